@@ -33,7 +33,8 @@ Terrain layout: the hfield is a square centred on the world origin, from
 ``-size_m`` to ``+size_m`` in x and y (so walking in +x stays on terrain for
 ``size_m`` metres), sampled every ``resolution_m`` (rows along y, columns along x),
 with a flat patch of height 0 within ``flat_radius_m`` of the origin where the robot
-stands at ``home``. Outside the square there is no ground.
+stands at ``home``. Outside the square there is no ground. (The OSU file's stair
+boxes at y = 19..21 m, x = 0.1..10.1 m are kept; they stay off the +x walking line.)
 """
 
 from __future__ import annotations
@@ -251,6 +252,16 @@ class Perturbation:
                 p.append(f"terrain={self.terrain!r} must be a TerrainSpec or None")
         return p
 
+    def __post_init__(self):
+        # Accept any length-3 sequence (list, numpy array) for the offset; store a
+        # tuple so the frozen instance stays hashable. Bad values are left for validate().
+        off = self.torso_com_offset_m
+        if not isinstance(off, tuple) and not isinstance(off, (str, bytes)):
+            try:
+                object.__setattr__(self, "torso_com_offset_m", tuple(off))
+            except TypeError:
+                pass
+
     def validate(self) -> None:
         """Raise :class:`PerturbationError` listing every problem (``.problems``), if any."""
         p = self.problems()
@@ -260,7 +271,9 @@ class Perturbation:
     @property
     def is_nominal(self) -> bool:
         """True when applying this perturbation changes nothing."""
-        return self == Perturbation()
+        return (self.torso_mass_kg is None and self.joint_damping_scale == 1.0
+                and self.terrain is None
+                and all(c == 0 for c in self.torso_com_offset_m))
 
 
 def _perturbation_error(problems: list[str]) -> PerturbationError:
@@ -381,7 +394,13 @@ def terrain_height_at(model: mujoco.MjModel, x: float, y: float) -> float:
     cell's twist ``|h00 - h10 - h01 + h11|``, a few mm for the generated fields).
     Points beyond the field's edge are clamped to the edge (there is no ground
     there). Without terrain: the height of the floor plane (0 for both models).
+    Costs a few microseconds (name lookup plus 4 samples); fine at 2 kHz.
+
+    Raises:
+        ValueError: x or y is not finite.
     """
+    if not (math.isfinite(x) and math.isfinite(y)):
+        raise ValueError(f"terrain_height_at: x={x!r} m and y={y!r} m must be finite")
     gid = _terrain_geom_id(model)
     if gid < 0:
         planes = np.flatnonzero((model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE)
@@ -390,22 +409,15 @@ def terrain_height_at(model: mujoco.MjModel, x: float, y: float) -> float:
     hid = int(model.geom_dataid[gid])
     nrow, ncol = int(model.hfield_nrow[hid]), int(model.hfield_ncol[hid])
     sx, sy, sz, _ = model.hfield_size[hid]
-    # World -> geom frame (the world body's geoms have their world pose in geom_pos/quat).
-    rel = np.array([x, y, 0.0]) - model.geom_pos[gid]
-    qinv = np.empty(4)
-    mujoco.mju_negQuat(qinv, model.geom_quat[gid])
-    local = np.empty(3)
-    mujoco.mju_rotVecQuat(local, rel, qinv)
-    u = (np.clip(local[0], -sx, sx) + sx) / (2 * sx) * (ncol - 1)  # column coordinate
-    v = (np.clip(local[1], -sy, sy) + sy) / (2 * sy) * (nrow - 1)  # row coordinate
+    gx, gy, _ = model.geom_pos[gid]  # world-body geom, axis-aligned as load_model builds it
+    u = (min(max(x - gx, -sx), sx) + sx) / (2 * sx) * (ncol - 1)  # column coordinate
+    v = (min(max(y - gy, -sy), sy) + sy) / (2 * sy) * (nrow - 1)  # row coordinate
     j0, i0 = min(int(u), ncol - 2), min(int(v), nrow - 2)
     fu, fv = u - j0, v - i0
     adr = int(model.hfield_adr[hid])
     data = model.hfield_data[adr:adr + nrow * ncol].reshape(nrow, ncol)
     h = ((1 - fv) * ((1 - fu) * data[i0, j0] + fu * data[i0, j0 + 1])
          + fv * ((1 - fu) * data[i0 + 1, j0] + fu * data[i0 + 1, j0 + 1]))
-    if not np.allclose(model.geom_quat[gid], (1, 0, 0, 0)):
-        log.debug("terrain geom is rotated; heights are along its z axis")
     return float(model.geom_pos[gid, 2] + sz * h)
 
 
@@ -571,7 +583,8 @@ def load_model(source: str | os.PathLike = "menagerie",
 
     if perturbation is not None:
         _apply_compiled(model, perturbation)
-    log.info("loaded Cassie model %r: %s", src, model_summary(model))
+    if log.isEnabledFor(logging.INFO):
+        log.info("loaded Cassie model %r: %s", src, model_summary(model))
     return model
 
 

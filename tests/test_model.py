@@ -176,6 +176,16 @@ def test_validation_lists_every_problem():
                  terrain=TerrainSpec(1.0, 45.0, 0)).validate()  # bounds are inclusive
 
 
+def test_nominal_flag_and_sequence_offset():
+    assert Perturbation().is_nominal
+    p = Perturbation(torso_com_offset_m=[0, 0, 0])
+    assert p.is_nominal and p.torso_com_offset_m == (0, 0, 0) and hash(p) == hash(Perturbation())
+    p = Perturbation(torso_com_offset_m=np.array([0.1, 0.0, 0.0]))
+    assert not p.is_nominal and isinstance(p.torso_com_offset_m, tuple)
+    p.validate()
+    assert not Perturbation(torso_mass_kg=10.33).is_nominal
+
+
 # ------------------------------------------------------------------ terrain
 
 SPEC = TerrainSpec(max_height_m=0.3, max_slope_deg=15.0, seed=3)
@@ -261,6 +271,8 @@ def test_terrain_height_at_matches_ray(terrain_models):
         twist = abs(h[i, j] - h[i, j + 1] - h[i + 1, j] + h[i + 1, j + 1])
         assert terrain_height_at(m, x, y) == pytest.approx(5.0 - dist, abs=twist / 4 + 1e-5)
     assert terrain_height_at(m, 1e3, 0.0) == terrain_height_at(m, SPEC.size_m, 0.0)  # clamped
+    with pytest.raises(ValueError, match="finite"):
+        terrain_height_at(m, float("nan"), 0.0)
 
 
 @pytest.mark.parametrize("src", SOURCES)
