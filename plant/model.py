@@ -39,7 +39,6 @@ boxes at y = 19..21 m, x = 0.1..10.1 m are kept; they stay off the +x walking li
 
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 import numbers
