@@ -1,0 +1,254 @@
+"""FMI 2.0 co-simulation slave ``AdaptiveVelocityRegulator`` (pythonfmu).
+
+A thin translator between FMI calls and the numpy-only regulator core
+(:mod:`avr_core`): the variables are declared once, in the order of the core's
+``PARAM_SPECS``, ``INPUT_SPECS`` and ``OUTPUT_SPECS`` (that order is the value
+reference order), and every numeric decision is the core's.
+
+What this class adds is FMI behaviour that pythonfmu 0.7.0 does not give:
+
+* It tracks the FMI 2.0 co-simulation state (instantiated, initialization mode,
+  step complete, terminated) and refuses what the standard forbids there.
+* ``do_step`` never lets an exception escape (pythonfmu would turn it into
+  ``fmi2Fatal`` and the instance would be unusable): a rejected step returns
+  ``False``, which pythonfmu reports as ``fmi2Discard``; the regulator's state is
+  left exactly as it was, and the reason is logged.
+* A refused ``set`` raises :class:`FmiCallError`.  pythonfmu can only report
+  that as ``fmi2Fatal``; the FMU's binary guard (``guard/fmi2_guard.c``, the
+  library the host actually loads on linux64) checks the same rules first and
+  answers ``fmi2Error`` without calling Python, so on linux64 this path is a
+  second line of defence only.
+* FMU state: ``_get_fmu_state`` returns one self-describing ``bytes`` blob
+  (variable values, time, FMI phase and the core's weights and memories); the
+  same blob is the serialized form, so get/set/serialize/deserialize round
+  trips are bit-exact.
+
+Statuses (host sees; linux64 with the guard / Python-only):
+    doStep in a wrong phase, non-finite or non-positive step, current time not
+    the end of the last step, NaN/inf input, negative step_index:
+        fmi2Error (guard) / fmi2Discard (slave returns False);
+    set of an output, of a fixed parameter after initialization, of anything
+    after terminate, parameter out of its [min, max] or NaN:
+        fmi2Error (guard) / fmi2Fatal (pythonfmu);
+    corrupt state blob: fmi2Error (guard) / fmi2Fatal.
+"""
+from __future__ import annotations
+
+import json
+import math
+import struct
+
+from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real
+from pythonfmu.enums import Fmi2Status
+
+try:  # inside the FMU these are top-level modules in resources/
+    from .avr_core import (INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, RegulatorInputs, RegulatorParams, build_networks,
+                           initial_state, state_from_bytes, state_to_bytes, step, validate_params)
+    from .avr_errors import AvrError, StateError
+except ImportError:  # pragma: no cover - exercised inside the built FMU
+    from avr_core import (INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, RegulatorInputs, RegulatorParams, build_networks,
+                          initial_state, state_from_bytes, state_to_bytes, step, validate_params)
+    from avr_errors import AvrError, StateError
+
+# FMI phases tracked by the slave (FMI 2.0 section 4.2.4)
+INSTANTIATED = "instantiated"
+INITIALIZATION_MODE = "initializationMode"
+STEP_COMPLETE = "stepComplete"
+TERMINATED = "terminated"
+
+#: Header of the FMU state blob: magic, format version, JSON length, core blob length.
+STATE_MAGIC = b"AVRS"
+STATE_VERSION = 1
+_HEADER = struct.Struct("<4sIII")
+
+#: Relative tolerance on "doStep starts where the last step ended": a master that
+#: computes t = t0 + k*h differs from (t_prev + h) by a few ulp, far below 1e-9 s.
+TIME_MATCH_RTOL = 1e-9
+
+_TYPES = {"Real": Real, "Integer": Integer, "Boolean": Boolean}
+_CAUSALITY = {"parameter": Fmi2Causality.parameter, "input": Fmi2Causality.input, "output": Fmi2Causality.output}
+_VARIABILITY = {name: getattr(Fmi2Variability, name) for name in ("fixed", "tunable", "discrete", "continuous")}
+_CASTS = {"Real": float, "Integer": int, "Boolean": bool}
+
+
+class FmiCallError(AvrError):
+    """A call the FMI 2.0 standard forbids in the current phase (or an invalid value)."""
+
+
+class AdaptiveVelocityRegulator(Fmi2Slave):
+    """Adaptive velocity regulator for 3D bipedal walking (Castillo et al., IROS 2020)."""
+
+    author = "cassie-avr project"
+    description = ("Adaptive velocity regulator for bipedal walking: PD foot-placement and torso regulators "
+                   "plus online-learning neural networks (delta rule) that output virtual-constraint offsets")
+    license = "MIT"
+    version = "0.1.0"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self._specs = {spec.name: spec for spec in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)}
+        self._values = {spec.name: spec.default for spec in self._specs.values()}
+        self._phase = INSTANTIATED
+        self._time_s = 0.0
+        self._params = None
+        self._networks = None
+        self._state = None
+        for spec in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS):
+            self.register_variable(self._declare(spec))
+
+    # -- declarations -------------------------------------------------------------------
+    def _declare(self, spec):
+        kind = _TYPES[spec.type]
+        extra = {}
+        if spec.causality != "input":  # FMI forbids `initial` on inputs
+            extra["initial"] = Fmi2Initial.exact
+        return kind(spec.name, causality=_CAUSALITY[spec.causality], variability=_VARIABILITY[spec.variability],
+                    description=spec.description, getter=lambda name=spec.name: self._values[name],
+                    setter=lambda value, name=spec.name: self._set(name, value), **extra)
+
+    # -- setting variables ------------------------------------------------------------------
+    def _set(self, name: str, value) -> None:
+        spec = self._specs[name]
+        problem = self.set_problem(name, value)
+        if problem is not None:
+            self.log(problem, Fmi2Status.error)
+            raise FmiCallError(problem)
+        self._values[name] = _CASTS[spec.type](value)
+        if spec.causality == "parameter" and self._phase == STEP_COMPLETE:
+            self._params = self._make_params()  # tunable parameter changed while stepping
+
+    def set_problem(self, name: str, value) -> str | None:
+        """Why setting ``name`` to ``value`` now is illegal, or None if it is allowed."""
+        spec = self._specs[name]
+        if spec.causality == "output":
+            return f"{name} is an output: it cannot be set"
+        if self._phase == TERMINATED:
+            return f"cannot set {name} after fmi2Terminate"
+        if self._phase == STEP_COMPLETE and spec.causality == "parameter" and spec.variability == "fixed":
+            return f"{name} is a fixed parameter: it can only be set before fmi2ExitInitializationMode"
+        if spec.type == "Real":
+            if not math.isfinite(value):
+                return f"{name} = {value!r}: must be a finite number" + _range_text(spec)
+        if spec.min is not None and value < spec.min or spec.max is not None and value > spec.max:
+            return f"{name} = {value!r}: out of range" + _range_text(spec)
+        return None
+
+    def _make_params(self) -> RegulatorParams:
+        params = RegulatorParams(**{spec.name: self._values[spec.name] for spec in PARAM_SPECS})
+        validate_params(params)
+        return params
+
+    # -- FMI life cycle -----------------------------------------------------------------
+    def _require(self, call: str, *phases: str) -> None:
+        if self._phase not in phases:
+            message = f"{call} is not allowed in state {self._phase} (allowed in: {', '.join(phases)})"
+            self.log(message, Fmi2Status.error)
+            raise FmiCallError(message)
+
+    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
+        self._require("fmi2SetupExperiment", INSTANTIATED)
+        if not math.isfinite(start_time):
+            raise FmiCallError(f"startTime = {start_time!r}: must be finite")
+        self._time_s = float(start_time)
+
+    def enter_initialization_mode(self):
+        self._require("fmi2EnterInitializationMode", INSTANTIATED)
+        self._phase = INITIALIZATION_MODE
+
+    def exit_initialization_mode(self):
+        self._require("fmi2ExitInitializationMode", INITIALIZATION_MODE)
+        self._params = self._make_params()
+        if self._state is None:  # not already restored from an FMU state blob
+            self._networks = build_networks(self._params)
+            self._state = initial_state(self._params, self._networks)
+        self._phase = STEP_COMPLETE
+
+    def terminate(self):
+        self._require("fmi2Terminate", STEP_COMPLETE)
+        self._phase = TERMINATED
+
+    def do_step(self, current_time, step_size):
+        try:
+            problem = self._step_problem(current_time, step_size)
+            if problem is None:
+                inputs = RegulatorInputs(**{spec.name: _CASTS[spec.type](self._values[spec.name])
+                                            for spec in INPUT_SPECS})
+                new_state, outputs = step(self._state, inputs, float(step_size), self._params, self._networks)
+                self._state = new_state
+                self._values.update(outputs)
+                self._time_s = float(current_time) + float(step_size)
+                return True
+        except Exception as exc:  # noqa: BLE001 - nothing may escape to pythonfmu (it would mean fmi2Fatal)
+            problem = f"doStep rejected: {exc}"
+        self.log(problem, Fmi2Status.discard)
+        return False
+
+    def _step_problem(self, current_time, step_size) -> str | None:
+        if self._phase != STEP_COMPLETE:
+            return f"fmi2DoStep is not allowed in state {self._phase} (allowed in: {STEP_COMPLETE})"
+        if not (math.isfinite(step_size) and step_size > 0.0):
+            return f"communicationStepSize = {step_size!r}: must be a finite number > 0"
+        tolerance = TIME_MATCH_RTOL * max(1.0, abs(self._time_s))
+        if not (math.isfinite(current_time) and abs(current_time - self._time_s) <= tolerance):
+            return (f"currentCommunicationPoint = {current_time!r}: must equal the end of the last step "
+                    f"({self._time_s!r}) to within {tolerance:g} s")
+        return None
+
+    # -- FMU state ----------------------------------------------------------------------
+    def _get_fmu_state(self):
+        scalars = {"values": self._values, "phase": self._phase, "time_s": self._time_s}
+        text = json.dumps(scalars, sort_keys=True).encode("utf-8")
+        core = b"" if self._state is None else state_to_bytes(self._state)
+        return _HEADER.pack(STATE_MAGIC, STATE_VERSION, len(text), len(core)) + text + core
+
+    def _set_fmu_state(self, state):
+        values, phase, time_s, core = self._fmu_state_parts(state)
+        params = RegulatorParams(**{spec.name: _CASTS[spec.type](values[spec.name]) for spec in PARAM_SPECS})
+        validate_params(params)
+        if core:
+            networks = build_networks(params) if self._networks_stale(params) else self._networks
+            core_state = state_from_bytes(core, params)
+        else:
+            networks, core_state = None, None
+        # everything checked: commit at once
+        self._values = {name: _CASTS[self._specs[name].type](values[name]) for name in self._specs}
+        self._phase, self._time_s = phase, time_s
+        self._params = params if core else None
+        self._networks, self._state = networks, core_state
+
+    def _networks_stale(self, params) -> bool:
+        current = self._params
+        return (self._networks is None or current is None
+                or (current.n_neurons, current.seed) != (params.n_neurons, params.seed))
+
+    def _fmu_state_parts(self, state):
+        blob = bytes(state)
+        if len(blob) < _HEADER.size:
+            raise StateError(f"FMU state of {len(blob)} bytes is shorter than its header ({_HEADER.size} bytes)")
+        magic, version, n_text, n_core = _HEADER.unpack_from(blob)
+        if magic != STATE_MAGIC or version != STATE_VERSION:
+            raise StateError(f"not an AdaptiveVelocityRegulator state (magic {magic!r}, version {version})")
+        if len(blob) != _HEADER.size + n_text + n_core:
+            raise StateError(f"FMU state has {len(blob)} bytes, its header says {_HEADER.size + n_text + n_core}")
+        scalars = json.loads(blob[_HEADER.size:_HEADER.size + n_text].decode("utf-8"))
+        values = scalars["values"]
+        missing = sorted(set(self._specs) - set(values))
+        if missing:
+            raise StateError(f"FMU state lacks variables: {', '.join(missing)}")
+        if scalars["phase"] not in (INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED):
+            raise StateError(f"FMU state has an unknown phase {scalars['phase']!r}")
+        return values, scalars["phase"], float(scalars["time_s"]), blob[_HEADER.size + n_text:]
+
+    @staticmethod
+    def _fmu_state_to_bytes(state) -> bytes:
+        return bytes(state)
+
+    @staticmethod
+    def _fmu_state_from_bytes(state: bytes):
+        return bytes(state)
+
+
+def _range_text(spec) -> str:
+    low = "-inf" if spec.min is None else repr(spec.min)
+    high = "inf" if spec.max is None else repr(spec.max)
+    return f" in [{low}, {high}]"
