@@ -1,0 +1,393 @@
+"""Physics wrapper for the MuJoCo Cassie model (dm_control ``Physics`` style).
+
+Every joint, actuator, body and geom is looked up **by name once** in
+:class:`CassiePhysics` (no hard-coded indices, no ``qpos[7:]`` slices); the
+accessors below return SI units (m, m/s, rad, rad/s, N) as their names or
+docstrings say.
+
+Frames and signs used throughout the plant package
+--------------------------------------------------
+* World: z up, x forward at start, y to the left.
+* Heading (yaw) frame: the world frame rotated about z by the pelvis yaw, so
+  ``x`` points where the pelvis faces, projected on the ground.
+* ``torso_pitch()``: rotation of the pelvis about the heading-frame +y axis
+  (ZYX Euler pitch).  **Positive = nose down** (forward lean).
+* ``torso_roll()``: rotation about the pelvis +x axis (ZYX Euler roll).
+  **Positive = left side up** (leaning to the right).
+* Rates (``torso_pitch_rate()``, ``torso_roll_rate()``) are the pelvis angular
+  velocity expressed in the heading frame (y and x component): equal to the
+  Euler-angle rates for the small tilts of walking.
+* Joint signs on both legs (checked in tests): positive hip pitch / knee moves
+  the foot forward (knee positive also lengthens the leg); positive hip roll
+  moves the foot toward +y (left) on *both* legs (both axes are +x).
+
+The actuators are re-configured by :meth:`CassiePhysics.configure_pd_servos`
+as joint PD servos evaluated by MuJoCo at every 0.5 ms step (see
+``plant/controller.py``); the caller's model is copied, never modified.
+"""
+from __future__ import annotations
+
+import copy
+import logging
+import math
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from fmu_src.avr_errors import ModelError
+
+log = logging.getLogger(__name__)
+
+SIDES = ("left", "right")
+#: Motor joints of one leg, in actuator order used throughout the package.
+MOTOR_JOINTS = ("hip-roll", "hip-yaw", "hip-pitch", "knee", "foot")
+#: Passive joints of one leg.
+PASSIVE_JOINTS = ("shin", "tarsus", "heel-spring")
+PELVIS_BODY = "cassie-pelvis"
+
+#: Standing pose per leg used when the model has no ``home`` keyframe (rad), the
+#: values of Menagerie's ``home`` keyframe: hip roll is +0.0045 left / -0.0045 right.
+STANDING_JOINTS_RAD = {
+    "hip-roll": 0.00449956,
+    "hip-yaw": 0.0,
+    "hip-pitch": 0.497301,
+    "knee": -1.1997,
+    "shin": 0.0,
+    "tarsus": 1.42671,
+    "heel-spring": 0.0,
+    "foot": -1.59681,
+}
+#: Pelvis height of the standing pose (m); the feet then just touch a z=0 floor.
+STANDING_PELVIS_HEIGHT_M = 1.0059301
+
+#: Fall thresholds.  Nominal walking keeps the pelvis 0.85-1.0 m above the ground
+#: and within ~0.2 rad of level; 0.55 m means the knees have folded or the robot is
+#: down, 0.7 rad (40 deg) of tilt is not recoverable by stepping.
+FALL_HEIGHT_M = 0.55
+FALL_TILT_RAD = 0.7
+
+
+@dataclass(frozen=True)
+class LegIds:
+    """Ids of one leg (all resolved by name)."""
+
+    side: str
+    qadr: dict  # joint short name -> qpos address
+    dadr: dict  # joint short name -> dof address
+    jid: dict  # joint short name -> joint id
+    act: dict  # motor joint short name -> actuator id
+    hip_pitch_jid: int
+    foot_jid: int
+    foot_body: int
+    foot_geoms: tuple
+
+
+def _id(model, objtype, name):
+    i = mujoco.mj_name2id(model, objtype, name)
+    if i < 0:
+        raise ModelError(f"Cassie model has no {objtype.name.lower()} named {name!r}")
+    return i
+
+
+class CassiePhysics:
+    """Named access to a Cassie ``MjModel``/``MjData`` pair.
+
+    Args:
+        model: a compiled Cassie model (Menagerie or OSU); it is copied, the
+            caller's object is never changed.
+    """
+
+    def __init__(self, model: mujoco.MjModel):
+        self.model = copy.deepcopy(model)
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        #: Plant step (s): the model's timestep, 0.5 ms for both Cassie models.
+        self.SIM_DT_S = float(m.opt.timestep)
+        self.pelvis_body = _id(m, mujoco.mjtObj.mjOBJ_BODY, PELVIS_BODY)
+        self.free_qadr, self.free_dadr = self._floating_base_adr(m)
+        self.legs = {}
+        for s in SIDES:
+            qadr, dadr, jid, act = {}, {}, {}, {}
+            for j in MOTOR_JOINTS + PASSIVE_JOINTS:
+                k = _id(m, mujoco.mjtObj.mjOBJ_JOINT, f"{s}-{j}")
+                jid[j] = k
+                qadr[j] = int(m.jnt_qposadr[k])
+                dadr[j] = int(m.jnt_dofadr[k])
+            for j in MOTOR_JOINTS:
+                a = _id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, f"{s}-{j}")
+                if m.actuator_trnid[a, 0] != jid[j]:
+                    raise ModelError(f"actuator {s}-{j} does not drive joint {s}-{j}")
+                act[j] = a
+            foot_body = _id(m, mujoco.mjtObj.mjOBJ_BODY, f"{s}-foot")
+            geoms = tuple(g for g in range(m.ngeom) if m.geom_bodyid[g] == foot_body
+                          and (m.geom_contype[g] or m.geom_conaffinity[g]))
+            if not geoms:
+                raise ModelError(f"{s}-foot has no collision geom")
+            self.legs[s] = LegIds(s, qadr, dadr, jid, act, jid["hip-pitch"], jid["foot"],
+                                  foot_body, geoms)
+        self._foot_geom_side = {g: s for s in SIDES for g in self.legs[s].foot_geoms}
+        # Original motor limits: peak joint torque = gear * ctrlrange (N m).
+        self.torque_limit_nm = {
+            (s, j): float(m.actuator_gear[a, 0] * max(abs(m.actuator_ctrlrange[a, 0]),
+                                                         abs(m.actuator_ctrlrange[a, 1])))
+            for s in SIDES for j, a in self.legs[s].act.items()}
+        # Static ground geoms (world body) for ground_height_m().
+        self._ground_geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == 0
+                              and m.geom_type[g] in (mujoco.mjtGeom.mjGEOM_PLANE,
+                                                     mujoco.mjtGeom.mjGEOM_HFIELD)
+                              and (m.geom_contype[g] or m.geom_conaffinity[g])]
+        self._force6 = np.zeros(6)
+        self.home_key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home")
+        self.reset_standing()
+
+    def _floating_base_adr(self, m):
+        """qpos/qvel addresses of the pelvis pose (x, y, z, qw, qx, qy, qz) / twist.
+
+        Menagerie uses one free joint; the OSU model uses three world-axis slide
+        joints followed by a ball joint, which has the same qpos/qvel layout (world
+        linear velocity, body-frame angular velocity).
+        """
+        js = [j for j in range(m.njnt) if m.jnt_bodyid[j] == self.pelvis_body]
+        T = mujoco.mjtJoint
+        if len(js) == 1 and m.jnt_type[js[0]] == T.mjJNT_FREE:
+            return int(m.jnt_qposadr[js[0]]), int(m.jnt_dofadr[js[0]])
+        if ([m.jnt_type[j] for j in js] == [T.mjJNT_SLIDE] * 3 + [T.mjJNT_BALL]
+                and np.allclose(m.jnt_axis[js[:3]], np.eye(3))):
+            q0, d0 = int(m.jnt_qposadr[js[0]]), int(m.jnt_dofadr[js[0]])
+            if (list(m.jnt_qposadr[js]) == [q0, q0 + 1, q0 + 2, q0 + 3]
+                    and list(m.jnt_dofadr[js]) == [d0, d0 + 1, d0 + 2, d0 + 3]):
+                return q0, d0
+        raise ModelError("the pelvis must float on one free joint or x/y/z slides + a ball joint")
+
+    # ------------------------------------------------------------------ set-up
+    def reset_standing(self) -> None:
+        """Put the robot in the ``home`` standing pose at rest.
+
+        Uses the model's ``home`` keyframe if present, else :data:`STANDING_JOINTS_RAD`
+        with the pelvis at :data:`STANDING_PELVIS_HEIGHT_M` above the ground.
+        """
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        if self.home_key >= 0:
+            mujoco.mj_resetDataKeyframe(m, d, self.home_key)
+        else:
+            q = d.qpos
+            q[self.free_qadr:self.free_qadr + 7] = [0, 0, STANDING_PELVIS_HEIGHT_M, 1, 0, 0, 0]
+            for s in SIDES:
+                sign = 1.0 if s == "left" else -1.0
+                for j, v in STANDING_JOINTS_RAD.items():
+                    q[self.legs[s].qadr[j]] = sign * v if j == "hip-roll" else v
+        d.qvel[:] = 0.0
+        # Terrain: stand on the ground under the pelvis.
+        mujoco.mj_kinematics(m, d)
+        p = d.xpos[self.pelvis_body]
+        d.qpos[self.free_qadr + 2] += self.ground_height_m(p[0], p[1])
+        mujoco.mj_forward(m, d)
+
+    def configure_pd_servos(self) -> None:
+        """Turn the 10 motors into joint PD servos evaluated by MuJoCo every step.
+
+        Each actuator becomes ``force = ctrl - kp*q - kd*qdot`` (gain 1, affine bias,
+        gear 1 so force is the joint torque in N m) with ``forcerange`` equal to the
+        original ``gear * ctrlrange``: the controller writes ``ctrl = kp*q_des +
+        kd*qdot_des + tau_ff`` and the gains with :meth:`set_pd`.
+        """
+        m = self.model
+        for s in SIDES:
+            for j, a in self.legs[s].act.items():
+                lim = self.torque_limit_nm[(s, j)]
+                m.actuator_gear[a, :] = 0.0
+                m.actuator_gear[a, 0] = 1.0
+                m.actuator_gaintype[a] = mujoco.mjtGain.mjGAIN_FIXED
+                m.actuator_biastype[a] = mujoco.mjtBias.mjBIAS_AFFINE
+                m.actuator_gainprm[a, :] = 0.0
+                m.actuator_gainprm[a, 0] = 1.0
+                m.actuator_biasprm[a, :] = 0.0
+                m.actuator_ctrllimited[a] = 0
+                m.actuator_forcelimited[a] = 1
+                m.actuator_forcerange[a] = (-lim, lim)
+        # (actuator length/moment are recomputed from the gear at every step; no
+        # mj_setConst, which would overwrite the state.)
+        self.data.ctrl[:] = 0.0
+
+    def set_pd(self, side: str, joint: str, kp: float, kd: float) -> None:
+        """Set the servo gains (N m/rad, N m s/rad) of one motor joint."""
+        a = self.legs[side].act[joint]
+        self.model.actuator_biasprm[a, 1] = -kp
+        self.model.actuator_biasprm[a, 2] = -kd
+
+    # -------------------------------------------------------------- accessors
+    @property
+    def time_s(self) -> float:
+        """Simulated time (s)."""
+        return float(self.data.time)
+
+    def step(self, n_steps: int = 1) -> None:
+        """Advance the plant by ``n_steps`` steps of ``SIM_DT_S``."""
+        mujoco.mj_step(self.model, self.data, nstep=int(n_steps))
+
+    def joint_pos_rad(self, side: str, joint: str) -> float:
+        """Position of joint ``{side}-{joint}`` (rad)."""
+        return float(self.data.qpos[self.legs[side].qadr[joint]])
+
+    def joint_vel_radps(self, side: str, joint: str) -> float:
+        """Velocity of joint ``{side}-{joint}`` (rad/s)."""
+        return float(self.data.qvel[self.legs[side].dadr[joint]])
+
+    def pelvis_position(self) -> np.ndarray:
+        """World position of the pelvis body frame origin (m), shape (3,)."""
+        return self.data.qpos[self.free_qadr:self.free_qadr + 3].copy()
+
+    def pelvis_quat(self) -> np.ndarray:
+        """Pelvis orientation quaternion (w, x, y, z)."""
+        return self.data.qpos[self.free_qadr + 3:self.free_qadr + 7].copy()
+
+    def euler_zyx(self) -> tuple[float, float, float]:
+        """Pelvis (yaw, pitch, roll) ZYX Euler angles (rad)."""
+        w, x, y, z = self.data.qpos[self.free_qadr + 3:self.free_qadr + 7]
+        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+        sp = max(-1.0, min(1.0, 2.0 * (w * y - z * x)))
+        pitch = math.asin(sp)
+        roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+        return yaw, pitch, roll
+
+    def heading_yaw(self) -> float:
+        """Pelvis yaw (rad), the rotation of the heading frame about world z."""
+        return self.euler_zyx()[0]
+
+    def torso_pitch(self) -> float:
+        """Pelvis pitch (rad), positive = nose down."""
+        return self.euler_zyx()[1]
+
+    def torso_roll(self) -> float:
+        """Pelvis roll (rad), positive = left side up."""
+        return self.euler_zyx()[2]
+
+    def pelvis_velocity_world(self) -> np.ndarray:
+        """Pelvis linear velocity in the world frame (m/s), shape (3,)."""
+        return self.data.qvel[self.free_dadr:self.free_dadr + 3].copy()
+
+    def pelvis_velocity_heading(self) -> np.ndarray:
+        """Pelvis linear velocity in the heading frame (m/s): (forward, left, up)."""
+        v = self.data.qvel[self.free_dadr:self.free_dadr + 3]
+        yaw = self.heading_yaw()
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])
+
+    def angular_velocity_heading(self) -> np.ndarray:
+        """Pelvis angular velocity in the heading frame (rad/s): (roll, pitch, yaw) rates."""
+        d = self.data
+        # Free-joint angular velocity is in the body frame; rotate to world, then heading.
+        wb = d.qvel[self.free_dadr + 3:self.free_dadr + 6]
+        ww = d.xmat[self.pelvis_body].reshape(3, 3) @ wb
+        yaw = self.heading_yaw()
+        c, s = math.cos(yaw), math.sin(yaw)
+        return np.array([c * ww[0] + s * ww[1], -s * ww[0] + c * ww[1], ww[2]])
+
+    def torso_pitch_rate(self) -> float:
+        """Pitch rate (rad/s), heading-frame y component of the pelvis angular velocity."""
+        return float(self.angular_velocity_heading()[1])
+
+    def torso_roll_rate(self) -> float:
+        """Roll rate (rad/s), heading-frame x component of the pelvis angular velocity."""
+        return float(self.angular_velocity_heading()[0])
+
+    def hip_position(self, side: str) -> np.ndarray:
+        """World position of the hip-pitch joint axis point (m)."""
+        return self.data.xanchor[self.legs[side].hip_pitch_jid].copy()
+
+    def foot_position(self, side: str) -> np.ndarray:
+        """World position of the foot joint (ankle) axis point (m)."""
+        return self.data.xanchor[self.legs[side].foot_jid].copy()
+
+    def foot_center(self, side: str) -> np.ndarray:
+        """World position of the centre of the foot's contact capsule (m)."""
+        return self.data.geom_xpos[self.legs[side].foot_geoms[0]].copy()
+
+    def foot_normal_forces_n(self) -> tuple[float, float]:
+        """Contact normal force on the (left, right) foot (N), from all its contacts."""
+        d = self.data
+        f = [0.0, 0.0]
+        side_of = self._foot_geom_side
+        for i in range(d.ncon):
+            c = d.contact[i]
+            s = side_of.get(c.geom1) or side_of.get(c.geom2)
+            if s is None:
+                continue
+            mujoco.mj_contactForce(self.model, d, i, self._force6)
+            f[0 if s == "left" else 1] += abs(self._force6[0])
+        return f[0], f[1]
+
+    def total_mass_kg(self) -> float:
+        """Total robot mass (kg)."""
+        return float(np.sum(self.model.body_mass[1:]))
+
+    def center_of_mass(self) -> np.ndarray:
+        """World position of the robot's centre of mass (m)."""
+        return self.data.subtree_com[self.pelvis_body].copy()
+
+    def set_pelvis_force(self, force_n) -> None:
+        """Apply a constant world-frame force (N, shape (3,)) at the pelvis COM until changed."""
+        f = np.asarray(force_n, dtype=float).reshape(3)
+        if not np.all(np.isfinite(f)):
+            raise ValueError(f"force_n must be finite, got {f}")
+        self.data.xfrc_applied[self.pelvis_body, :3] = f
+
+    # ------------------------------------------------------------- terrain/fall
+    def ground_height_m(self, x: float, y: float) -> float:
+        """Height of the highest static plane/height field under (x, y) (m); 0 if none.
+
+        Planes are taken as horizontal at their z; a height field is interpolated
+        bilinearly in its grid (``hfield_size`` = half-x, half-y, z-scale, base).
+        """
+        m, d = self.model, self.data
+        best = None
+        for g in self._ground_geoms:
+            if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE:
+                h = float(m.geom_pos[g][2])  # world geoms: model pose is the world pose
+            else:
+                hid = m.geom_dataid[g]
+                sx, sy, sz, _base = m.hfield_size[hid]
+                nr, nc = m.hfield_nrow[hid], m.hfield_ncol[hid]
+                pos = m.geom_pos[g]
+                u = (x - pos[0] + sx) / (2 * sx) * (nc - 1)
+                v = (y - pos[1] + sy) / (2 * sy) * (nr - 1)
+                if not (0 <= u <= nc - 1 and 0 <= v <= nr - 1):
+                    continue
+                adr = m.hfield_adr[hid]
+                i0, j0 = min(int(v), nr - 2), min(int(u), nc - 2)
+                fv, fu = v - i0, u - j0
+                z = m.hfield_data[adr:adr + nr * nc].reshape(nr, nc)
+                h = float(pos[2] + sz * ((1 - fv) * ((1 - fu) * z[i0, j0] + fu * z[i0, j0 + 1])
+                                         + fv * ((1 - fu) * z[i0 + 1, j0] + fu * z[i0 + 1, j0 + 1])))
+            best = h if best is None else max(best, h)
+        return 0.0 if best is None else best
+
+    def pelvis_height_above_ground_m(self) -> float:
+        """Pelvis height above the ground directly under it (m)."""
+        p = self.data.qpos[self.free_qadr:self.free_qadr + 3]
+        return float(p[2] - self.ground_height_m(p[0], p[1]))
+
+    def fall_reason(self) -> str | None:
+        """Why the robot counts as fallen, or None.
+
+        Fallen = pelvis lower than :data:`FALL_HEIGHT_M` above the ground under it,
+        or pelvis tilt (angle between pelvis z axis and world z) beyond
+        :data:`FALL_TILT_RAD`, or a non-finite state.
+        """
+        d = self.data
+        if not np.all(np.isfinite(d.qpos)) or not np.all(np.isfinite(d.qvel)):
+            return "non-finite state"
+        h = self.pelvis_height_above_ground_m()
+        if h < FALL_HEIGHT_M:
+            return f"pelvis height {h:.3f} m < {FALL_HEIGHT_M} m"
+        zz = float(d.xmat[self.pelvis_body][8])
+        tilt = math.acos(max(-1.0, min(1.0, zz)))
+        if tilt > FALL_TILT_RAD:
+            return f"pelvis tilt {tilt:.3f} rad > {FALL_TILT_RAD} rad"
+        return None
+
+    def fell(self) -> bool:
+        """True if :meth:`fall_reason` reports a fall."""
+        return self.fall_reason() is not None

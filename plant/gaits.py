@@ -1,0 +1,96 @@
+"""Gait library: calibrated gait parameters per commanded (forward, lateral) speed.
+
+Each grid point of ``plant/data/gait_library.json`` holds the numeric fields of
+:class:`plant.controller.GaitParams` (step time, landing leg-angle offset,
+lateral offset, step width, torso pitch) found by ``python -m plant.make_gaits``
+on the nominal Menagerie model; the Bezier shapes are shared by all points.
+:meth:`GaitLibrary.lookup` interpolates bilinearly in (vx, vy) and clamps to the
+grid's range (commands outside it get the edge gait).
+"""
+from __future__ import annotations
+
+import bisect
+import json
+import logging
+from dataclasses import asdict, dataclass, fields, replace
+from pathlib import Path
+
+from plant.controller import GaitParams
+
+log = logging.getLogger(__name__)
+
+DEFAULT_LIBRARY_PATH = Path(__file__).resolve().parent / "data" / "gait_library.json"
+#: GaitParams fields interpolated over the grid (the rest are shared shapes).
+NUMERIC_FIELDS = ("step_time_s", "leg_angle_offset_rad", "lateral_offset_rad",
+                  "step_width_rad", "torso_pitch_des_rad")
+
+
+def _bracket(grid, x):
+    """Indices (i, j) and weight w so that x ~ (1-w) grid[i] + w grid[j] (clamped)."""
+    if x <= grid[0]:
+        return 0, 0, 0.0
+    if x >= grid[-1]:
+        n = len(grid) - 1
+        return n, n, 0.0
+    j = bisect.bisect_right(grid, x)
+    i = j - 1
+    return i, j, (x - grid[i]) / (grid[j] - grid[i])
+
+
+@dataclass(frozen=True)
+class GaitLibrary:
+    """Gaits on a (vx, vy) grid; ``points[(i, j)]`` is the gait at (vx_grid[i], vy_grid[j])."""
+
+    vx_grid: tuple
+    vy_grid: tuple
+    points: dict
+    base: GaitParams = GaitParams()
+    meta: dict | None = None
+
+    @classmethod
+    def default(cls) -> "GaitLibrary":
+        """The committed library if present, else a single uncalibrated gait."""
+        if DEFAULT_LIBRARY_PATH.exists():
+            return cls.load(DEFAULT_LIBRARY_PATH)
+        log.warning("no gait library at %s; using the uncalibrated default gait", DEFAULT_LIBRARY_PATH)
+        return cls.uniform(GaitParams())
+
+    @classmethod
+    def uniform(cls, gait: GaitParams) -> "GaitLibrary":
+        return cls((0.0,), (0.0,), {(0, 0): gait}, gait)
+
+    @classmethod
+    def load(cls, path) -> "GaitLibrary":
+        raw = json.loads(Path(path).read_text())
+        base = GaitParams(**{k: tuple(v) if isinstance(v, list) else v for k, v in raw["base"].items()})
+        vx, vy = tuple(raw["vx_grid"]), tuple(raw["vy_grid"])
+        pts = {}
+        for p in raw["points"]:
+            i, j = vx.index(p["vx"]), vy.index(p["vy"])
+            pts[(i, j)] = replace(base, **{k: float(p[k]) for k in NUMERIC_FIELDS if k in p})
+        missing = [(a, b) for a in range(len(vx)) for b in range(len(vy)) if (a, b) not in pts]
+        if missing:
+            raise ValueError(f"gait library {path} misses grid points {missing}")
+        return cls(vx, vy, pts, base, raw.get("meta"))
+
+    def save(self, path) -> None:
+        pts = []
+        for (i, j), g in sorted(self.points.items()):
+            d = {"vx": self.vx_grid[i], "vy": self.vy_grid[j]}
+            d.update({k: getattr(g, k) for k in NUMERIC_FIELDS})
+            pts.append(d)
+        raw = {"meta": self.meta or {}, "vx_grid": list(self.vx_grid), "vy_grid": list(self.vy_grid),
+               "base": {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self.base).items()},
+               "points": pts}
+        Path(path).write_text(json.dumps(raw, indent=1) + "\n")
+
+    def lookup(self, vx: float, vy: float) -> GaitParams:
+        """Bilinearly interpolated gait for commanded (vx, vy) (m/s), clamped to the grid."""
+        i0, i1, wx = _bracket(self.vx_grid, vx)
+        j0, j1, wy = _bracket(self.vy_grid, vy)
+        vals = {}
+        for k in NUMERIC_FIELDS:
+            f = lambda i, j: getattr(self.points[(i, j)], k)  # noqa: E731
+            vals[k] = ((1 - wx) * ((1 - wy) * f(i0, j0) + wy * f(i0, j1))
+                       + wx * ((1 - wy) * f(i1, j0) + wy * f(i1, j1)))
+        return replace(self.points[(i0, j0)], **vals)

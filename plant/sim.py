@@ -1,0 +1,138 @@
+"""Facade of the Cassie plant + nominal walking controller used by the co-simulation.
+
+Typical use::
+
+    walker = CassieWalker(load_model("menagerie"))
+    walker.set_command(0.5, 0.0)
+    while walker.time_s < 10:
+        walker.set_offsets(regulator.step(walker.regulator_inputs(), ...))
+        walker.advance(20)          # 20 plant steps of 0.5 ms = 10 ms
+        log(walker.telemetry())
+
+The walker starts in the ``home`` standing pose at rest, stands
+``ControllerParams.stand_time_s``, shifts its weight over the first stance foot
+and then walks (see ``plant/controller.py`` for the signs of the offsets and the
+definition of the regulator inputs).  The joint PD runs inside MuJoCo at every
+plant step; the Python controller refreshes its targets every
+``ControllerParams.control_substeps`` steps, counted across ``advance`` calls.
+"""
+from __future__ import annotations
+
+import logging
+from typing import Mapping
+
+import mujoco
+
+from plant.cassie import CassiePhysics
+from plant.controller import OFFSET_KEYS, ControllerParams, NominalController
+from plant.gaits import GaitLibrary
+
+log = logging.getLogger(__name__)
+
+
+class CassieWalker:
+    """Cassie plant with the nominal controller; see the module docstring."""
+
+    def __init__(self, model: mujoco.MjModel, params: ControllerParams | None = None,
+                 gaits: GaitLibrary | None = None):
+        self.physics = CassiePhysics(model)
+        #: Plant step (s), 0.5 ms for Cassie.
+        self.SIM_DT_S = self.physics.SIM_DT_S
+        self.params = params or ControllerParams()
+        self.gaits = gaits or GaitLibrary.default()
+        self.controller = NominalController(self.physics, self.params)
+        self._substep = 0
+        self._fall_reason = None
+        self.vx_des_mps = 0.0
+        self.vy_des_mps = 0.0
+        self.set_command(0.0, 0.0)
+
+    @property
+    def model(self) -> mujoco.MjModel:
+        """The walker's own (copied, servo-configured) model."""
+        return self.physics.model
+
+    @property
+    def data(self) -> mujoco.MjData:
+        return self.physics.data
+
+    @property
+    def time_s(self) -> float:
+        """Simulated time (s)."""
+        return self.physics.time_s
+
+    def set_command(self, vx_des_mps: float, vy_des_mps: float) -> None:
+        """Commanded forward/lateral speed (m/s, heading frame); selects the gait."""
+        self.vx_des_mps, self.vy_des_mps = float(vx_des_mps), float(vy_des_mps)
+        self.controller.set_command(self.vx_des_mps, self.vy_des_mps,
+                                    self.gaits.lookup(self.vx_des_mps, self.vy_des_mps))
+
+    def set_offsets(self, offsets: Mapping[str, float]) -> None:
+        """Regulator joint offsets (rad); keys from ``OFFSET_KEYS``; unknown key -> KeyError."""
+        self.controller.set_offsets(offsets)
+
+    def regulator_inputs(self) -> dict:
+        """Signals for the regulator (see ``plant/controller.py`` for definitions)."""
+        ph, c = self.physics, self.controller
+        _, pitch, roll = ph.euler_zyx()
+        w = ph.angular_velocity_heading()
+        return {"vx": float(c.vx_step_avg), "vy": float(c.vy_filt), "pitch": float(pitch),
+                "roll": float(roll), "pitch_rate": float(w[1]), "roll_rate": float(w[0]),
+                "step_index": int(c.step_index)}
+
+    def advance(self, n_steps: int) -> None:
+        """Advance ``n_steps`` plant steps of ``SIM_DT_S`` with the controller running."""
+        n = int(n_steps)
+        if n < 0:
+            raise ValueError(f"n_steps must be >= 0, got {n_steps}")
+        sub = self.params.control_substeps
+        ph, c = self.physics, self.controller
+        while n > 0:
+            k = min(n, sub - self._substep)
+            ph.step(k)
+            n -= k
+            self._substep += k
+            if self._substep >= sub:
+                self._substep = 0
+                c.update()
+        if self._fall_reason is None:
+            self._fall_reason = ph.fall_reason()
+            if self._fall_reason:
+                log.info("fall at t=%.3f s: %s", self.time_s, self._fall_reason)
+
+    def set_pelvis_force(self, force_n) -> None:
+        """Constant world-frame force (N, 3-vector) on the pelvis until changed."""
+        self.physics.set_pelvis_force(force_n)
+
+    def fell(self) -> bool:
+        """True once a fall has been detected (latched; checked at the end of ``advance``)."""
+        if self._fall_reason is None:
+            self._fall_reason = self.physics.fall_reason()
+        return self._fall_reason is not None
+
+    @property
+    def fall_reason(self) -> str | None:
+        """Reason of the first detected fall, or None."""
+        return self._fall_reason
+
+    def telemetry(self) -> dict:
+        """Named floats for logging (SI units; stance 0 = left, 1 = right)."""
+        ph, c = self.physics, self.controller
+        p = ph.pelvis_position()
+        v = ph.pelvis_velocity_heading()
+        _, pitch, roll = ph.euler_zyx()
+        fl, fr = ph.foot_normal_forces_n()
+        return {
+            "t": self.time_s,
+            "pelvis_x": float(p[0]), "pelvis_y": float(p[1]), "pelvis_z": float(p[2]),
+            "vx": float(v[0]), "vy": float(v[1]),
+            "vx_step_avg": float(c.vx_step_avg), "vy_signal": float(c.vy_filt),
+            "pitch": float(pitch), "roll": float(roll),
+            "stance": 0.0 if c.stance == "left" else 1.0,
+            "tau": float(c.tau), "step_index": float(c.step_index),
+            "left_foot_force": float(fl), "right_foot_force": float(fr),
+            "vx_des": self.vx_des_mps, "vy_des": self.vy_des_mps,
+        }
+
+
+__all__ = ["CassieWalker", "ControllerParams", "GaitLibrary", "OFFSET_KEYS"]
