@@ -1,0 +1,227 @@
+"""Metrics of one closed-loop run: pure functions over the master's structured array.
+
+The array has one row per communication step ``k`` (state at ``t = k*h`` and the
+regulator action applied over ``[t, t+h)``); the columns the metrics use are
+
+- ``t``: the communication point (s),
+- ``cmd_vx_des``, ``cmd_vy_des``: the command in force (m/s),
+- ``tel_vx_step_avg`` (and ``tel_vy_step_avg`` if the plant reports it): the forward
+  (lateral) velocity averaged over the last completed step (m/s),
+- ``in_vx``, ``in_vy``, ``in_step_index``: the regulator's inputs (used to rebuild a
+  step average the plant does not report),
+- ``in_pitch``, ``in_roll``: torso angles (rad).
+
+Velocity error = step-averaged velocity - command (the quantity the paper regulates).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+#: Convergence band on the step-averaged velocity error (m/s).
+CONVERGENCE_TOL_MPS = 0.05
+#: The steady-state window at the end of a run (s).
+STEADY_WINDOW_S = 5.0
+#: A convergence must hold at least this long before the end of the run to count (s).
+MIN_HOLD_S = 1.0
+
+
+def comm_step(rows: np.ndarray) -> float:
+    """The communication step of the run (difference of the first two time stamps)."""
+    if len(rows) < 2:
+        return 0.0
+    return float(rows["t"][1] - rows["t"][0])
+
+
+def end_time(rows: np.ndarray) -> float:
+    """The time at the end of the last recorded communication step."""
+    if len(rows) == 0:
+        return 0.0
+    return float(rows["t"][-1]) + comm_step(rows)
+
+
+def step_average(values: np.ndarray, step_index: np.ndarray) -> np.ndarray:
+    """For each row, the mean of ``values`` over the last *completed* step.
+
+    A step is a run of equal ``step_index``; rows in the first step (no completed step
+    yet) get the running mean of the values so far.
+    """
+    values = np.asarray(values, dtype=float)
+    step_index = np.asarray(step_index)
+    out = np.empty_like(values)
+    if len(values) == 0:
+        return out
+    start = 0
+    last_avg = None
+    running_sum = 0.0
+    for i in range(len(values)):
+        if i > 0 and step_index[i] != step_index[i - 1]:
+            last_avg = float(np.mean(values[start:i]))
+            start = i
+        if last_avg is None:
+            running_sum += values[i]
+            out[i] = running_sum / (i + 1)
+        else:
+            out[i] = last_avg
+    return out
+
+
+def _stepavg_column(rows: np.ndarray, axis: str) -> np.ndarray:
+    name = f"tel_{axis}_step_avg"
+    if name in rows.dtype.names:
+        return np.asarray(rows[name], dtype=float)
+    return step_average(rows[f"in_{axis}"], rows["in_step_index"])
+
+
+def velocity_errors(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(ex, ey): step-averaged velocity minus command, per row (m/s)."""
+    ex = _stepavg_column(rows, "vx") - np.asarray(rows["cmd_vx_des"], dtype=float)
+    ey = _stepavg_column(rows, "vy") - np.asarray(rows["cmd_vy_des"], dtype=float)
+    return ex, ey
+
+
+def _last_window(rows: np.ndarray, window_s: float) -> np.ndarray:
+    t_end = end_time(rows)
+    return np.asarray(rows["t"], dtype=float) >= t_end - window_s - 1e-9
+
+
+def steady_state_error(rows: np.ndarray, axis: str = "vx", *, window_s: float = STEADY_WINDOW_S,
+                       fell: bool = False) -> float | None:
+    """Mean |step-averaged velocity error| over the last ``window_s`` of the run.
+
+    ``None`` when the robot fell (a steady state was never reached) or there is no data.
+    """
+    if fell or len(rows) == 0:
+        return None
+    ex, ey = velocity_errors(rows)
+    e = ex if axis == "vx" else ey
+    sel = _last_window(rows, window_s)
+    return float(np.mean(np.abs(e[sel])))
+
+
+def convergence_time(rows: np.ndarray, *, t_from: float = 0.0, tol: float = CONVERGENCE_TOL_MPS,
+                     min_hold_s: float = MIN_HOLD_S, fell: bool = False) -> float | None:
+    """Time from ``t_from`` after which |ex| and |ey| stay <= ``tol`` to the end of the run.
+
+    Returns ``t_c - t_from`` where ``t_c`` is the first row time >= ``t_from`` from which
+    every later row is inside the band (0 if it never leaves the band after ``t_from``);
+    ``None`` if the run fell, never settles, or settles less than ``min_hold_s`` before
+    the end.
+    """
+    if fell or len(rows) == 0:
+        return None
+    t = np.asarray(rows["t"], dtype=float)
+    ex, ey = velocity_errors(rows)
+    inside = (np.abs(ex) <= tol) & (np.abs(ey) <= tol)
+    after = t >= t_from - 1e-9
+    if not after.any():
+        return None
+    bad = np.nonzero(after & ~inside)[0]
+    if len(bad) == 0:
+        t_c = float(t[after][0])
+    else:
+        last_bad = int(bad[-1])
+        if last_bad + 1 >= len(t):
+            return None
+        t_c = float(t[last_bad + 1])
+    if end_time(rows) - t_c < min_hold_s - 1e-9:
+        return None
+    return max(0.0, t_c - t_from)
+
+
+def mean_last(rows: np.ndarray, column: str, *, window_s: float = STEADY_WINDOW_S) -> float | None:
+    if len(rows) == 0 or column not in rows.dtype.names:
+        return None
+    return float(np.mean(rows[column][_last_window(rows, window_s)]))
+
+
+def max_abs(rows: np.ndarray, column: str) -> float | None:
+    if len(rows) == 0 or column not in rows.dtype.names:
+        return None
+    return float(np.max(np.abs(rows[column])))
+
+
+def summarize_arm(rows: np.ndarray, *, fell: bool, t_fall_s: float | None, perturbation_t_s: float = 0.0,
+                  wall_s: float | None = None) -> dict[str, Any]:
+    """The per-arm metrics of ``summary.json`` (JSON-ready: floats, bools, None)."""
+    sim_s = end_time(rows)
+    out: dict[str, Any] = {
+        "fell": bool(fell),
+        "t_fall_s": None if t_fall_s is None else float(t_fall_s),
+        "steady_state_error_vx": steady_state_error(rows, "vx", fell=fell),
+        "steady_state_error_vy": steady_state_error(rows, "vy", fell=fell),
+        "convergence_time_s": convergence_time(rows, t_from=perturbation_t_s, fell=fell),
+        "mean_vx_last_s": mean_last(rows, "tel_vx" if "tel_vx" in rows.dtype.names else "in_vx"),
+        "mean_vy_last_s": mean_last(rows, "tel_vy" if "tel_vy" in rows.dtype.names else "in_vy"),
+        "max_abs_pitch_rad": max_abs(rows, "in_pitch"),
+        "max_abs_roll_rad": max_abs(rows, "in_roll"),
+        "sim_s": sim_s,
+        "n_comm_steps": int(len(rows)),
+        "wall_s": None if wall_s is None else float(wall_s),
+        "realtime_factor": (sim_s / wall_s) if wall_s and wall_s > 0 else None,
+    }
+    psi = {}
+    for name in ("psi_x", "psi_y", "psi_pitch", "psi_roll"):
+        col = f"out_{name}"
+        if len(rows) and col in rows.dtype.names:
+            psi[name] = float(rows[col][-1])
+    out["final_psi"] = psi
+    return _json_clean(out)
+
+
+def _json_clean(d: dict[str, Any]) -> dict[str, Any]:
+    """NaN/inf become None so summary.json stays strict JSON."""
+    clean: dict[str, Any] = {}
+    for k, v in d.items():
+        if isinstance(v, float) and not math.isfinite(v):
+            clean[k] = None
+        elif isinstance(v, dict):
+            clean[k] = _json_clean(v)
+        else:
+            clean[k] = v
+    return clean
+
+
+# --------------------------------------------------------------------------- claim checks
+_OPS = {
+    "<": lambda a, b: a < b,
+    "<=": lambda a, b: a <= b,
+    ">": lambda a, b: a > b,
+    ">=": lambda a, b: a >= b,
+    "==": lambda a, b: a == b,
+    "!=": lambda a, b: a != b,
+}
+
+
+def evaluate_check(check: dict[str, Any], arms: dict[str, dict[str, Any]]) -> dict[str, Any]:
+    """Evaluate one claim check against the per-arm metrics.
+
+    ``check`` has ``arm``, ``metric``, ``op`` and ``value`` or ``other_arm``. Returns
+    ``{"verdict": "pass"|"miss"|"n/a", "lhs": ..., "rhs": ..., "text": ...}``; ``n/a``
+    when an arm is missing or a metric is null (e.g. the error of a run that fell).
+    """
+    arm, metric, op = check["arm"], check["metric"], check["op"]
+    other = check.get("other_arm")
+    rhs_label = f"{other}.{metric}" if other else _show(check.get("value"))
+    text = f"{arm}.{metric} {op} {rhs_label}"
+    lhs = arms.get(arm, {}).get(metric) if arm in arms else None
+    if other:
+        rhs = arms.get(other, {}).get(metric) if other in arms else None
+    else:
+        rhs = check.get("value")
+    if arm not in arms or (other and other not in arms):
+        return {"verdict": "n/a", "lhs": lhs, "rhs": rhs, "text": text, "why": "arm not run"}
+    if lhs is None or rhs is None:
+        return {"verdict": "n/a", "lhs": lhs, "rhs": rhs, "text": text, "why": "metric is null"}
+    ok = bool(_OPS[op](lhs, rhs))
+    return {"verdict": "pass" if ok else "miss", "lhs": lhs, "rhs": rhs, "text": text}
+
+
+def _show(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return f"{v:g}"
+    return str(v)

@@ -1,0 +1,145 @@
+"""``python -m scenarios report DIR``: one markdown page over every scenario's results.
+
+For every scenario of the suite and every other result folder found in ``DIR``: the
+table rows (one per arm), the plots, the paper's claim beside the measured numbers
+and a pass/miss verdict per check with both sides' values. Nothing is hidden: a
+scenario of the suite without results is listed as "not run", a failed run with its
+error, an arm that fell with its fall time.
+"""
+from __future__ import annotations
+
+import json
+import logging
+from pathlib import Path
+from typing import Any
+
+from fmu_src.avr_errors import ScenarioError
+from scenarios.output import TABLE_COLUMNS, evaluate_claim, fmt, table_rows
+
+log = logging.getLogger(__name__)
+
+
+def collect(out_dir: Path) -> list[tuple[str, dict[str, Any] | None, str | None]]:
+    """(name, summary or None, problem) for the suite's scenarios and every result folder."""
+    from scenarios import spec
+
+    found: dict[str, dict[str, Any] | None] = {}
+    problems: dict[str, str] = {}
+    for f in sorted(Path(out_dir).glob("*/summary.json")):
+        name = f.parent.name
+        try:
+            found[name] = json.loads(f.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            found[name] = None
+            problems[name] = f"unreadable summary.json: {exc}"
+    order: list[str] = []
+    try:
+        suite = [s.name for s in spec.load_suite(check_plant=False)]
+    except ScenarioError as exc:
+        log.warning("the suite does not validate: %s", exc)
+        suite = [p.stem for p in spec.suite_files()]
+    order.extend(suite)
+    order.extend(sorted(n for n in found if n not in suite))
+    out = []
+    for name in order:
+        if name in found:
+            out.append((name, found[name], problems.get(name)))
+        else:
+            out.append((name, None, "not run (no results in this folder)"))
+    return out
+
+
+def _md_escape(text: str) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def _num(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, float):
+        return f"{v:.4g}"
+    return "null" if v is None else str(v)
+
+
+def render(out_dir: Path) -> str:
+    entries = collect(out_dir)
+    n_pass = n_miss = n_na = 0
+    lines = ["# Scenario report", ""]
+    lines.append(f"Results folder: `{Path(out_dir)}`. One section per scenario; every arm is listed. "
+                 "Velocity errors are of the step-averaged velocity against the command: `sse_*` is the mean "
+                 "|error| over the last 5 s, `t_conv_s` the time from `perturbation_t_s` after which both errors "
+                 "stay within 0.05 m/s (null if never, or if the robot fell).")
+    lines.append("")
+    # ---- overview
+    lines += ["## Overview", "", "| scenario | status | regulator | model | verdict |", "|---|---|---|---|---|"]
+    for name, s, problem in entries:
+        if s is None:
+            lines.append(f"| {name} | {_md_escape(problem)} | - | - | n/a |")
+            n_na += 1
+            continue
+        verdict = (s.get("verdict") or evaluate_claim(s.get("claim"), s.get("arms") or {})).get("overall", "n/a")
+        n_pass += verdict == "pass"
+        n_miss += verdict == "miss"
+        n_na += verdict == "n/a"
+        status = s.get("status", "?")
+        if status != "ok":
+            status = f"{status}: {_md_escape(str(s.get('error') or '')[:120])}"
+        lines.append(f"| [{name}](#{name}) | {status} | {s.get('regulator', '-')} | "
+                     f"{_md_escape(Path(str(s.get('model', '-'))).name)} | **{verdict}** |")
+    lines += ["", f"Verdicts: {n_pass} pass, {n_miss} miss, {n_na} n/a (not run, failed or no checks).", ""]
+
+    # ---- per scenario
+    for name, s, problem in entries:
+        lines += [f"## {name}", ""]
+        if s is None:
+            lines += [f"**Not available:** {problem}.", ""]
+            continue
+        if s.get("description"):
+            lines += [_md_escape(s["description"]), ""]
+        lines.append(f"Model `{_md_escape(Path(str(s.get('model'))).name)}`, regulator `{s.get('regulator')}`, "
+                     f"duration {s.get('duration_s')} s, comm step {s.get('comm_step_s')} s, seed {s.get('seed')}, "
+                     f"perturbation from t = {s.get('perturbation_t_s')} s.")
+        lines.append("")
+        if s.get("status") != "ok":
+            lines += [f"**Run failed:** `{_md_escape(s.get('error'))}`", ""]
+        if s.get("arm_names") or s.get("arms"):
+            header = [h for _, h, _ in TABLE_COLUMNS[1:]]
+            lines.append("| " + " | ".join(header) + " |")
+            lines.append("|" + "---|" * len(header))
+            for row in table_rows(s):
+                if row.get("status") != "ok":
+                    lines.append(f"| {row.get('arm')} | {row.get('status')} |" + " |" * (len(header) - 2))
+                    continue
+                cells = [fmt(row.get(k), d) for k, _, d in TABLE_COLUMNS[1:]]
+                if row.get("fell") and row.get("fall_reason"):
+                    cells[1] = f"yes ({_md_escape(row['fall_reason'])})"
+                lines.append("| " + " | ".join(cells) + " |")
+            lines.append("")
+        claim = s.get("claim")
+        if claim:
+            lines += ["**Paper's claim:** " + _md_escape(claim.get("text", "")), ""]
+            if claim.get("source"):
+                lines += [f"_Source: {_md_escape(claim['source'])}_", ""]
+            verdict = s.get("verdict") or evaluate_claim(claim, s.get("arms") or {})
+            if verdict.get("checks"):
+                lines += ["| check | measured | reference | verdict |", "|---|---|---|---|"]
+                for c in verdict["checks"]:
+                    why = f" ({c['why']})" if c.get("why") else ""
+                    lines.append(f"| `{_md_escape(c['text'])}` | {_num(c.get('lhs'))} | {_num(c.get('rhs'))} | "
+                                 f"**{c['verdict']}**{why} |")
+                lines.append("")
+            lines += [f"**Verdict: {verdict.get('overall', 'n/a')}**", ""]
+        else:
+            lines += ["_No claim given for this scenario._", ""]
+        for plot in s.get("plots") or []:
+            lines += [f"![{name} {plot}]({name}/{plot})", ""]
+    return "\n".join(lines) + "\n"
+
+
+def write_report(out_dir: Path) -> Path:
+    out_dir = Path(out_dir)
+    if not out_dir.is_dir():
+        raise FileNotFoundError(f"no such results folder: {out_dir}")
+    path = out_dir / "report.md"
+    path.write_text(render(out_dir))
+    return path
