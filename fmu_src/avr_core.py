@@ -1,0 +1,917 @@
+"""Numpy-only core of the adaptive velocity regulator (AVR).
+
+Implements the regulator of Castillo, Weng, Stewart, Zhang and Hereid, "Velocity
+Regulation of 3D Bipedal Walking Robots with Uncertain Dynamics Through Adaptive
+Neural Network Controller" (IROS 2020): three decoupled regulators, each a classic PD
+term plus the output ``Psi`` of a one-hidden-layer rate network whose output weights
+learn online with the PES rule.
+
+Everything here is pure (``step`` returns a new state and never mutates its inputs),
+float64, seeded and free of any import besides numpy and the standard library, because
+this module is copied flat into the FMU's ``resources/`` folder.
+
+Regulators and outputs (all offsets in rad, added by the plant to its nominal gait)::
+
+    PD_x     = Kp_x (vx[k] - vx_des) + Kd_x (vx[k] - vx[k-1])      held per step_index
+    PD_y     = Kp_y (vy[k] - vy_des) + Kd_y (vy[k] - vy[k-1])      held per step_index
+    PD_pitch = Kp_pitch (pitch - pitch_des) + Kd_pitch pitch_rate   every call
+    PD_roll  = Kp_roll  (roll  - roll_des)  + Kd_roll  roll_rate    every call
+
+    delta_swing_hip_pitch  = PD_x     + g_shp * Psi_x[0]
+    delta_swing_knee       =            g_sk  * Psi_x[1]
+    delta_swing_hip_roll   = PD_y     + g_shr * Psi_y[0]
+    delta_stance_hip_roll  = PD_roll  + g_thr * Psi_y[1] + g_thr * Psi_torso[2]
+    delta_stance_hip_pitch = PD_pitch + g_thp * Psi_torso[0]
+    delta_stance_knee      =            g_tk  * Psi_torso[1]
+
+where ``g_*`` are the ``psi_gain_<joint>`` parameters, applied at output time only
+(learning does not depend on them, so a gain of 0 switches an output off while its
+network keeps learning).
+
+Networks.  Each regulator has ``n_neurons`` LIFRate neurons (tau_rc = 0.02 s,
+tau_ref = 0.002 s) with unit-vector encoders drawn uniformly on the sphere, maximum
+rates ~ U(200, 400) Hz and intercepts ~ U(-1, 0.9) (nengo 4's Ensemble defaults; the
+upper end stays below 1 because the gain ``(J_max - 1) / (1 - intercept)`` diverges as
+an intercept approaches 1, giving neurons that switch on only in a sliver of the input
+space with a huge slope).  Gains and biases follow from the analytic LIF rate curve
+exactly as nengo builds an Ensemble with radius 1.  Network inputs:
+
+* longitudinal: ``[vx, vx_des] / velocity_scale_mps``
+* lateral:      ``[vy, vy_des] / velocity_scale_mps``
+* torso:        ``[pitch / angle_scale_rad, roll / angle_scale_rad,
+  pitch_rate / rate_scale_radps, roll_rate / rate_scale_radps]``
+
+each then mapped into the unit ball by *radial projection*: a vector of norm <= 1 is
+used unchanged, a longer one is divided by its norm (direction kept, no per-component
+distortion and no loss of resolution inside the ball, unlike clip-then-divide by
+sqrt(d)).
+
+Learning (PES, as nengo 4 scales it).  Output weights ``W`` (rows = outputs, columns =
+neurons) start at zero; at every call, with ``h`` the rates (Hz) for this call's input::
+
+    Psi_raw = W h ;   Psi = clip(Psi_raw, -psi_limit, +psi_limit)
+    W      <- W - learning_rate * dt / n_neurons * outer(E, h)
+
+with ``E = desired - actual``: ``E_x = vx_des - vx`` (both longitudinal outputs),
+``E_y = vy_des - vy``, ``E_pitch = pitch_des - pitch`` (torso outputs 0 and 1) and
+``E_roll = roll_des - roll`` (torso output 2).  So a persistent ``vx > vx_des`` drives
+``Psi_x`` positive, the same sign as its PD term.  Outputs that share an error signal
+keep identical weight rows forever, so the state stores 4 rows (x, y, pitch, roll),
+not 7 (see :class:`RegulatorState`).  The output of a call uses the
+weights from before that call's update (exactly nengo's ordering, in which the delta
+computed in step k is applied at the start of step k+1).
+
+Anti-windup (conditional integration): when ``|Psi_raw[j]| >= psi_limit`` and the
+update would push ``Psi_raw[j]`` further out (``sign(-E_j) == sign(Psi_raw[j])``), the
+update of row ``j`` is skipped for this call.  The weights therefore never wind up far
+beyond what the limit lets through, and the output leaves saturation as soon as the
+error reverses.  Rows that are not saturated learn exactly as plain PES.
+
+``adaptation_enabled = False``: the networks are not evaluated, the weights are not
+updated and Psi contributes exactly 0 (the diagnostic ``psi_*`` outputs are 0 too), so
+the outputs are exactly the classic PD regulator.  The weights are kept in the state
+and learning resumes from them when adaptation is re-enabled.
+"""
+from __future__ import annotations
+
+import logging
+import math
+import struct
+import zlib
+from dataclasses import dataclass, field, fields
+from numbers import Integral, Real
+
+import numpy as np
+
+try:
+    from .avr_errors import InputError, ParameterError, StateError
+except ImportError:  # inside the FMU the modules are top-level
+    from avr_errors import InputError, ParameterError, StateError
+
+__all__ = [
+    "OUTPUT_JOINTS", "VarSpec", "PARAM_SPECS", "INPUT_SPECS", "OUTPUT_SPECS",
+    "FIXED_PARAMS", "TAU_RC", "TAU_REF", "MAX_RATE_RANGE_HZ", "INTERCEPT_RANGE",
+    "RegulatorParams", "validate_params", "RegulatorInputs", "validate_inputs",
+    "NetworkSpec", "Networks", "build_networks", "lif_gain_bias", "neuron_rates",
+    "network_inputs", "RegulatorState", "initial_state", "step",
+    "state_to_bytes", "state_from_bytes", "Regulator",
+]
+
+logger = logging.getLogger(__name__)
+
+OUTPUT_JOINTS = (
+    "swing_hip_pitch", "swing_knee", "swing_hip_roll",
+    "stance_hip_roll", "stance_hip_pitch", "stance_knee",
+)
+
+#: LIFRate membrane time constant (s) and refractory period (s).
+TAU_RC = 0.02
+TAU_REF = 0.002
+#: Distributions of the neurons' maximum rates (Hz, uniform) and intercepts (uniform,
+#: in units of the unit-ball input), both nengo 4's Ensemble defaults.
+MAX_RATE_RANGE_HZ = (200.0, 400.0)
+INTERCEPT_RANGE = (-1.0, 0.9)
+
+_INT32_MAX = 2**31 - 1
+
+
+# --------------------------------------------------------------------------------------
+# Variable declarations
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class VarSpec:
+    """One declaration of an FMU variable (parameter, input or output).
+
+    ``min``/``max`` are inclusive bounds (``None`` = unbounded); ``default`` is the FMI
+    start value; ``unit`` is a plain unit string ("m/s", "rad", "rad/s", "s", "1", ...).
+    """
+
+    name: str
+    type: str  # "Real" | "Integer" | "Boolean"
+    default: float | int | bool | None
+    min: float | None
+    max: float | None
+    unit: str
+    causality: str  # "parameter" | "input" | "output"
+    variability: str  # "tunable" | "fixed" | "continuous" | "discrete"
+    description: str
+
+
+def _p(name, default, lo, hi, unit, description, type="Real", variability="tunable"):
+    return VarSpec(name, type, default, lo, hi, unit, "parameter", variability, description)
+
+
+_GAIN = (-5.0, 5.0)
+_SIGN_NOTE = ("; negative values flip the sign for plants whose joint convention is the "
+              "opposite one")
+
+PARAM_SPECS: tuple[VarSpec, ...] = (
+    _p("Kp_x", 0.25, *_GAIN, "rad.s/m",
+       "Longitudinal P gain: swing hip pitch offset per m/s of (vx - vx_des), "
+       "rad/(m/s), in [-5, 5]" + _SIGN_NOTE),
+    _p("Kd_x", 0.05, *_GAIN, "rad.s/m",
+       "Longitudinal D gain: swing hip pitch offset per m/s change of vx between two "
+       "walking steps, rad/(m/s), in [-5, 5]" + _SIGN_NOTE),
+    _p("Kp_y", 0.25, *_GAIN, "rad.s/m",
+       "Lateral P gain: swing hip roll offset per m/s of (vy - vy_des), rad/(m/s), "
+       "in [-5, 5]" + _SIGN_NOTE),
+    _p("Kd_y", 0.05, *_GAIN, "rad.s/m",
+       "Lateral D gain: swing hip roll offset per m/s change of vy between two walking "
+       "steps, rad/(m/s), in [-5, 5]" + _SIGN_NOTE),
+    _p("Kp_pitch", 0.0, *_GAIN, "1",
+       "Torso pitch P gain: stance hip pitch offset per rad of (pitch - pitch_des), "
+       "rad/rad, in [-5, 5]; 0 by default (the plant's stance controller stabilises "
+       "the torso)"),
+    _p("Kd_pitch", 0.0, *_GAIN, "s",
+       "Torso pitch D gain: stance hip pitch offset per rad/s of pitch_rate, "
+       "rad/(rad/s), in [-5, 5]; 0 by default"),
+    _p("Kp_roll", 0.0, *_GAIN, "1",
+       "Torso roll P gain: stance hip roll offset per rad of (roll - roll_des), "
+       "rad/rad, in [-5, 5]; 0 by default"),
+    _p("Kd_roll", 0.0, *_GAIN, "s",
+       "Torso roll D gain: stance hip roll offset per rad/s of roll_rate, "
+       "rad/(rad/s), in [-5, 5]; 0 by default"),
+    _p("pitch_des", 0.0, -0.5, 0.5, "rad", "Desired torso pitch, rad, in [-0.5, 0.5]"),
+    _p("roll_des", 0.0, -0.5, 0.5, "rad", "Desired torso roll, rad, in [-0.5, 0.5]"),
+    _p("learning_rate", 1e-6, 0.0, 1e-3, "1",
+       "PES learning rate kappa (nengo 4 convention: W -= kappa dt/n outer(E, h), "
+       "h in Hz), in [0, 1e-3]; the default 1e-6 moves Psi by ~0.05 rad in ~10 s of "
+       "a constant 0.3 m/s velocity error; 0 freezes the weights"),
+    _p("psi_limit", 0.3, 0.0, 1.0, "rad",
+       "Saturation of every network output Psi (before psi_gain), rad, in [0, 1]; "
+       "saturated outputs stop integrating outward (anti-windup)"),
+    _p("psi_gain_swing_hip_pitch", 1.0, *_GAIN, "1",
+       "Gain of Psi_x[0] on delta_swing_hip_pitch, in [-5, 5]; 0 switches it off"),
+    _p("psi_gain_swing_knee", 1.0, *_GAIN, "1",
+       "Gain of Psi_x[1] on delta_swing_knee, in [-5, 5]; 0 switches it off"),
+    _p("psi_gain_swing_hip_roll", 1.0, *_GAIN, "1",
+       "Gain of Psi_y[0] on delta_swing_hip_roll, in [-5, 5]; 0 switches it off"),
+    _p("psi_gain_stance_hip_roll", 1.0, *_GAIN, "1",
+       "Gain of Psi_y[1] and Psi_torso[2] on delta_stance_hip_roll, in [-5, 5]; "
+       "0 switches them off"),
+    _p("psi_gain_stance_hip_pitch", 1.0, *_GAIN, "1",
+       "Gain of Psi_torso[0] on delta_stance_hip_pitch, in [-5, 5]; 0 switches it off"),
+    _p("psi_gain_stance_knee", 1.0, *_GAIN, "1",
+       "Gain of Psi_torso[1] on delta_stance_knee, in [-5, 5]; 0 switches it off"),
+    _p("adaptation_enabled", True, None, None, "1",
+       "If false: no learning and Psi contributes 0 (exactly the classic PD "
+       "regulator); the learned weights are kept and used again when re-enabled",
+       type="Boolean"),
+    _p("velocity_scale_mps", 1.5, 0.05, 10.0, "m/s",
+       "Velocities are divided by this before entering the longitudinal/lateral "
+       "networks (then radially projected into the unit ball), m/s, in [0.05, 10]",
+       variability="fixed"),
+    _p("angle_scale_rad", 0.3, 0.01, 3.2, "rad",
+       "Torso pitch/roll are divided by this before entering the torso network, rad, "
+       "in [0.01, 3.2]", variability="fixed"),
+    _p("rate_scale_radps", 2.0, 0.01, 50.0, "rad/s",
+       "Torso pitch/roll rates are divided by this before entering the torso network, "
+       "rad/s, in [0.01, 50]", variability="fixed"),
+    _p("n_neurons", 1000, 1, 10000, "1",
+       "Neurons per network (three networks), in [1, 10000]", type="Integer",
+       variability="fixed"),
+    _p("seed", 0, 0, _INT32_MAX, "1",
+       "Seed of the random encoders, max rates and intercepts, in [0, 2147483647]; "
+       "same seed -> identical networks", type="Integer", variability="fixed"),
+)
+
+
+def _i(name, unit, description, type="Real", variability="continuous", default=0.0,
+       lo=None, hi=None):
+    return VarSpec(name, type, default, lo, hi, unit, "input", variability, description)
+
+
+INPUT_SPECS: tuple[VarSpec, ...] = (
+    _i("vx", "m/s", "Measured forward (longitudinal) velocity of the pelvis, m/s"),
+    _i("vy", "m/s", "Measured lateral velocity of the pelvis, m/s"),
+    _i("vx_des", "m/s", "Desired forward velocity, m/s"),
+    _i("vy_des", "m/s", "Desired lateral velocity, m/s"),
+    _i("pitch", "rad", "Measured torso pitch, rad"),
+    _i("roll", "rad", "Measured torso roll, rad"),
+    _i("pitch_rate", "rad/s", "Measured torso pitch rate, rad/s"),
+    _i("roll_rate", "rad/s", "Measured torso roll rate, rad/s"),
+    _i("step_index", "1",
+       "Walking step counter from the plant, >= 0; the longitudinal and lateral PD "
+       "terms are recomputed whenever it changes and held otherwise",
+       type="Integer", variability="discrete", default=0, lo=0, hi=_INT32_MAX),
+)
+
+
+def _o(name, unit, description):
+    return VarSpec(name, "Real", 0.0, None, None, unit, "output", "continuous", description)
+
+
+OUTPUT_SPECS: tuple[VarSpec, ...] = (
+    _o("delta_swing_hip_pitch", "rad", "Swing hip pitch offset: PD_x + g Psi_x[0], rad"),
+    _o("delta_swing_knee", "rad", "Swing knee offset: g Psi_x[1], rad"),
+    _o("delta_swing_hip_roll", "rad", "Swing hip roll offset: PD_y + g Psi_y[0], rad"),
+    _o("delta_stance_hip_roll", "rad",
+       "Stance hip roll offset: PD_roll + g Psi_y[1] + g Psi_torso[2], rad"),
+    _o("delta_stance_hip_pitch", "rad",
+       "Stance hip pitch offset: PD_pitch + g Psi_torso[0], rad"),
+    _o("delta_stance_knee", "rad", "Stance knee offset: g Psi_torso[1], rad"),
+    _o("psi_x", "rad", "Diagnostic: saturated network output Psi_x[0] (before gain), rad"),
+    _o("psi_y", "rad", "Diagnostic: saturated network output Psi_y[0] (before gain), rad"),
+    _o("psi_pitch", "rad",
+       "Diagnostic: saturated network output Psi_torso[0] (before gain), rad"),
+    _o("psi_roll", "rad",
+       "Diagnostic: saturated network output Psi_torso[2] (before gain), rad"),
+    _o("error_vx", "m/s", "vx - vx_des, m/s"),
+    _o("error_vy", "m/s", "vy - vy_des, m/s"),
+    _o("error_pitch", "rad", "pitch - pitch_des, rad"),
+    _o("error_roll", "rad", "roll - roll_des, rad"),
+)
+
+_PARAM_BY_NAME = {s.name: s for s in PARAM_SPECS}
+#: Parameters that define the networks and cannot change once a regulator exists.
+FIXED_PARAMS = tuple(s.name for s in PARAM_SPECS if s.variability == "fixed")
+_OUTPUT_NAMES = tuple(s.name for s in OUTPUT_SPECS)
+_REAL_INPUTS = tuple(s.name for s in INPUT_SPECS if s.type == "Real")
+
+
+def _fmt_range(spec: VarSpec) -> str:
+    def f(v):
+        return repr(int(v)) if spec.type == "Integer" else f"{v:g}"
+    return f"[{f(spec.min)}, {f(spec.max)}]"
+
+
+def _check_param(spec: VarSpec, value) -> tuple[object, str | None]:
+    """Return ``(normalised value, problem or None)`` for one parameter value."""
+    if spec.type == "Boolean":
+        if isinstance(value, (bool, np.bool_)):
+            return bool(value), None
+        return value, f"{spec.name} = {value!r}: must be a bool (true/false)"
+    if spec.type == "Integer":
+        ok = isinstance(value, Integral) and not isinstance(value, (bool, np.bool_))
+        if ok and spec.min <= value <= spec.max:
+            return int(value), None
+        return value, f"{spec.name} = {value!r}: must be an integer in {_fmt_range(spec)}"
+    ok = isinstance(value, Real) and not isinstance(value, (bool, np.bool_))
+    if ok:
+        v = float(value)
+        if math.isfinite(v) and spec.min <= v <= spec.max:
+            return v, None
+    return value, f"{spec.name} = {value!r}: must be a finite number in {_fmt_range(spec)}"
+
+
+# --------------------------------------------------------------------------------------
+# Parameters
+# --------------------------------------------------------------------------------------
+def _d(name):
+    return _PARAM_BY_NAME[name].default
+
+
+@dataclass(frozen=True)
+class RegulatorParams:
+    """All regulator parameters (names, units, ranges and defaults: ``PARAM_SPECS``).
+
+    Construction validates every field (raising :class:`ParameterError` that lists every
+    problem at once) and normalises numbers: Real fields become ``float``, Integer
+    fields ``int``, Boolean fields ``bool``.  Use :meth:`replace` for a modified copy.
+    """
+
+    Kp_x: float = _d("Kp_x")  # rad/(m/s)
+    Kd_x: float = _d("Kd_x")  # rad/(m/s)
+    Kp_y: float = _d("Kp_y")  # rad/(m/s)
+    Kd_y: float = _d("Kd_y")  # rad/(m/s)
+    Kp_pitch: float = _d("Kp_pitch")  # rad/rad
+    Kd_pitch: float = _d("Kd_pitch")  # rad/(rad/s)
+    Kp_roll: float = _d("Kp_roll")  # rad/rad
+    Kd_roll: float = _d("Kd_roll")  # rad/(rad/s)
+    pitch_des: float = _d("pitch_des")  # rad
+    roll_des: float = _d("roll_des")  # rad
+    learning_rate: float = _d("learning_rate")  # PES kappa (nengo convention)
+    psi_limit: float = _d("psi_limit")  # rad
+    psi_gain_swing_hip_pitch: float = _d("psi_gain_swing_hip_pitch")
+    psi_gain_swing_knee: float = _d("psi_gain_swing_knee")
+    psi_gain_swing_hip_roll: float = _d("psi_gain_swing_hip_roll")
+    psi_gain_stance_hip_roll: float = _d("psi_gain_stance_hip_roll")
+    psi_gain_stance_hip_pitch: float = _d("psi_gain_stance_hip_pitch")
+    psi_gain_stance_knee: float = _d("psi_gain_stance_knee")
+    adaptation_enabled: bool = _d("adaptation_enabled")
+    velocity_scale_mps: float = _d("velocity_scale_mps")  # m/s
+    angle_scale_rad: float = _d("angle_scale_rad")  # rad
+    rate_scale_radps: float = _d("rate_scale_radps")  # rad/s
+    n_neurons: int = _d("n_neurons")
+    seed: int = _d("seed")
+
+    def __post_init__(self):
+        problems = []
+        for spec in PARAM_SPECS:
+            value, problem = _check_param(spec, getattr(self, spec.name))
+            if problem is None:
+                object.__setattr__(self, spec.name, value)
+            else:
+                problems.append(problem)
+        if problems:
+            raise ParameterError(problems)
+
+    def replace(self, **changes) -> "RegulatorParams":
+        """Return a validated copy with ``changes`` applied (ParameterError if invalid)."""
+        unknown = sorted(set(changes) - set(_PARAM_BY_NAME))
+        values = {s.name: getattr(self, s.name) for s in PARAM_SPECS}
+        values.update({k: v for k, v in changes.items() if k in _PARAM_BY_NAME})
+        problems = [f"{k}: unknown parameter (known: {', '.join(_PARAM_BY_NAME)})"
+                    for k in unknown]
+        try:
+            new = RegulatorParams(**values)
+        except ParameterError as exc:
+            raise ParameterError(problems + exc.problems) from None
+        if problems:
+            raise ParameterError(problems)
+        return new
+
+    def as_dict(self) -> dict[str, float | int | bool]:
+        """Field name -> value, in ``PARAM_SPECS`` order."""
+        return {s.name: getattr(self, s.name) for s in PARAM_SPECS}
+
+
+def validate_params(params: RegulatorParams) -> None:
+    """Raise :class:`ParameterError` listing every invalid field of ``params``.
+
+    Each problem names the field, its value and the allowed range, e.g.
+    ``"Kp_x = nan: must be a finite number in [-5, 5]"``.
+    """
+    if not isinstance(params, RegulatorParams):
+        raise ParameterError(f"params = {params!r}: must be a RegulatorParams")
+    problems = [p for s in PARAM_SPECS
+                for p in [_check_param(s, getattr(params, s.name, None))[1]] if p]
+    if problems:
+        raise ParameterError(problems)
+
+
+# --------------------------------------------------------------------------------------
+# Inputs
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RegulatorInputs:
+    """One call's inputs (names and units: ``INPUT_SPECS``); not validated on
+    construction (``step`` calls :func:`validate_inputs`)."""
+
+    vx: float = 0.0  # m/s
+    vy: float = 0.0  # m/s
+    vx_des: float = 0.0  # m/s
+    vy_des: float = 0.0  # m/s
+    pitch: float = 0.0  # rad
+    roll: float = 0.0  # rad
+    pitch_rate: float = 0.0  # rad/s
+    roll_rate: float = 0.0  # rad/s
+    step_index: int = 0  # walking step counter, >= 0
+
+
+def validate_inputs(inputs: RegulatorInputs) -> None:
+    """Raise :class:`InputError` naming the first bad input.
+
+    Real inputs must be finite numbers; ``step_index`` an integer in [0, 2**31-1].
+    """
+    for name in _REAL_INPUTS:
+        v = getattr(inputs, name)
+        if type(v) is float:  # fast path
+            if v - v == 0.0:  # false for nan and +-inf
+                continue
+        elif (isinstance(v, Real) and not isinstance(v, (bool, np.bool_))
+              and math.isfinite(v)):
+            continue
+        unit = next(s.unit for s in INPUT_SPECS if s.name == name)
+        raise InputError(f"{name} = {v!r}: must be a finite number ({unit})")
+    s = inputs.step_index
+    if not (isinstance(s, Integral) and not isinstance(s, (bool, np.bool_))
+            and 0 <= s <= _INT32_MAX):
+        raise InputError(f"step_index = {s!r}: must be an integer in [0, {_INT32_MAX}]")
+
+
+# --------------------------------------------------------------------------------------
+# Networks
+# --------------------------------------------------------------------------------------
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a.flags.writeable = False
+    return a
+
+
+def lif_gain_bias(max_rates, intercepts, tau_rc: float = TAU_RC,
+                  tau_ref: float = TAU_REF) -> tuple[np.ndarray, np.ndarray]:
+    """Gain and bias (per neuron, unit input current) of LIFRate neurons.
+
+    The LIF rate for input current J > 1 is ``1 / (tau_ref + tau_rc ln(1 + 1/(J-1)))``.
+    A neuron with intercept c (rate 0 at ``e.x = c``, i.e. ``J = 1``) and maximum rate
+    m (Hz, reached at ``e.x = 1``) needs ``J_max - 1 = 1 / expm1((1/m - tau_ref) /
+    tau_rc)``, hence ``gain = (J_max - 1) / (1 - c)`` and ``bias = 1 - gain c``.
+    Requires ``m < 1/tau_ref`` and ``c < 1``.
+    """
+    max_rates = np.asarray(max_rates, dtype=np.float64)
+    intercepts = np.asarray(intercepts, dtype=np.float64)
+    if np.any(max_rates >= 1.0 / tau_ref) or np.any(max_rates <= 0):
+        raise ValueError("max_rates must be in (0, 1/tau_ref) Hz")
+    if np.any(intercepts >= 1.0):
+        raise ValueError("intercepts must be < 1")
+    j_max_minus_1 = 1.0 / np.expm1((1.0 / max_rates - tau_ref) / tau_rc)
+    gain = j_max_minus_1 / (1.0 - intercepts)
+    bias = 1.0 - gain * intercepts
+    return gain, bias
+
+
+@dataclass(frozen=True, eq=False)
+class NetworkSpec:
+    """One fixed hidden layer: ``n`` LIFRate neurons on a ``d``-dimensional input.
+
+    ``encoders`` (n, d) unit vectors, ``max_rates`` (n,) Hz, ``intercepts`` (n,),
+    ``gain`` (n,) and ``bias`` (n,) in units of the neuron's threshold current, and
+    ``scaled_encoders = encoders * gain[:, None]`` (radius 1).  Input current for a
+    unit-ball input x: ``J = scaled_encoders @ x + bias``.  Arrays are read-only.
+    """
+
+    name: str
+    encoders: np.ndarray
+    max_rates: np.ndarray
+    intercepts: np.ndarray
+    gain: np.ndarray
+    bias: np.ndarray
+    scaled_encoders: np.ndarray
+
+    @property
+    def n_neurons(self) -> int:
+        return self.encoders.shape[0]
+
+    @property
+    def dimensions(self) -> int:
+        return self.encoders.shape[1]
+
+
+def _make_network(name: str, n: int, d: int, rng: np.random.Generator) -> NetworkSpec:
+    # Order of draws is part of the format: encoders, max rates, intercepts.
+    enc = rng.standard_normal((n, d))
+    norms = np.linalg.norm(enc, axis=1, keepdims=True)
+    # A zero-length Gaussian vector has probability 0; guard anyway (use e_0).
+    zero = norms[:, 0] == 0.0
+    if np.any(zero):
+        enc[zero] = 0.0
+        enc[zero, 0] = 1.0
+        norms[zero] = 1.0
+    enc = enc / norms
+    max_rates = rng.uniform(*MAX_RATE_RANGE_HZ, size=n)
+    intercepts = rng.uniform(*INTERCEPT_RANGE, size=n)
+    gain, bias = lif_gain_bias(max_rates, intercepts)
+    scaled = enc * gain[:, None]
+    return NetworkSpec(name, _readonly(enc), _readonly(max_rates), _readonly(intercepts),
+                       _readonly(gain), _readonly(bias), _readonly(scaled))
+
+
+#: Rows of the stored weight matrix (one per error signal, see RegulatorState) and the
+#: network each row reads its presynaptic rates from.
+WEIGHT_ROWS = ("x", "y", "pitch", "roll")
+_ROW_NET = np.array([0, 1, 2, 2], dtype=np.intp)
+_N_ROWS = 4
+_DIMS = (2, 2, 4)
+
+
+@dataclass(frozen=True, eq=False)
+class Networks:
+    """The three fixed hidden layers, built from ``(n_neurons, seed)`` only.
+
+    ``longitudinal`` (input [vx, vx_des]), ``lateral`` ([vy, vy_des]) and ``torso``
+    ([pitch, roll, pitch_rate, roll_rate]), all scaled into the unit ball.  The stacked
+    arrays ``encoders_t`` ((8, 3n) block-diagonal transposed scaled encoders) and
+    ``bias_all`` ((3n,)) let :func:`step` evaluate all 3n neurons in one product.
+    """
+
+    n_neurons: int
+    seed: int
+    longitudinal: NetworkSpec
+    lateral: NetworkSpec
+    torso: NetworkSpec
+    encoders_t: np.ndarray = field(init=False, repr=False)
+    bias_all: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self):
+        n = self.n_neurons
+        nets = (self.longitudinal, self.lateral, self.torso)
+        enc_t = np.zeros((sum(_DIMS), 3 * n))
+        col = 0
+        for k, net in enumerate(nets):
+            if net.encoders.shape != (n, _DIMS[k]):
+                raise ValueError(f"{net.name}: encoders must have shape {(n, _DIMS[k])}")
+            enc_t[col:col + _DIMS[k], k * n:(k + 1) * n] = net.scaled_encoders.T
+            col += _DIMS[k]
+        object.__setattr__(self, "encoders_t", _readonly(enc_t))
+        object.__setattr__(self, "bias_all",
+                           _readonly(np.concatenate([net.bias for net in nets])))
+
+    def __iter__(self):
+        return iter((self.longitudinal, self.lateral, self.torso))
+
+
+def build_networks(params: RegulatorParams) -> Networks:
+    """Build the three networks from ``params.n_neurons`` and ``params.seed`` only.
+
+    Network k (0 longitudinal, 1 lateral, 2 torso) draws from its own stream
+    ``np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,)))`` (the k-th
+    child of ``SeedSequence(seed)``), so the networks are independent of each other and
+    identical for identical seeds.
+    """
+    n, seed = int(params.n_neurons), int(params.seed)
+    rngs = [np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,)))
+            for k in range(3)]
+    nets = [_make_network(name, n, d, rng)
+            for name, d, rng in zip(("longitudinal", "lateral", "torso"), _DIMS, rngs)]
+    logger.debug("built 3 networks of %d LIFRate neurons (seed %d)", n, seed)
+    return Networks(n, seed, *nets)
+
+
+def _lif_rates_from_current(J: np.ndarray) -> np.ndarray:
+    """LIFRate rates (Hz) for input currents J: 0 where J <= 1 (consumes J's copy)."""
+    j = J - 1.0
+    active = j > 0.0
+    # Inactive neurons get a harmless positive j (avoids inf, whose special-value path
+    # in log1p is slow) and are zeroed by the numerator below; active ones are
+    # evaluated operation by operation as 1 / (tau_ref + tau_rc * log1p(1 / j)).
+    np.maximum(j, 1e-300, out=j)
+    np.divide(1.0, j, out=j)
+    np.log1p(j, out=j)
+    j *= TAU_RC
+    j += TAU_REF
+    np.divide(active, j, out=j)  # True -> 1.0, False -> 0.0 (exactly 0 Hz)
+    return j
+
+
+def neuron_rates(net: NetworkSpec, x) -> np.ndarray:
+    """LIFRate rates (Hz, shape (n,)) of ``net`` for a scaled input ``x`` (shape (d,)).
+
+    ``x`` is used as given (callers map it into the unit ball, see
+    :func:`network_inputs`); the current is ``scaled_encoders @ x + bias``.
+    """
+    x = np.asarray(x, dtype=np.float64).reshape(net.dimensions)
+    return _lif_rates_from_current(net.scaled_encoders @ x + net.bias)
+
+
+def _ball2(a: float, b: float) -> tuple[float, float]:
+    r = math.hypot(a, b)
+    if r > 1.0:
+        return a / r, b / r
+    return a, b
+
+
+def _scaled(inputs: RegulatorInputs, params: RegulatorParams) -> list[float]:
+    vs, sa, sr = params.velocity_scale_mps, params.angle_scale_rad, params.rate_scale_radps
+    a, b = _ball2(inputs.vx / vs, inputs.vx_des / vs)
+    c, d = _ball2(inputs.vy / vs, inputs.vy_des / vs)
+    p, r = inputs.pitch / sa, inputs.roll / sa
+    pr, rr = inputs.pitch_rate / sr, inputs.roll_rate / sr
+    n = math.hypot(p, r, pr, rr)
+    if n > 1.0:
+        p, r, pr, rr = p / n, r / n, pr / n, rr / n
+    return [a, b, c, d, p, r, pr, rr]
+
+
+def network_inputs(inputs: RegulatorInputs,
+                   params: RegulatorParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The three networks' inputs for ``inputs``: scaled and radially projected into
+    the unit ball (longitudinal (2,), lateral (2,), torso (4,), dimensionless)."""
+    x = np.array(_scaled(inputs, params))
+    return x[0:2], x[2:4], x[4:8]
+
+
+# --------------------------------------------------------------------------------------
+# State
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True, eq=False)
+class RegulatorState:
+    """Immutable snapshot of everything the regulator remembers.
+
+    * ``weights`` (4, n) learned output weights, rad/Hz (read-only; a writeable or
+      non-owning array passed in is copied), one row per error signal
+      (``WEIGHT_ROWS``): x (longitudinal net), y (lateral net), pitch and roll (torso
+      net).  The two outputs of a network that share an error signal (Psi_x[0] and
+      Psi_x[1]; Psi_y[0] and Psi_y[1]; Psi_torso[0] and Psi_torso[1]) have identical
+      weight rows at all times (same zero start, same error, same presynaptic rates,
+      same saturation and anti-windup decision), so each pair is stored once; they
+      differ only through their psi_gain.  ``weights_x`` (2, n), ``weights_y`` (2, n)
+      and ``weights_torso`` (3, n) are read-only views in the per-output layout.
+    * ``last_step_index``: step_index seen at the previous call, -1 before the first.
+    * ``vx_at_step``/``vy_at_step``: vx, vy (m/s) at the last step_index change.
+    * ``pd_x``/``pd_y``: held longitudinal/lateral PD terms (rad).
+    * ``n_calls``: number of ``step`` calls so far; ``time_s``: sum of their dt (s).
+    * ``network_key``: ``(seed, velocity_scale_mps, angle_scale_rad,
+      rate_scale_radps)`` of the regulator the weights belong to (``None`` = unknown);
+      :func:`state_from_bytes` refuses a state learned on other networks.
+    """
+
+    weights: np.ndarray
+    last_step_index: int = -1
+    vx_at_step: float = 0.0
+    vy_at_step: float = 0.0
+    pd_x: float = 0.0
+    pd_y: float = 0.0
+    n_calls: int = 0
+    time_s: float = 0.0
+    network_key: tuple[int, float, float, float] | None = None
+
+    def __post_init__(self):
+        w = self.weights
+        if not (type(w) is np.ndarray and not w.flags.writeable and w.flags.owndata
+                and w.dtype == np.float64 and w.flags.c_contiguous):
+            w = np.array(w, dtype=np.float64, copy=True, order="C")
+            w.flags.writeable = False
+            object.__setattr__(self, "weights", w)
+        if w.ndim != 2 or w.shape[0] != _N_ROWS:
+            raise StateError(f"weights must have shape (4, n_neurons), got {w.shape}")
+
+    @property
+    def n_neurons(self) -> int:
+        return self.weights.shape[1]
+
+    @property
+    def weights_x(self) -> np.ndarray:
+        """(2, n) weights of Psi_x (swing hip pitch, swing knee), rad/Hz."""
+        return self.weights[[0, 0]]  # (fancy indexing returns a copy)
+
+    @property
+    def weights_y(self) -> np.ndarray:
+        """(2, n) weights of Psi_y (swing hip roll, stance hip roll), rad/Hz."""
+        return self.weights[[1, 1]]
+
+    @property
+    def weights_torso(self) -> np.ndarray:
+        """(3, n) weights of Psi_torso (stance hip pitch, stance knee, stance hip
+        roll), rad/Hz."""
+        return self.weights[[2, 2, 3]]
+
+    def __eq__(self, other):
+        if not isinstance(other, RegulatorState):
+            return NotImplemented
+        return all(np.array_equal(getattr(self, f.name), getattr(other, f.name))
+                   for f in fields(self))
+
+    __hash__ = None
+
+
+def initial_state(params: RegulatorParams, networks: Networks) -> RegulatorState:
+    """State before the first call: zero weights, no step seen yet."""
+    if networks.n_neurons != params.n_neurons:
+        raise ParameterError(f"n_neurons = {params.n_neurons!r}: networks were built "
+                             f"with {networks.n_neurons}")
+    return RegulatorState(weights=_readonly(np.zeros((_N_ROWS, params.n_neurons))),
+                          network_key=_network_key(params))
+
+
+def _network_key(params: RegulatorParams) -> tuple[int, float, float, float]:
+    return (params.seed, params.velocity_scale_mps, params.angle_scale_rad,
+            params.rate_scale_radps)
+
+
+# --------------------------------------------------------------------------------------
+# Step
+# --------------------------------------------------------------------------------------
+def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
+         params: RegulatorParams, networks: Networks) -> tuple[RegulatorState, dict]:
+    """Advance the regulator by one call of length ``dt`` (s, finite, > 0).
+
+    Pure: ``state`` is not modified.  Returns ``(new_state, outputs)`` with ``outputs``
+    a dict of python floats keyed by the ``OUTPUT_SPECS`` names.  Raises
+    :class:`InputError` naming the bad input (or ``dt``).  ``params`` must be the ones
+    the ``networks`` were built from (fixed fields); tunable fields may change between
+    calls.
+    """
+    if type(dt) is not float:
+        if isinstance(dt, (bool, np.bool_)) or not isinstance(dt, Real):
+            raise InputError(f"dt = {dt!r}: must be a finite number > 0 (s)")
+        dt = float(dt)
+    if not 0.0 < dt < math.inf:  # also rejects nan
+        raise InputError(f"dt = {dt!r}: must be a finite number > 0 (s)")
+    validate_inputs(inputs)
+    P = params
+    vx, vy, vx_des, vy_des = inputs.vx, inputs.vy, inputs.vx_des, inputs.vy_des
+    pitch, roll = inputs.pitch, inputs.roll
+    si = int(inputs.step_index)
+
+    # --- PD terms ---------------------------------------------------------------------
+    if si != state.last_step_index:
+        first = state.last_step_index < 0
+        vx_prev = vx if first else state.vx_at_step
+        vy_prev = vy if first else state.vy_at_step
+        pd_x = P.Kp_x * (vx - vx_des) + P.Kd_x * (vx - vx_prev)
+        pd_y = P.Kp_y * (vy - vy_des) + P.Kd_y * (vy - vy_prev)
+        vx_at, vy_at = vx, vy
+    else:
+        pd_x, pd_y = state.pd_x, state.pd_y
+        vx_at, vy_at = state.vx_at_step, state.vy_at_step
+    pd_pitch = P.Kp_pitch * (pitch - P.pitch_des) + P.Kd_pitch * inputs.pitch_rate
+    pd_roll = P.Kp_roll * (roll - P.roll_des) + P.Kd_roll * inputs.roll_rate
+
+    # --- adaptive networks ------------------------------------------------------------
+    weights = state.weights
+    if P.adaptation_enabled:
+        n = networks.n_neurons
+        x8 = np.array(_scaled(inputs, P))
+        h = _lif_rates_from_current(x8 @ networks.encoders_t + networks.bias_all)
+        H = h.reshape(3, n)[_ROW_NET]  # (4, n): each row's presynaptic rates, Hz
+        raw = np.einsum("ij,ij->i", weights, H).tolist()  # [x, y, pitch, roll], rad
+        lim = P.psi_limit
+        psi = [lim if r > lim else (-lim if r < -lim else r) for r in raw]
+        if P.learning_rate != 0.0:
+            alpha = -P.learning_rate * dt / n
+            err = (vx_des - vx, vy_des - vy, P.pitch_des - pitch, P.roll_des - roll)
+            # Row j changes raw[j] by alpha * E_j * |h|^2 (alpha < 0); anti-windup: skip
+            # rows already at the limit that this update would push further out.
+            coef = [0.0 if (r >= lim or r <= -lim) and r * e < 0.0 else alpha * e
+                    for r, e in zip(raw, err)]
+            if any(coef):  # else nothing to learn: keep (share) the read-only array
+                new_w = np.multiply(np.array(coef)[:, None], H)
+                new_w += weights
+                new_w.flags.writeable = False
+                weights = new_w
+        g = P
+        px, py, pp, pr = psi
+        out = {
+            "delta_swing_hip_pitch": pd_x + g.psi_gain_swing_hip_pitch * px,
+            "delta_swing_knee": g.psi_gain_swing_knee * px + 0.0,  # -0.0 -> 0.0
+            "delta_swing_hip_roll": pd_y + g.psi_gain_swing_hip_roll * py,
+            "delta_stance_hip_roll": (pd_roll + g.psi_gain_stance_hip_roll * py
+                                      + g.psi_gain_stance_hip_roll * pr),
+            "delta_stance_hip_pitch": pd_pitch + g.psi_gain_stance_hip_pitch * pp,
+            "delta_stance_knee": g.psi_gain_stance_knee * pp + 0.0,
+            "psi_x": px, "psi_y": py, "psi_pitch": pp, "psi_roll": pr,
+        }
+    else:
+        out = {
+            "delta_swing_hip_pitch": pd_x,
+            "delta_swing_knee": 0.0,
+            "delta_swing_hip_roll": pd_y,
+            "delta_stance_hip_roll": pd_roll,
+            "delta_stance_hip_pitch": pd_pitch,
+            "delta_stance_knee": 0.0,
+            "psi_x": 0.0, "psi_y": 0.0, "psi_pitch": 0.0, "psi_roll": 0.0,
+        }
+    out["error_vx"] = vx - vx_des
+    out["error_vy"] = vy - vy_des
+    out["error_pitch"] = pitch - P.pitch_des
+    out["error_roll"] = roll - P.roll_des
+    for k, v in out.items():  # python floats, also for int inputs
+        if type(v) is not float:
+            out[k] = float(v)
+    new_state = RegulatorState(weights, si, vx_at, vy_at, pd_x, pd_y,
+                               state.n_calls + 1, state.time_s + dt, state.network_key)
+    return new_state, out
+
+
+# --------------------------------------------------------------------------------------
+# Serialisation
+# --------------------------------------------------------------------------------------
+_MAGIC = b"AVRSTATE"
+_VERSION = 1
+# magic, version, n_rows, n_neurons, seed, velocity/angle/rate scales,
+# last_step_index, n_calls, vx_at_step, vy_at_step, pd_x, pd_y, time_s
+_HEADER = struct.Struct("<8sHHII3dqq5d")
+_CRC = struct.Struct("<I")
+
+
+def state_to_bytes(state: RegulatorState) -> bytes:
+    """Serialise ``state`` deterministically (no pickle).
+
+    Layout (little-endian): header ``_HEADER`` (magic ``b"AVRSTATE"``, format version
+    uint16, number of weight rows (4) uint16, n_neurons uint32, then ``network_key``: seed uint32 and the three
+    input scales float64 (NaN = unknown), then last_step_index int64, n_calls int64,
+    vx_at_step, vy_at_step, pd_x, pd_y, time_s float64), the weights as 4*n float64 in
+    C order, then a CRC-32 (uint32) of everything before it.
+    """
+    if state.network_key is not None:
+        seed, *scales = state.network_key
+    else:
+        seed, scales = 0, (math.nan,) * 3
+    head = _HEADER.pack(_MAGIC, _VERSION, _N_ROWS, state.n_neurons, seed, *scales,
+                        state.last_step_index, state.n_calls, state.vx_at_step,
+                        state.vy_at_step, state.pd_x, state.pd_y, state.time_s)
+    body = head + state.weights.astype("<f8", copy=False).tobytes(order="C")
+    return body + _CRC.pack(zlib.crc32(body))
+
+
+def state_from_bytes(blob: bytes, params: RegulatorParams) -> RegulatorState:
+    """Inverse of :func:`state_to_bytes` for a regulator with ``params``.
+
+    Raises :class:`StateError` on a non-bytes blob, bad magic, unknown version, wrong
+    size or checksum, an n_neurons (or, when recorded, seed or input scale) different
+    from ``params``, or invalid contents (non-finite values, step index < -1).
+    """
+    if not isinstance(blob, (bytes, bytearray, memoryview)):
+        raise StateError(f"state blob must be bytes, got {type(blob).__name__}")
+    blob = bytes(blob)
+    if len(blob) < _HEADER.size + _CRC.size:
+        raise StateError(f"state blob too short ({len(blob)} bytes)")
+    (magic, version, n_rows, n, seed, vs, sa, sr, last, n_calls, vx_at, vy_at, pd_x,
+     pd_y, time_s) = _HEADER.unpack_from(blob, 0)
+    if magic != _MAGIC:
+        raise StateError(f"not a regulator state (magic {magic!r}, expected {_MAGIC!r})")
+    if version != _VERSION:
+        raise StateError(f"unsupported state format version {version} "
+                         f"(this build reads {_VERSION})")
+    if n_rows != _N_ROWS:
+        raise StateError(f"state has {n_rows} weight rows, expected {_N_ROWS}")
+    expected = _HEADER.size + 8 * _N_ROWS * n + _CRC.size
+    if len(blob) != expected:
+        raise StateError(f"state blob has {len(blob)} bytes, expected {expected} "
+                         f"for n_neurons = {n}")
+    (crc,) = _CRC.unpack_from(blob, len(blob) - _CRC.size)
+    if zlib.crc32(blob[:-_CRC.size]) != crc:
+        raise StateError("state blob checksum mismatch (corrupted)")
+    if n != params.n_neurons:
+        raise StateError(f"state has n_neurons = {n}, regulator has {params.n_neurons}")
+    key = None
+    if not (math.isnan(vs) and math.isnan(sa) and math.isnan(sr)):
+        key = (seed, vs, sa, sr)
+        if seed != params.seed:
+            raise StateError(f"state was saved with seed = {seed}, regulator has "
+                             f"{params.seed}")
+        here = _network_key(params)[1:]
+        if (vs, sa, sr) != here:
+            raise StateError(f"state was saved with input scales {(vs, sa, sr)}, "
+                             f"regulator has {here}")
+    w = np.frombuffer(blob, dtype="<f8", count=_N_ROWS * n, offset=_HEADER.size)
+    w = w.astype(np.float64).reshape(_N_ROWS, n)  # owned, native-endian copy
+    scalars = (vx_at, vy_at, pd_x, pd_y, time_s)
+    if not (np.all(np.isfinite(w)) and all(math.isfinite(v) for v in scalars)):
+        raise StateError("state contains non-finite values")
+    if last < -1 or n_calls < 0:
+        raise StateError(f"state has invalid counters (last_step_index = {last}, "
+                         f"n_calls = {n_calls})")
+    w.flags.writeable = False
+    return RegulatorState(w, last, vx_at, vy_at, pd_x, pd_y, n_calls, time_s, key)
+
+
+# --------------------------------------------------------------------------------------
+# Convenience wrapper
+# --------------------------------------------------------------------------------------
+class Regulator:
+    """Stateful wrapper: holds ``params``, ``networks`` and the current ``state``.
+
+    Used by the in-process co-simulation path and the benchmarks; the FMU slave may
+    use the pure functions directly.
+    """
+
+    def __init__(self, params: RegulatorParams | None = None):
+        self.params = RegulatorParams() if params is None else params
+        validate_params(self.params)
+        self.networks = build_networks(self.params)
+        self.state = initial_state(self.params, self.networks)
+
+    def step(self, inputs: RegulatorInputs, dt: float) -> dict[str, float]:
+        """One call of length ``dt`` (s); returns the ``OUTPUT_SPECS`` dict."""
+        self.state, out = step(self.state, inputs, dt, self.params, self.networks)
+        return out
+
+    def set_params(self, **changes) -> None:
+        """Change tunable parameters (ParameterError for invalid or fixed ones)."""
+        fixed = [f"{k} = {v!r}: fixed parameter, cannot change after instantiation"
+                 for k, v in changes.items()
+                 if k in FIXED_PARAMS and v != getattr(self.params, k)]
+        if fixed:
+            raise ParameterError(fixed)
+        self.params = self.params.replace(**changes)
+
+    def reset(self) -> None:
+        """Back to the initial state (zero weights, no step seen)."""
+        self.state = initial_state(self.params, self.networks)
+
+    def save_state(self) -> bytes:
+        return state_to_bytes(self.state)
+
+    def load_state(self, blob: bytes) -> None:
+        self.state = state_from_bytes(blob, self.params)
