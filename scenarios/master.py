@@ -167,6 +167,7 @@ class FmuRegulator(RegulatorPath):
         self._unzip: str | None = None
         self._instantiated = False
         self._initialized = False
+        self._t: float | None = None  # the communication point being computed (for messages)
 
     def output_names(self) -> tuple[str, ...]:
         return self._outputs
@@ -183,6 +184,8 @@ class FmuRegulator(RegulatorPath):
         return "\n".join(self.messages) if self.messages else "(the FMU logged nothing)"
 
     def _fail(self, what: str, detail: str) -> CosimError:
+        if self._t is not None:
+            what = f"{what} at t = {self._t!r} s"
         return CosimError(f"{what} failed: {detail}\nFMU log ({self.fmu_path.name}):\n{self.log_text()}")
 
     def _call(self, what: str, fn, *args):
@@ -196,7 +199,7 @@ class FmuRegulator(RegulatorPath):
             raise
         except Exception as exc:  # instantiate raises a bare Exception on NULL
             raise self._fail(what, f"{type(exc).__name__}: {exc}") from None
-        if isinstance(status, int) and status != 0:
+        if status:  # None (instantiate) or fmi2OK == 0 pass; Warning and worse do not
             label = _FMI_STATUS[status] if 0 <= status < len(_FMI_STATUS) else str(status)
             raise self._fail(what, f"status {label}")
         return status
@@ -270,6 +273,7 @@ class FmuRegulator(RegulatorPath):
             raise CosimError("every FMU output must be Real: " + ", ".join(v.name for v in outs if v.type != "Real"))
         self._vr_out = self._vr_array([v.valueReference for v in outs])
         self._val_out = (c_double * len(outs))()
+        self._first_step = True
 
     @staticmethod
     def _vr_array(vrs: list[int]):
@@ -293,15 +297,21 @@ class FmuRegulator(RegulatorPath):
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
         fmu, comp = self._fmu, self._fmu.component
+        self._t = t
         for i, n in enumerate(self._in_real):
             self._val_in_real[i] = float(inputs[n])
+        int_changed = self._first_step
         for i, n in enumerate(self._in_int):
-            self._val_in_int[i] = int(inputs[n])
+            v = int(inputs[n])
+            if v != self._val_in_int[i]:
+                self._val_in_int[i] = v
+                int_changed = True
         if self._in_real:
             self._call("fmi2SetReal (inputs)", fmu.fmi2SetReal, comp, self._vr_in_real, len(self._in_real), self._val_in_real)
-        if self._in_int:
+        if self._in_int and int_changed:  # step_index changes once a walking step: FMU inputs keep their value
             self._call("fmi2SetInteger (inputs)", fmu.fmi2SetInteger, comp, self._vr_in_int, len(self._in_int), self._val_in_int)
-        self._call(f"fmi2DoStep(t={t!r}, h={h!r})", fmu.fmi2DoStep, comp, float(t), float(h), 1)
+        self._first_step = False
+        self._call("fmi2DoStep", fmu.fmi2DoStep, comp, t, h, 1)
         self._call("fmi2GetReal (outputs)", fmu.fmi2GetReal, comp, self._vr_out, len(self._outputs), self._val_out)
         vals = self._val_out
         return {n: vals[i] for i, n in enumerate(self._outputs)}

@@ -1,0 +1,204 @@
+"""Closed-loop co-simulation speed: simulated seconds per wall second, in one run.
+
+    python benchmarks/bench_cosim.py [--duration 10] [--repeat 3] [--fmu PATH] [--suite] [--json FILE]
+
+Measured on the same machine in the same process, one after the other:
+
+- ``bare mj_step``: ``mujoco.mj_step`` on the nominal model from ``home``, no
+  controller (the physics alone; the robot falls, which does not slow MuJoCo down);
+- ``plant only``: the master loop (``scenarios.master.run_arm``) with a regulator path
+  that returns zero offsets: walker + nominal controller + the loop's bookkeeping
+  (without the regulator the walker may fall early: its rate is over the part run);
+- ``in-process``: the same loop with the regulator core called directly;
+- ``FMU``: the same loop through the built FMU (fmpy).
+
+Each closed-loop figure is the best of ``--repeat`` runs of ``--duration`` simulated
+seconds of the ``nominal`` scenario (``adaptive`` arm), start-up (FMU extraction and
+instantiation) included; the three paths are interleaved so that load from other
+processes hits them alike, and rates are given per CPU second of this process (the
+ratios use these: on a shared machine wall time mostly measures the neighbours) and
+per wall second. Targets: FMU wall <= 1.2 x in-process wall; FMU closed loop
+>= 0.5 x the bare mj_step rate. ``--suite`` also times ``python -m scenarios run all
+--jobs 2`` (minutes).
+"""
+from __future__ import annotations
+
+import argparse
+import dataclasses
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Mapping
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT))
+os.environ.setdefault("MENAGERIE_ROOT", str(REPO_ROOT.parent / "shared" / "cassie" / "menagerie"))
+
+from scenarios import master, spec  # noqa: E402
+
+
+class ZeroRegulator(master.RegulatorPath):
+    """A regulator path that outputs zeros: the plant-only baseline of the same loop."""
+
+    kind = "zero"
+
+    def __init__(self) -> None:
+        from fmu_src.avr_core import OUTPUT_SPECS
+
+        self._outputs = tuple(s.name for s in OUTPUT_SPECS)
+        self._zeros = {n: 0.0 for n in self._outputs}
+
+    def output_names(self) -> tuple[str, ...]:
+        return self._outputs
+
+    def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
+        pass
+
+    def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
+        return dict(self._zeros)
+
+    def close(self) -> None:
+        pass
+
+
+def bare_mj_step(seconds: float) -> dict[str, float]:
+    """Simulated s per wall s (and per CPU s) of mj_step alone on the nominal model."""
+    import mujoco
+
+    from plant.model import load_model
+
+    model = load_model("menagerie")
+    data = mujoco.MjData(model)
+    mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+    n = int(round(seconds / model.opt.timestep))
+    w0, c0 = time.perf_counter(), time.process_time()
+    for _ in range(n):
+        mujoco.mj_step(model, data)
+    wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+    sim = n * model.opt.timestep
+    return {"sim_s": sim, "wall_s": wall, "cpu_s": cpu, "rtf": sim / wall, "rtf_cpu": sim / cpu}
+
+
+def closed_loop_all(scenario: spec.Scenario, makers: dict[str, Any], repeat: int) -> dict[str, dict[str, float]]:
+    """Best of ``repeat`` runs per regulator path, the paths interleaved (fair under load)."""
+    from scenarios.plantio import load_plant_model
+
+    model, summary = load_plant_model(scenario)
+    best: dict[str, dict[str, float]] = {}
+    for _ in range(repeat):
+        for key, make in makers.items():
+            c0 = time.process_time()
+            r = master.run_arm(scenario, "adaptive", make(), model=model, model_summary=summary)
+            cpu = time.process_time() - c0
+            # without a regulator the walker may fall: the rate is over the simulated part
+            m = {"sim_s": r.sim_s, "wall_s": r.wall_s, "cpu_s": cpu, "rtf": r.sim_s / r.wall_s,
+                 "rtf_cpu": r.sim_s / cpu, "fell_at_s": r.t_fall_s}
+            if key not in best or m["rtf_cpu"] > best[key]["rtf_cpu"]:
+                best[key] = m
+    return best
+
+
+def regulator_step_cost(make, n: int = 2000) -> float:
+    """Wall seconds per regulator step alone (no plant), start-up excluded."""
+    reg = make()
+    reg.start({}, 0.0, n * 0.005)
+    inputs = {"vx": 0.3, "vy": 0.01, "vx_des": 0.5, "vy_des": 0.0, "pitch": 0.01, "roll": -0.01,
+              "pitch_rate": 0.1, "roll_rate": -0.1, "step_index": 0}
+    try:
+        t0 = time.perf_counter()
+        for k in range(n):
+            inputs["step_index"] = k // 60
+            reg.step(k * 0.005, 0.005, inputs)
+        return (time.perf_counter() - t0) / n
+    finally:
+        reg.close()
+
+
+def ensure_fmu(path: str | None) -> Path:
+    if path:
+        return Path(path)
+    out = Path(tempfile.mkdtemp(prefix="bench_fmu_"))
+    mod_spec = importlib.util.spec_from_file_location("avr_build", REPO_ROOT / "build.py")
+    build = importlib.util.module_from_spec(mod_spec)
+    mod_spec.loader.exec_module(build)
+    return Path(build.build_fmu(out))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--duration", type=float, default=10.0, help="simulated seconds per closed-loop run")
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--fmu", default=None, help="FMU file (default: build one into a temp folder)")
+    ap.add_argument("--suite", action="store_true", help="also time `run all --jobs 2` (minutes)")
+    ap.add_argument("--json", default=None, help="write the numbers to this file")
+    args = ap.parse_args(argv)
+
+    fmu = ensure_fmu(args.fmu)
+    scenario = spec.override(spec.resolve_targets(["nominal"])[0], duration_s=args.duration)
+    res: dict[str, Any] = {"duration_s": args.duration, "repeat": args.repeat, "fmu": str(fmu)}
+    bare = [bare_mj_step(min(args.duration, 5.0)) for _ in range(args.repeat)]
+    res["bare_mj_step"] = max(bare, key=lambda m: m["rtf_cpu"])
+    res.update(closed_loop_all(scenario, {
+        "plant_only": ZeroRegulator,
+        "inprocess": master.InProcessRegulator,
+        "fmu": lambda: master.FmuRegulator(fmu),
+    }, args.repeat))
+    res["regulator_step_us"] = {
+        "inprocess": 1e6 * regulator_step_cost(master.InProcessRegulator),
+        "fmu": 1e6 * regulator_step_cost(lambda: master.FmuRegulator(fmu)),
+    }
+    t0 = time.perf_counter()
+    reg = master.FmuRegulator(fmu)
+    reg.start({}, 0.0, 1.0)
+    reg.close()
+    res["fmu_startup_s"] = time.perf_counter() - t0
+    res["ratios"] = {  # per simulated second, CPU time (the machine is shared: wall time is noisy)
+        "fmu_over_inprocess": res["inprocess"]["rtf_cpu"] / res["fmu"]["rtf_cpu"],
+        "inprocess_over_plant_only": res["plant_only"]["rtf_cpu"] / res["inprocess"]["rtf_cpu"],
+        "fmu_rate_over_bare_mj_step": res["fmu"]["rtf_cpu"] / res["bare_mj_step"]["rtf_cpu"],
+        "plant_only_rate_over_bare_mj_step": res["plant_only"]["rtf_cpu"] / res["bare_mj_step"]["rtf_cpu"],
+        "fmu_over_inprocess_wall": res["inprocess"]["rtf"] / res["fmu"]["rtf"],
+    }
+    if args.suite:
+        with tempfile.TemporaryDirectory(prefix="bench_suite_") as out:
+            t0 = time.perf_counter()
+            proc = subprocess.run([sys.executable, "-m", "scenarios", "run", "all", "--jobs", "2", "--out", out,
+                                   "--fmu", str(fmu)], cwd=REPO_ROOT, capture_output=True, text=True)
+            res["suite_jobs2_wall_s"] = time.perf_counter() - t0
+            res["suite_returncode"] = proc.returncode
+            res["suite_table"] = proc.stdout
+
+    r = res["ratios"]
+    print(f"closed loop, {args.duration:g} simulated s, best of {args.repeat} interleaved runs")
+    print("                        sim s / CPU s   sim s / wall s")
+    b = res["bare_mj_step"]
+    print(f"  bare mj_step          {b['rtf_cpu']:10.2f}   {b['rtf']:10.2f}")
+    for key, label in (("plant_only", "plant only (zero)"), ("inprocess", "in-process regulator"),
+                       ("fmu", "FMU regulator")):
+        m = res[key]
+        fell = f"  (fell at {m['fell_at_s']:.2f} s)" if m["fell_at_s"] is not None else ""
+        print(f"  {label:21s} {m['rtf_cpu']:10.2f}   {m['rtf']:10.2f}   {m['sim_s']:.2f} simulated s{fell}")
+    print(f"regulator step alone: in-process {res['regulator_step_us']['inprocess']:.1f} us, "
+          f"FMU {res['regulator_step_us']['fmu']:.1f} us; FMU start-up {res['fmu_startup_s'] * 1e3:.0f} ms")
+    ok1 = r["fmu_over_inprocess"] <= 1.2
+    ok2 = r["fmu_rate_over_bare_mj_step"] >= 0.5
+    print(f"FMU / in-process CPU per simulated s  {r['fmu_over_inprocess']:.3f}  (target <= 1.20: "
+          f"{'met' if ok1 else 'MISSED'}; by wall {r['fmu_over_inprocess_wall']:.3f})")
+    print(f"FMU rate / bare mj_step rate          {r['fmu_rate_over_bare_mj_step']:.3f}  (target >= 0.50: "
+          f"{'met' if ok2 else 'MISSED'})")
+    print(f"plant-only rate / bare mj_step rate   {r['plant_only_rate_over_bare_mj_step']:.3f}; "
+          f"in-process / plant-only CPU per simulated s {r['inprocess_over_plant_only']:.3f}")
+    if "suite_jobs2_wall_s" in res:
+        print(f"suite `run all --jobs 2`: {res['suite_jobs2_wall_s']:.1f} s wall (exit {res['suite_returncode']})")
+    if args.json:
+        Path(args.json).write_text(json.dumps(res, indent=2) + "\n")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
