@@ -137,7 +137,8 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
         for i, r in enumerate(results):
             c = colors[i % len(colors)]
             t = r.rows["t"]
-            ax.plot(t, r.rows[f"in_{axis}"], color=c, alpha=0.25, lw=0.6)
+            raw = f"tel_{axis}" if f"tel_{axis}" in r.rows.dtype.names else f"in_{axis}"
+            ax.plot(t, r.rows[raw], color=c, alpha=0.25, lw=0.6)
             e = metrics.velocity_errors(r.rows)[0 if axis == "vx" else 1]
             ax.plot(t, e + r.rows[f"cmd_{axis}_des"], color=c, lw=1.4, label=f"{r.arm}: step average")
             if r.fell:
@@ -171,6 +172,8 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
         ax.grid(alpha=0.3)
     for idx in range(len(panels), nrows * ncols):
         axes[idx // ncols][idx % ncols].axis("off")
+    for ax in axes[-1]:
+        ax.set_xlabel("t (s)")
     if panels:
         axes[0][0].legend(fontsize=8)
     fig.suptitle(f"{scenario.name}: Psi outputs and joint offsets per arm")
