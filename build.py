@@ -102,6 +102,56 @@ def _postprocess_model_description(xml_bytes: bytes, specs) -> ET.ElementTree:
     return ET.ElementTree(root)
 
 
+#: pythonfmu 0.7.0's linux64 library frees its static ``pyState`` shared_ptr at exit and then
+#: runs its destructor ``finalizePythonInterpreter``, which resets the same (already
+#: destroyed) shared_ptr: a use-after-free that corrupts the heap at process exit (valgrind:
+#: "Invalid read ... inside a block free'd"; a C host aborts every time, a Python host
+#: sometimes).  The static destructor already releases the state, so the fix is to make
+#: ``finalizePythonInterpreter`` return at once: after its ``endbr64``, a ``ret``.
+EXIT_BUG_SYMBOL = b"finalizePythonInterpreter"
+EXIT_BUG_PROLOGUE = bytes.fromhex("f30f1efa55")  # endbr64; push %rbp -- the 0.7.0 build we patch
+EXIT_BUG_PATCH = bytes.fromhex("f30f1efac3")  # endbr64; ret
+
+
+def _elf_symbol_file_offset(data: bytes, symbol: bytes) -> int:
+    """File offset of a dynamic symbol's code in an ELF64 little-endian shared library."""
+    import struct
+
+    if data[:4] != b"\x7fELF" or data[4] != 2 or data[5] != 1:
+        raise RuntimeError("pythonfmu's linux64 library is not an ELF64 little-endian file")
+    e_phoff, e_shoff = struct.unpack_from("<QQ", data, 0x20)
+    e_phentsize, e_phnum, e_shentsize, e_shnum = struct.unpack_from("<HHHH", data, 0x36)
+    sections = [struct.unpack_from("<IIQQQQIIQQ", data, e_shoff + i * e_shentsize) for i in range(e_shnum)]
+    dynsym = next(s for s in sections if s[1] == 11)  # SHT_DYNSYM
+    strtab = sections[dynsym[6]]  # sh_link: its string table
+    value = None
+    for off in range(dynsym[4], dynsym[4] + dynsym[5], 24):
+        st_name, _, _, _, st_value, _ = struct.unpack_from("<IBBHQQ", data, off)
+        start = strtab[4] + st_name
+        if data[start:data.index(b"\0", start)] == symbol:
+            value = st_value
+            break
+    if value is None:
+        raise RuntimeError(f"symbol {symbol.decode()} not found in pythonfmu's linux64 library")
+    for i in range(e_phnum):
+        p_type, _, p_offset, p_vaddr, _, p_filesz, _, _ = struct.unpack_from("<IIQQQQQQ", data, e_phoff + i * e_phentsize)
+        if p_type == 1 and p_vaddr <= value < p_vaddr + p_filesz:  # PT_LOAD
+            return value - p_vaddr + p_offset
+    raise RuntimeError(f"symbol {symbol.decode()} is not in a loaded segment")
+
+
+def patch_pythonfmu_exit_bug(data: bytes) -> bytes:
+    """pythonfmu 0.7.0's linux64 library without its use-after-free at process exit."""
+    offset = _elf_symbol_file_offset(data, EXIT_BUG_SYMBOL)
+    found = data[offset:offset + len(EXIT_BUG_PROLOGUE)]
+    if found == EXIT_BUG_PATCH:
+        return data
+    if found != EXIT_BUG_PROLOGUE:
+        raise RuntimeError(f"unexpected code at {EXIT_BUG_SYMBOL.decode()} ({found.hex()}): a pythonfmu build this "
+                           "script does not know; check whether its exit-time use-after-free is fixed, then update build.py")
+    return data[:offset] + EXIT_BUG_PATCH + data[offset + len(EXIT_BUG_PATCH):]
+
+
 def _guard_header(root: ET.Element, guid: str) -> str:
     codes = {"Real": "R", "Integer": "I", "Boolean": "B", "String": "S"}
     rows = []
@@ -211,7 +261,7 @@ def build_fmu(out_dir: Path = DEFAULT_OUT) -> Path:
     entries["documentation/index.html"] = _documentation(specs).encode("utf-8")
     entries["resources/requirements.txt"] = REQUIREMENTS.encode("utf-8")
     pythonfmu_linux = entries.pop(f"binaries/linux64/{MODEL_IDENTIFIER}.so")
-    entries[f"binaries/linux64/{MODEL_IDENTIFIER}_pythonfmu.so"] = pythonfmu_linux
+    entries[f"binaries/linux64/{MODEL_IDENTIFIER}_pythonfmu.so"] = patch_pythonfmu_exit_bug(pythonfmu_linux)
 
     # GUID: a hash of everything but the guard library (which embeds the GUID) and the GUID itself.
     digest = hashlib.sha256()

@@ -309,3 +309,20 @@ def test_guard_header_matches_model_description(built_fmu):
     root = ET.fromstring(zipfile.ZipFile(built_fmu).read("modelDescription.xml"))
     refs = [int(v.get("valueReference")) for v in root.find("ModelVariables")]
     assert refs == list(range(len(refs)))  # the guard indexes its table by value reference
+
+
+def test_pythonfmu_exit_use_after_free_is_patched(build_module, built_fmu):
+    import pythonfmu
+
+    original = (Path(pythonfmu.__file__).parent / "resources" / "binaries" / "linux64" /
+                "libpythonfmu-export.so").read_bytes()
+    offset = build_module._elf_symbol_file_offset(original, build_module.EXIT_BUG_SYMBOL)
+    patched = build_module.patch_pythonfmu_exit_bug(original)
+    assert patched[offset:offset + 5] == build_module.EXIT_BUG_PATCH and len(patched) == len(original)
+    assert sum(a != b for a, b in zip(original, patched)) == 1  # one byte: push %rbp -> ret
+    assert build_module.patch_pythonfmu_exit_bug(patched) == patched
+    with zipfile.ZipFile(built_fmu) as z:
+        assert z.read("binaries/linux64/AdaptiveVelocityRegulator_pythonfmu.so") == patched
+    broken = original[:offset] + b"\x90" * 5 + original[offset + 5:]
+    with pytest.raises(RuntimeError, match="unexpected code"):
+        build_module.patch_pythonfmu_exit_bug(broken)
