@@ -52,6 +52,18 @@ def scenario_header(scenario: Scenario, regulator: str) -> dict[str, Any]:
         "seed": scenario.seed,
         "perturbation_t_s": scenario.perturbation_t_s,
         "arm_names": [a.name for a in scenario.arms],
+        "commands": [[c.t_s, c.vx_des, c.vy_des] for c in scenario.commands],
+        "perturbation": {
+            "torso_mass_kg": scenario.torso_mass_kg,
+            "torso_added_mass_kg": scenario.torso_added_mass_kg,
+            "torso_com_offset_m": list(scenario.torso_com_offset_m),
+            "joint_damping_scale": scenario.joint_damping_scale,
+            "pushes": [{"t_s": p.t_s, "force_n": list(p.force_n), "duration_s": p.duration_s}
+                       for p in scenario.pushes],
+            "terrain": None if scenario.terrain is None else {
+                "max_height_m": scenario.terrain.max_height_m, "max_slope_deg": scenario.terrain.max_slope_deg,
+                "seed": scenario.terrain.seed, "size_m": scenario.terrain.size_m},
+        },
         "claim": claim_dict(scenario),
     }
 

@@ -61,6 +61,36 @@ def _num(v: Any) -> str:
     return "null" if v is None else str(v)
 
 
+def _plant_line(s: dict[str, Any]) -> str:
+    """Commands, perturbation as specified, and the plant as actually loaded (model summary)."""
+    parts = []
+    cmds = s.get("commands") or []
+    if cmds:
+        parts.append("command " + ", ".join(f"({vx:g}, {vy:g}) m/s from {t:g} s" for t, vx, vy in cmds))
+    p = s.get("perturbation") or {}
+    if p.get("torso_mass_kg") is not None:
+        parts.append(f"torso mass {p['torso_mass_kg']:g} kg")
+    if p.get("torso_added_mass_kg"):
+        parts.append(f"torso mass {p['torso_added_mass_kg']:+g} kg")
+    if any(p.get("torso_com_offset_m") or []):
+        parts.append("torso COM offset [" + ", ".join(f"{c:g}" for c in p["torso_com_offset_m"]) + "] m")
+    if p.get("joint_damping_scale", 1.0) != 1.0:
+        parts.append(f"joint damping x{p['joint_damping_scale']:g}")
+    for push in p.get("pushes") or []:
+        parts.append(f"push [{', '.join(f'{f:g}' for f in push['force_n'])}] N at {push['t_s']:g} s "
+                     f"for {push['duration_s']:g} s")
+    if p.get("terrain"):
+        t = p["terrain"]
+        parts.append(f"terrain heights <= {t['max_height_m']:g} m, slopes <= {t['max_slope_deg']:g} deg "
+                     f"(seed {t['seed']})")
+    ms = s.get("model_summary") or {}
+    if ms.get("pelvis_mass_kg") is not None:
+        com = ms.get("pelvis_com_m") or []
+        parts.append(f"loaded plant: pelvis {ms['pelvis_mass_kg']:.2f} kg, pelvis COM ["
+                     + ", ".join(f"{c:.3f}" for c in com) + f"] m, total {ms.get('total_mass_kg', 0):.2f} kg")
+    return ("Setup: " + "; ".join(parts) + ".") if parts else ""
+
+
 def render(out_dir: Path) -> str:
     entries = collect(out_dir)
     n_pass = n_miss = n_na = 0
@@ -100,6 +130,9 @@ def render(out_dir: Path) -> str:
                      f"duration {s.get('duration_s')} s, comm step {s.get('comm_step_s')} s, seed {s.get('seed')}, "
                      f"perturbation from t = {s.get('perturbation_t_s')} s.")
         lines.append("")
+        plant = _plant_line(s)
+        if plant:
+            lines += [plant, ""]
         if s.get("status") != "ok":
             lines += [f"**Run failed:** `{_md_escape(s.get('error'))}`", ""]
         if s.get("arm_names") or s.get("arms"):
