@@ -509,9 +509,11 @@ class Networks:
     """The three fixed hidden layers, built from ``(n_neurons, seed)`` only.
 
     ``longitudinal`` (input [vx, vx_des]), ``lateral`` ([vy, vy_des]) and ``torso``
-    ([pitch, roll, pitch_rate, roll_rate]), all scaled into the unit ball.  The stacked
-    arrays ``encoders_t`` ((8, 3n) block-diagonal transposed scaled encoders) and
-    ``bias_all`` ((3n,)) let :func:`step` evaluate all 3n neurons in one product.
+    ([pitch, roll, pitch_rate, roll_rate]), all scaled into the unit ball.
+
+    ``stacked`` ((9, 3n), read-only) lets :func:`step` get all 3n neurons' ``J - 1`` in
+    one product ``[x_long, x_lat, x_torso, 1] @ stacked``: rows 0-7 hold the transposed
+    scaled encoders block-diagonally, row 8 holds ``bias - 1``.
     """
 
     n_neurons: int
@@ -519,22 +521,20 @@ class Networks:
     longitudinal: NetworkSpec
     lateral: NetworkSpec
     torso: NetworkSpec
-    encoders_t: np.ndarray = field(init=False, repr=False)
-    bias_all: np.ndarray = field(init=False, repr=False)
+    stacked: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
         n = self.n_neurons
         nets = (self.longitudinal, self.lateral, self.torso)
-        enc_t = np.zeros((sum(_DIMS), 3 * n))
+        enc_t = np.zeros((sum(_DIMS) + 1, 3 * n))
         col = 0
         for k, net in enumerate(nets):
             if net.encoders.shape != (n, _DIMS[k]):
                 raise ValueError(f"{net.name}: encoders must have shape {(n, _DIMS[k])}")
             enc_t[col:col + _DIMS[k], k * n:(k + 1) * n] = net.scaled_encoders.T
             col += _DIMS[k]
-        object.__setattr__(self, "encoders_t", _readonly(enc_t))
-        object.__setattr__(self, "bias_all",
-                           _readonly(np.concatenate([net.bias for net in nets])))
+        enc_t[-1] = np.concatenate([net.bias for net in nets]) - 1.0
+        object.__setattr__(self, "stacked", _readonly(enc_t))
 
     def __iter__(self):
         return iter((self.longitudinal, self.lateral, self.torso))
@@ -557,13 +557,15 @@ def build_networks(params: RegulatorParams) -> Networks:
     return Networks(n, seed, *nets)
 
 
-def _lif_rates_from_current(J: np.ndarray) -> np.ndarray:
-    """LIFRate rates (Hz) for input currents J: 0 where J <= 1 (consumes J's copy)."""
-    j = J - 1.0
+def _lif_rates(j: np.ndarray) -> np.ndarray:
+    """LIFRate rates (Hz) for ``j = J - 1`` (J: input current); 0 where j <= 0.
+
+    Works in place on ``j`` (pass a temporary).  Inactive neurons get a harmless
+    positive j (avoids inf, whose special-value path in log1p is slow) and are zeroed
+    by the numerator of the last division; active ones are evaluated operation by
+    operation as nengo does, ``1 / (tau_ref + tau_rc * log1p(1 / j))``.
+    """
     active = j > 0.0
-    # Inactive neurons get a harmless positive j (avoids inf, whose special-value path
-    # in log1p is slow) and are zeroed by the numerator below; active ones are
-    # evaluated operation by operation as 1 / (tau_ref + tau_rc * log1p(1 / j)).
     np.maximum(j, 1e-300, out=j)
     np.divide(1.0, j, out=j)
     np.log1p(j, out=j)
@@ -573,6 +575,26 @@ def _lif_rates_from_current(J: np.ndarray) -> np.ndarray:
     return j
 
 
+def _lif_rates_times_tau_rc(j: np.ndarray) -> np.ndarray:
+    """``tau_rc *`` LIFRate rate (dimensionless) for ``j = J - 1``, in place.
+
+    ``tau_rc r = 1 / (tau_ref / tau_rc + log1p(1 / j))``: one pass fewer than
+    :func:`_lif_rates`; :func:`step` folds the factor ``1 / tau_rc`` into four scalars.
+    Equal to ``tau_rc * _lif_rates(j)`` to ~1e-16 relative.
+    """
+    active = j > 0.0
+    np.maximum(j, 1e-300, out=j)
+    np.divide(1.0, j, out=j)
+    np.log1p(j, out=j)
+    j += _TAU_RATIO
+    np.divide(active, j, out=j)
+    return j
+
+
+_TAU_RATIO = TAU_REF / TAU_RC
+_INV_TAU_RC = 1.0 / TAU_RC
+
+
 def neuron_rates(net: NetworkSpec, x) -> np.ndarray:
     """LIFRate rates (Hz, shape (n,)) of ``net`` for a scaled input ``x`` (shape (d,)).
 
@@ -580,7 +602,7 @@ def neuron_rates(net: NetworkSpec, x) -> np.ndarray:
     :func:`network_inputs`); the current is ``scaled_encoders @ x + bias``.
     """
     x = np.asarray(x, dtype=np.float64).reshape(net.dimensions)
-    return _lif_rates_from_current(net.scaled_encoders @ x + net.bias)
+    return _lif_rates((net.scaled_encoders @ x + net.bias) - 1.0)
 
 
 def _ball2(a: float, b: float) -> tuple[float, float]:
@@ -590,23 +612,29 @@ def _ball2(a: float, b: float) -> tuple[float, float]:
     return a, b
 
 
-def _scaled(inputs: RegulatorInputs, params: RegulatorParams) -> list[float]:
+def _scaled_values(vx, vx_des, vy, vy_des, pitch, roll, pitch_rate, roll_rate,
+                   params: RegulatorParams) -> list[float]:
+    """The 8 network inputs (see :func:`network_inputs`) followed by a 1.0."""
     vs, sa, sr = params.velocity_scale_mps, params.angle_scale_rad, params.rate_scale_radps
-    a, b = _ball2(inputs.vx / vs, inputs.vx_des / vs)
-    c, d = _ball2(inputs.vy / vs, inputs.vy_des / vs)
-    p, r = inputs.pitch / sa, inputs.roll / sa
-    pr, rr = inputs.pitch_rate / sr, inputs.roll_rate / sr
+    a, b = _ball2(vx / vs, vx_des / vs)
+    c, d = _ball2(vy / vs, vy_des / vs)
+    p, r = pitch / sa, roll / sa
+    pr, rr = pitch_rate / sr, roll_rate / sr
     n = math.hypot(p, r, pr, rr)
     if n > 1.0:
         p, r, pr, rr = p / n, r / n, pr / n, rr / n
-    return [a, b, c, d, p, r, pr, rr]
+    return [a, b, c, d, p, r, pr, rr, 1.0]  # the trailing 1 multiplies the bias row
 
 
 def network_inputs(inputs: RegulatorInputs,
                    params: RegulatorParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The three networks' inputs for ``inputs``: scaled and radially projected into
     the unit ball (longitudinal (2,), lateral (2,), torso (4,), dimensionless)."""
-    x = np.array(_scaled(inputs, params))
+    validate_inputs(inputs)
+    x = np.array(_scaled_values(
+        float(inputs.vx), float(inputs.vx_des), float(inputs.vy), float(inputs.vy_des),
+        float(inputs.pitch), float(inputs.roll), float(inputs.pitch_rate),
+        float(inputs.roll_rate), params)[:8])
     return x[0:2], x[2:4], x[4:8]
 
 
@@ -717,11 +745,28 @@ def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
         dt = float(dt)
     if not 0.0 < dt < math.inf:  # also rejects nan
         raise InputError(f"dt = {dt!r}: must be a finite number > 0 (s)")
-    validate_inputs(inputs)
-    P = params
     vx, vy, vx_des, vy_des = inputs.vx, inputs.vy, inputs.vx_des, inputs.vy_des
-    pitch, roll = inputs.pitch, inputs.roll
-    si = int(inputs.step_index)
+    pitch, roll, pitch_rate, roll_rate = (inputs.pitch, inputs.roll, inputs.pitch_rate,
+                                          inputs.roll_rate)
+    si = inputs.step_index
+    # Fast path for the usual all-python-float inputs (a non-finite value makes the sum
+    # non-finite); anything else goes through the full check and is converted to float.
+    if not (type(vx) is float and type(vy) is float and type(vx_des) is float
+            and type(vy_des) is float and type(pitch) is float and type(roll) is float
+            and type(pitch_rate) is float and type(roll_rate) is float
+            and type(si) is int and 0 <= si <= _INT32_MAX
+            and math.isfinite(vx + vy + vx_des + vy_des + pitch + roll + pitch_rate
+                              + roll_rate)):
+        validate_inputs(inputs)
+        vx, vy, vx_des, vy_des = float(vx), float(vy), float(vx_des), float(vy_des)
+        pitch, roll = float(pitch), float(roll)
+        pitch_rate, roll_rate = float(pitch_rate), float(roll_rate)
+        si = int(si)
+    P = params
+    weights = state.weights
+    n = networks.n_neurons
+    if weights.shape[1] != n:
+        raise StateError(f"state has n_neurons = {weights.shape[1]}, networks have {n}")
 
     # --- PD terms ---------------------------------------------------------------------
     if si != state.last_step_index:
@@ -734,41 +779,48 @@ def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
     else:
         pd_x, pd_y = state.pd_x, state.pd_y
         vx_at, vy_at = state.vx_at_step, state.vy_at_step
-    pd_pitch = P.Kp_pitch * (pitch - P.pitch_des) + P.Kd_pitch * inputs.pitch_rate
-    pd_roll = P.Kp_roll * (roll - P.roll_des) + P.Kd_roll * inputs.roll_rate
+    pd_pitch = P.Kp_pitch * (pitch - P.pitch_des) + P.Kd_pitch * pitch_rate
+    pd_roll = P.Kp_roll * (roll - P.roll_des) + P.Kd_roll * roll_rate
 
     # --- adaptive networks ------------------------------------------------------------
-    weights = state.weights
     if P.adaptation_enabled:
-        n = networks.n_neurons
-        x8 = np.array(_scaled(inputs, P))
-        h = _lif_rates_from_current(x8 @ networks.encoders_t + networks.bias_all)
-        H = h.reshape(3, n)[_ROW_NET]  # (4, n): each row's presynaptic rates, Hz
-        raw = np.einsum("ij,ij->i", weights, H).tolist()  # [x, y, pitch, roll], rad
+        x9 = np.array(_scaled_values(vx, vx_des, vy, vy_des, pitch, roll, pitch_rate,
+                                     roll_rate, P))
+        # s3 = tau_rc * rates (3, n): the factor 1/tau_rc goes into scalars below
+        s3 = _lif_rates_times_tau_rc(x9 @ networks.stacked).reshape(3, n)
+        # Psi_raw[j] = weights[j] . rates[_ROW_NET[j]]: the needed entries of the (4, 3)
+        # product (one BLAS call beats gathering a (4, n) copy of the rates).
+        prod = (weights @ s3.T).ravel().tolist()
+        k = _INV_TAU_RC
+        raw = [prod[0] * k, prod[4] * k, prod[8] * k, prod[11] * k]  # x, y, pitch, roll
         lim = P.psi_limit
-        psi = [lim if r > lim else (-lim if r < -lim else r) for r in raw]
+        psi = [lim if r > lim else (-lim if r < -lim else r) for r in raw]  # rad
         if P.learning_rate != 0.0:
-            alpha = -P.learning_rate * dt / n
+            alpha = -P.learning_rate * dt / n * _INV_TAU_RC  # per unit of s3
             err = (vx_des - vx, vy_des - vy, P.pitch_des - pitch, P.roll_des - roll)
-            # Row j changes raw[j] by alpha * E_j * |h|^2 (alpha < 0); anti-windup: skip
-            # rows already at the limit that this update would push further out.
+            # The update moves raw[j] by -learning_rate dt/n E_j |rates|^2, i.e. in the
+            # direction of -E_j.  Anti-windup: skip rows at or beyond the limit that it
+            # would push further out (raw[j] and -E_j of the same sign).
             coef = [0.0 if (r >= lim or r <= -lim) and r * e < 0.0 else alpha * e
                     for r, e in zip(raw, err)]
             if any(coef):  # else nothing to learn: keep (share) the read-only array
-                new_w = np.multiply(np.array(coef)[:, None], H)
+                c0, c1, c2, c3 = coef
+                # (4, 3) @ (3, n) = each row's coefficient times its network's rates,
+                # exactly (the zero terms add exact zeros); one BLAS call.
+                new_w = np.array([[c0, 0.0, 0.0], [0.0, c1, 0.0], [0.0, 0.0, c2],
+                                  [0.0, 0.0, c3]]) @ s3
                 new_w += weights
                 new_w.flags.writeable = False
                 weights = new_w
-        g = P
         px, py, pp, pr = psi
+        g_roll = P.psi_gain_stance_hip_roll
         out = {
-            "delta_swing_hip_pitch": pd_x + g.psi_gain_swing_hip_pitch * px,
-            "delta_swing_knee": g.psi_gain_swing_knee * px + 0.0,  # -0.0 -> 0.0
-            "delta_swing_hip_roll": pd_y + g.psi_gain_swing_hip_roll * py,
-            "delta_stance_hip_roll": (pd_roll + g.psi_gain_stance_hip_roll * py
-                                      + g.psi_gain_stance_hip_roll * pr),
-            "delta_stance_hip_pitch": pd_pitch + g.psi_gain_stance_hip_pitch * pp,
-            "delta_stance_knee": g.psi_gain_stance_knee * pp + 0.0,
+            "delta_swing_hip_pitch": pd_x + P.psi_gain_swing_hip_pitch * px,
+            "delta_swing_knee": P.psi_gain_swing_knee * px + 0.0,  # -0.0 -> 0.0
+            "delta_swing_hip_roll": pd_y + P.psi_gain_swing_hip_roll * py,
+            "delta_stance_hip_roll": pd_roll + g_roll * py + g_roll * pr,
+            "delta_stance_hip_pitch": pd_pitch + P.psi_gain_stance_hip_pitch * pp,
+            "delta_stance_knee": P.psi_gain_stance_knee * pp + 0.0,
             "psi_x": px, "psi_y": py, "psi_pitch": pp, "psi_roll": pr,
         }
     else:
@@ -785,12 +837,17 @@ def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
     out["error_vy"] = vy - vy_des
     out["error_pitch"] = pitch - P.pitch_des
     out["error_roll"] = roll - P.roll_des
-    for k, v in out.items():  # python floats, also for int inputs
-        if type(v) is not float:
-            out[k] = float(v)
-    new_state = RegulatorState(weights, si, vx_at, vy_at, pd_x, pd_y,
-                               state.n_calls + 1, state.time_s + dt, state.network_key)
+    # All operands are python floats here (validated params are floats, inputs were
+    # converted), so every output is a python float.
+    new_state = _new_state(RegulatorState)
+    new_state.__dict__.update(  # skips __post_init__: weights are owned and read-only
+        weights=weights, last_step_index=si, vx_at_step=vx_at, vy_at_step=vy_at,
+        pd_x=pd_x, pd_y=pd_y, n_calls=state.n_calls + 1, time_s=state.time_s + dt,
+        network_key=state.network_key)
     return new_state, out
+
+
+_new_state = object.__new__
 
 
 # --------------------------------------------------------------------------------------

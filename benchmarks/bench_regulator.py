@@ -1,0 +1,215 @@
+"""Per-step cost of the adaptive velocity regulator vs nengo 4.1 on the same networks.
+
+Run ``python benchmarks/bench_regulator.py [--steps N] [--neurons N] [--rounds R]``.
+Prints, for each measured path, the median and 90th percentile wall time of one step
+(µs) and the ratio nengo / path of the medians, all measured in the same run.
+
+Paths: one ``setup_*(inputs, dt, n_neurons)`` function each, registered in ``PATHS``.
+A setup builds its model, runs ``WARMUP`` steps and returns a *stepper*: a callable
+``stepper(k)`` that performs step ``k`` (k = 0, 1, 2, ... with input ``inputs[WARMUP +
+k]``); if the stepper has a ``close()`` attribute it is called at the end.
+
+* ``setup_regulator_step``: ``Regulator.step`` (in-process co-simulation path),
+* ``setup_pure_step``: the pure ``step`` function, state threaded by hand,
+* ``setup_pd_only``: ``step`` with ``adaptation_enabled = False`` (floor: no networks),
+* ``setup_nengo``: ``nengo.Simulator.step()`` of three LIFRate ensembles (2-, 2- and
+  4-dimensional, n_neurons each) with the core's encoders/gains/biases, input and error
+  Nodes and PES-learning ``neurons -> output`` connections (2, 2 and 3 outputs): the
+  same network work as the regulator, without the PD terms and saturation.
+
+The machine may be shared, so the paths are measured *interleaved*: ``rounds`` rounds,
+each running a block of ``steps / rounds`` consecutive steps of every path in turn, so
+that load changes hit all paths alike.  Every call is timed individually with
+``time.perf_counter_ns``, the garbage collector disabled during the timed blocks.
+"""
+from __future__ import annotations
+
+import argparse
+import gc
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+try:
+    from fmu_src.avr_core import (
+        Regulator, RegulatorInputs, RegulatorParams, build_networks, initial_state,
+        network_inputs, step,
+    )
+except ImportError:  # run from a checkout without the editable install
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    from fmu_src.avr_core import (
+        Regulator, RegulatorInputs, RegulatorParams, build_networks, initial_state,
+        network_inputs, step,
+    )
+
+DT = 0.005  # s, a typical co-simulation communication step
+WARMUP = 200
+
+
+def make_inputs(n_steps: int, seed: int = 0) -> list[RegulatorInputs]:
+    """A seeded random walk of plausible walking inputs (python floats), the step
+    index advancing every 60 calls (~0.3 s per walking step at dt = 5 ms)."""
+    rng = np.random.default_rng(seed)
+    walk = np.cumsum(rng.normal(0.0, 1.0, (n_steps, 8)), axis=0)
+    walk *= np.array([0.01, 0.005, 0.002, 0.001, 0.002, 0.002, 0.02, 0.02])
+    walk += np.array([0.6, 0.0, 0.5, 0.0, 0.0, 0.0, 0.0, 0.0])
+    return [RegulatorInputs(*map(float, row), step_index=k // 60)
+            for k, row in enumerate(walk)]
+
+
+def _params(n_neurons: int, **changes) -> RegulatorParams:
+    return RegulatorParams(n_neurons=n_neurons, **changes)
+
+
+def _time_block(stepper, start: int, count: int) -> np.ndarray:
+    """Time ``stepper(k)`` for k in [start, start + count) individually; µs per call."""
+    out = np.empty(count)
+    clock = time.perf_counter_ns
+    was_enabled = gc.isenabled()
+    gc.disable()
+    try:
+        for i in range(count):
+            t0 = clock()
+            stepper(start + i)
+            out[i] = clock() - t0
+    finally:
+        if was_enabled:
+            gc.enable()
+    return out / 1000.0
+
+
+def setup_regulator_step(inputs, dt, n_neurons):
+    reg = Regulator(_params(n_neurons))
+    for u in inputs[:WARMUP]:
+        reg.step(u, dt)
+    timed = inputs[WARMUP:]
+    return lambda k: reg.step(timed[k], dt)
+
+
+def _setup_step(inputs, dt, params):
+    nets = build_networks(params)
+    box = [initial_state(params, nets)]
+    for u in inputs[:WARMUP]:
+        box[0] = step(box[0], u, dt, params, nets)[0]
+    timed = inputs[WARMUP:]
+
+    def stepper(k):
+        box[0] = step(box[0], timed[k], dt, params, nets)[0]
+
+    return stepper
+
+
+def setup_pure_step(inputs, dt, n_neurons):
+    return _setup_step(inputs, dt, _params(n_neurons))
+
+
+def setup_pd_only(inputs, dt, n_neurons):
+    return _setup_step(inputs, dt, _params(n_neurons, adaptation_enabled=False))
+
+
+def setup_nengo(inputs, dt, n_neurons):
+    import nengo  # test/benchmark dependency only
+
+    params = _params(n_neurons)
+    nets = build_networks(params)
+    xs = [np.array([network_inputs(u, params)[k] for u in inputs]) for k in range(3)]
+    e = np.array([[u.vx_des - u.vx, u.vy_des - u.vy, params.pitch_des - u.pitch,
+                   params.roll_des - u.roll] for u in inputs])
+    errors = [e[:, [0, 0]], e[:, [1, 1]], e[:, [2, 2, 3]]]
+
+    def at(table):  # row of step k at t = (k + 1) dt
+        return lambda t: table[min(max(int(round(t / dt)) - 1, 0), len(table) - 1)]
+
+    with nengo.Network(seed=0) as model:
+        for k, net in enumerate(nets):
+            inp = nengo.Node(at(xs[k]))
+            ens = nengo.Ensemble(net.n_neurons, net.dimensions, encoders=net.encoders,
+                                 gain=net.gain, bias=net.bias, normalize_encoders=False,
+                                 neuron_type=nengo.LIFRate(tau_rc=0.02, tau_ref=0.002))
+            nengo.Connection(inp, ens, synapse=None)
+            n_out = errors[k].shape[1]
+            out = nengo.Node(size_in=n_out)
+            conn = nengo.Connection(
+                ens.neurons, out, transform=np.zeros((n_out, net.n_neurons)),
+                learning_rule_type=nengo.PES(learning_rate=params.learning_rate,
+                                             pre_synapse=None),
+                synapse=None)
+            nengo.Connection(nengo.Node(at(errors[k])), conn.learning_rule, synapse=None)
+    sim = nengo.Simulator(model, dt=dt, progress_bar=False, optimize=True)
+    for _ in range(WARMUP):
+        sim.step()
+
+    def stepper(k):
+        sim.step()
+
+    stepper.close = sim.close
+    return stepper
+
+
+#: (label, setup); the nengo reference must keep the label "nengo".
+PATHS = [
+    ("Regulator.step", setup_regulator_step),
+    ("pure step()", setup_pure_step),
+    ("step(), adaptation off", setup_pd_only),
+    ("nengo", setup_nengo),
+]
+
+
+def summarize(samples_us: np.ndarray) -> tuple[float, float]:
+    """(median, 90th percentile) in µs."""
+    return float(np.median(samples_us)), float(np.percentile(samples_us, 90))
+
+
+def measure(paths=None, n_steps: int = 3000, n_neurons: int = 1000, dt: float = DT,
+            rounds: int = 10, seed: int = 0) -> dict[str, np.ndarray]:
+    """Per-step samples (µs) of every path, measured interleaved in ``rounds``."""
+    paths = PATHS if paths is None else paths
+    inputs = make_inputs(n_steps + WARMUP, seed)
+    block = max(1, n_steps // rounds)
+    steppers = [(label, setup(inputs, dt, n_neurons)) for label, setup in paths]
+    samples = {label: [] for label, _ in steppers}
+    try:
+        for r in range(rounds):
+            for label, stepper in steppers:
+                samples[label].append(_time_block(stepper, r * block, block))
+    finally:
+        for _, stepper in steppers:
+            close = getattr(stepper, "close", None)
+            if close is not None:
+                close()
+    return {label: np.concatenate(v) for label, v in samples.items()}
+
+
+def run(paths=None, **kwargs) -> dict[str, tuple[float, float]]:
+    """label -> (median µs, p90 µs); keyword arguments as :func:`measure`."""
+    return {label: summarize(s) for label, s in measure(paths, **kwargs).items()}
+
+
+def format_table(results: dict[str, tuple[float, float]], n_neurons: int,
+                 dt: float = DT) -> str:
+    ref = results.get("nengo", (float("nan"),))[0]
+    lines = [f"per-step wall time, 3 networks x {n_neurons} LIFRate neurons "
+             f"(dt = {dt * 1e3:g} ms)",
+             f"{'path':<26}{'median µs':>11}{'p90 µs':>10}{'nengo/this':>12}"]
+    for label, (med, p90) in results.items():
+        lines.append(f"{label:<26}{med:>11.1f}{p90:>10.1f}{ref / med:>11.2f}x")
+    return "\n".join(lines)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--steps", type=int, default=3000, help="timed steps per path")
+    ap.add_argument("--neurons", type=int, default=1000, help="neurons per network")
+    ap.add_argument("--rounds", type=int, default=10, help="interleaving rounds")
+    ap.add_argument("--seed", type=int, default=0)
+    args = ap.parse_args(argv)
+    results = run(n_steps=args.steps, n_neurons=args.neurons, rounds=args.rounds,
+                  seed=args.seed)
+    print(format_table(results, args.neurons))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
