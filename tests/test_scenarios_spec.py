@@ -336,3 +336,30 @@ def test_cli_run_rejects_bad_file_before_running(tmp_path):
     assert proc.returncode == 2
     assert "comm_step_s = 0.0013" in proc.stderr
     assert not (tmp_path / "o").exists()
+
+
+# --------------------------------------------------------------------------- properties
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=60, deadline=None)
+@given(errs=st.lists(st.floats(-0.2, 0.2, allow_nan=False), min_size=300, max_size=600),
+       t_from=st.floats(0.0, 1.0))
+def test_convergence_time_property(errs, t_from):
+    """After t_from + result every error is in the band, and the row just before is not (unless 0)."""
+    e = np.asarray(errs)
+    t = np.arange(len(e)) * 0.005
+    rows = rows_from(t, 0.5 + e, 0.5)
+    res = metrics.convergence_time(rows, t_from=t_from, min_hold_s=0.0)
+    ex, _ = metrics.velocity_errors(rows)
+    after = t >= t_from - 1e-9
+    if res is None:
+        assert np.abs(ex[after][-1]) > metrics.CONVERGENCE_TOL_MPS or not after.any()
+        return
+    t_c = t_from + res
+    inside = t >= t_c - 1e-9
+    assert np.all(np.abs(ex[inside]) <= metrics.CONVERGENCE_TOL_MPS)
+    if res > 0:
+        k = int(np.argmax(inside))
+        assert np.abs(ex[k - 1]) > metrics.CONVERGENCE_TOL_MPS
