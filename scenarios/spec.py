@@ -18,7 +18,7 @@ Layout of a file (every key below is known; anything else is an error)::
     duration_s = 50.0               # whole number of communication steps
     model = "menagerie"             # "menagerie", "osu" or a path to an MJCF file
     comm_step_s = 0.005             # whole number of plant steps (0.5 ms)
-    seed = 1                        # the regulator's `seed` parameter (weights init)
+    seed = 1                        # required: the regulator's `seed` parameter (weights init)
     perturbation_t_s = 0.0          # when the perturbation starts mattering (metrics)
     torso_mass_kg = 15.0            # absolute torso (pelvis) mass; or
     torso_added_mass_kg = 5.0       # mass added to the model's own torso mass
@@ -226,10 +226,6 @@ class Scenario:
             if a.name == name:
                 return a
         raise KeyError(f"scenario {self.name!r} has no arm {name!r}; arms: {[a.name for a in self.arms]}")
-
-    def with_model(self, model: str) -> "Scenario":
-        """The same scenario on another model (CLI --model); the caller re-validates it."""
-        return dataclasses.replace(self, model=model)
 
     def is_perturbed(self) -> bool:
         return bool(
@@ -490,7 +486,7 @@ def parse_scenario(doc: Mapping[str, Any], source: str | None = None, *, base_di
     model = _string(doc, "model", "model", probs, default="menagerie")
     if isinstance(doc.get("model", ""), str):
         model = resolve_model(model, base_dir, probs)
-    seed = _integer(doc, "seed", "seed", probs, default=0, ge=0)
+    seed = _integer(doc, "seed", "seed", probs, required=True, default=0, ge=0)  # seeds are explicit
     pert_t = _number(doc, "perturbation_t_s", "perturbation_t_s", probs, default=0.0, ge=0.0)
     if pert_t is not None and duration is not None and pert_t >= duration:
         probs.add("perturbation_t_s", pert_t, f"must be < duration_s = {duration:g}")

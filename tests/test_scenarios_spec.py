@@ -126,6 +126,7 @@ Kp_xx = 1.0
     assert "command[0].vx_des = 9: must be <= 2" in text
     assert any(p.startswith("command[0].t_s") and "t_s = 0" in p for p in probs)
     assert "push[1].duration_s = -0.1: must be > 0" in text
+    assert "seed: required" in probs  # seeds are explicit
     assert any(p.startswith("regulator.learning_rate = -5") and "out of range" in p for p in probs)
     assert any(p.startswith("regulator.Kp_xx") and "did you mean 'Kp_x'" in p for p in probs)
     assert len(probs) >= 9
