@@ -26,6 +26,14 @@ tracking at plant rate with fresh joint measurements.
   at ``torso_pitch_des``/0 (their constraint is on the torso angle), the stance
   knee holds the leg length ``stance_leg_length_m`` with a gravity feedforward,
   the stance foot is passive.
+* Landing leg angle = ``asin(v T / 2L) + leg_angle_offset(v_des) + delta_swing_hip_pitch``
+  with ``v`` the low-pass filtered measured forward speed (neutral point,
+  ``neutral_point_blend = 1``): the nominal gait is speed-neutral and the
+  per-speed offset from the gait library makes it settle at ``v_des``.  There is
+  no integral action anywhere in the nominal controller, so a model change
+  (pelvis mass, COM) leaves a steady-state speed error for the regulator.
+* The gait speed follows the command through a rate limit
+  (``accel_limit_mps2``).
 * Start from rest: ``stand_time_s`` standing on both feet (COM fed back through
   the foot torques), ``shift_time_s`` shifting the pelvis over the first stance
   foot, then walking.  No velocity kick.
@@ -60,6 +68,12 @@ first-order low-pass filter with time constant ``vy_filter_tau_s`` (a
 continuously filtered signal: the paper's mid-step average mixes the periodic
 sway with the drift and made the lateral loop unstable); pitch/roll and their
 rates as above.
+
+Recommended regulator defaults (measured with this plant, see the tests and the
+gait calibration): ``Kp_x = 0.10`` rad/(m/s), ``Kd_x = 0`` (0.15 also works but
+rings; 0.25 oscillates and falls; any Kd_x > 0 on the step-to-step difference
+destabilised it), ``Kp_y = 0.3`` rad/(m/s) on the filtered ``vy``, ``Kd_y = 0``,
+torso gains 0 (the stance hip PD already holds the torso).
 
 :class:`PDRegulator` is a minimal stand-in for ``fmu_src.avr_core`` with exactly
 the paper's PD form (no adaptation) used by the gait calibration and tests.
@@ -162,6 +176,17 @@ class ControllerParams:
     #: Low-pass time constant of the lateral velocity signal given to the regulator.
     vy_filter_tau_s: float = 0.1
     swing_leg_min_length_m: float = 0.55
+    #: Landing leg angle uses the speed v_des + blend*(vx_filt - v_des) in its
+    #: neutral-point term asin(v T / 2L): 0 = pure time-based gait (v_des only),
+    #: 1 = neutral point of the measured speed (speed-neutral gait, the regulator
+    #: supplies the correction).  Proportional only: no integral action.
+    neutral_point_blend: float = 1.0
+    vx_filter_tau_s: float = 0.05
+    #: Proportional landing-angle feedback on the filtered forward speed error
+    #: (rad per m/s), inside the step; no integral action.
+    landing_speed_gain: float = 0.0
+    #: Rate limit of the gait speed toward the command (m/s^2).
+    accel_limit_mps2: float = 0.5
     swing_leg_max_length_m: float = 0.93
 
 
@@ -232,6 +257,14 @@ def joint_pd_torque(kp, kd, q_des, qd_des, tau_ff, q, qd, limit):
     return min(max(tau, -limit), limit)
 
 
+class _Uniform:
+    def __init__(self, g):
+        self.g = g
+
+    def lookup(self, vx, vy):
+        return self.g
+
+
 class NominalController:
     """Stance/swing state machine, Bezier virtual constraints and joint PD targets."""
 
@@ -248,9 +281,12 @@ class NominalController:
         # Ankle height above ground when standing (m).
         self.ankle_height0 = float(np.mean([phys.foot_position(s)[2] for s in SIDES]))
         self.offsets = {k: 0.0 for k in OFFSET_KEYS}
-        self.gait = GaitParams()
+        self.gait = None
+        #: Gait speed (m/s): the command through the rate limiter.
         self.vx_des = 0.0
         self.vy_des = 0.0
+        self.cmd_vx = self.cmd_vy = 0.0
+        self._gaits = _Uniform(GaitParams())
         self.mode = "stand"
         self.stance = self.p.first_stance
         self.step_index = 0
@@ -259,6 +295,7 @@ class NominalController:
         self.vx_step_avg = 0.0
         self.vy_step_avg = 0.0
         self.vy_filt = 0.0
+        self.vx_filt = 0.0
         self._step_start_xy = phys.pelvis_position()[:2]
         self._swing_start = (0.0, 0.0)
         self._last_t = phys.time_s
@@ -267,8 +304,27 @@ class NominalController:
         self.update()
 
     # ----------------------------------------------------------- interface
-    def set_command(self, vx: float, vy: float, gait: GaitParams) -> None:
-        self.vx_des, self.vy_des, self.gait = float(vx), float(vy), gait
+    def set_command(self, vx: float, vy: float, gaits) -> None:
+        """Commanded speed (m/s) and the gait library (``lookup(vx, vy) -> GaitParams``).
+
+        The gait follows the command through a rate limiter
+        (``ControllerParams.accel_limit_mps2``) so walking starts from rest smoothly.
+        """
+        self.cmd_vx, self.cmd_vy, self._gaits = float(vx), float(vy), gaits
+        self.gait = None  # force a new lookup (the library may have changed)
+        self._refresh_gait(0.0)
+
+    def _refresh_gait(self, dt: float) -> None:
+        a = self.p.accel_limit_mps2 * dt
+        if self.mode != "walk":
+            tx, ty = 0.0, 0.0  # standing/shifting: ramp starts with the first step
+        else:
+            tx, ty = self.cmd_vx, self.cmd_vy
+        nx = self.vx_des + max(-a, min(a, tx - self.vx_des))
+        ny = self.vy_des + max(-a, min(a, ty - self.vy_des))
+        if nx != self.vx_des or ny != self.vy_des or self.gait is None:
+            self.vx_des, self.vy_des = nx, ny
+            self.gait = self._gaits.lookup(nx, ny)
 
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
         for k in offsets:
@@ -311,7 +367,7 @@ class NominalController:
     # -------------------------------------------------------------- update
     def update(self) -> None:
         """Refresh phase and servo targets from the current state (call every substep block)."""
-        ph, p, g = self.phys, self.p, self.gait
+        ph, p = self.phys, self.p
         d = ph.data
         t = ph.time_s
         yaw, pitch, roll = ph.euler_zyx()
@@ -322,9 +378,13 @@ class NominalController:
         self._last_t = t
         a = dt / (p.vy_filter_tau_s + dt) if dt > 0 else 0.0
         self.vy_filt += a * (vh[1] - self.vy_filt)
+        ax = dt / (p.vx_filter_tau_s + dt) if dt > 0 else 0.0
+        self.vx_filt += ax * (vh[0] - self.vx_filt)
         fl, fr = ph.foot_normal_forces_n()
         self.foot_forces = (fl, fr)
 
+        self._refresh_gait(dt)
+        g = self.gait
         # ---------------- phase / mode machine
         if self.mode == "stand" and t >= p.stand_time_s:
             self.mode = "shift"
@@ -397,7 +457,9 @@ class NominalController:
             T = g.step_time_s
             L = p.stance_leg_length_m
             b = bezier(g.swing_shape, self.tau / g.swing_end_tau)
-            th_f = (math.asin(max(-0.5, min(0.5, self.vx_des * T / (2 * L)))) + g.leg_angle_offset_rad
+            v_np = self.vx_des + p.neutral_point_blend * (self.vx_filt - self.vx_des)
+            th_f = (math.asin(max(-0.5, min(0.5, v_np * T / (2 * L)))) + g.leg_angle_offset_rad
+                    + p.landing_speed_gain * (self.vx_filt - self.vx_des)
                     + o["delta_swing_hip_pitch"])
             side = 1.0 if sw == "left" else -1.0
             ph_f = (math.asin(max(-0.5, min(0.5, self.vy_des * T / (2 * L)))) + g.lateral_offset_rad
@@ -413,8 +475,10 @@ class NominalController:
             Ld = (hip[2] - z_ankle) / max(math.cos(th) * math.cos(phi), 0.5)
             Ld = min(max(Ld, p.swing_leg_min_length_m), p.swing_leg_max_length_m)
             kin = self.kin[sw]
-            kn = kin.knee_for_length(Ld) + o["delta_swing_knee"] * b
-            T_.q[sw, "knee"] = kn
+            kn = kin.knee_for_length(Ld)
+            # The knee offset is not compensated at the hip: + extends the shank
+            # forward, so the foot lands further forward (and lower/earlier).
+            T_.q[sw, "knee"] = kn + o["delta_swing_knee"] * b
             T_.q[sw, "hip-pitch"] = th + pitch - kin.angle_offset(kn)
             T_.q[sw, "hip-roll"] = phi - roll
             T_.q[sw, "hip-yaw"] = 0.0
@@ -435,7 +499,7 @@ class NominalController:
 class PDRegulatorParams:
     """Gains of the minimal PD regulator (rad per m/s, rad per m/s, rad/rad, rad s/rad)."""
 
-    Kp_x: float = 0.15
+    Kp_x: float = 0.1
     Kd_x: float = 0.0
     Kp_y: float = 0.3
     Kd_y: float = 0.0

@@ -82,6 +82,7 @@ class GaitLibrary:
         raw = {"meta": self.meta or {}, "vx_grid": list(self.vx_grid), "vy_grid": list(self.vy_grid),
                "base": {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self.base).items()},
                "points": pts}
+        Path(path).parent.mkdir(parents=True, exist_ok=True)
         Path(path).write_text(json.dumps(raw, indent=1) + "\n")
 
     def lookup(self, vx: float, vy: float) -> GaitParams:

@@ -64,8 +64,7 @@ class CassieWalker:
     def set_command(self, vx_des_mps: float, vy_des_mps: float) -> None:
         """Commanded forward/lateral speed (m/s, heading frame); selects the gait."""
         self.vx_des_mps, self.vy_des_mps = float(vx_des_mps), float(vy_des_mps)
-        self.controller.set_command(self.vx_des_mps, self.vy_des_mps,
-                                    self.gaits.lookup(self.vx_des_mps, self.vy_des_mps))
+        self.controller.set_command(self.vx_des_mps, self.vy_des_mps, self.gaits)
 
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
         """Regulator joint offsets (rad); keys from ``OFFSET_KEYS``; unknown key -> KeyError."""

@@ -1,54 +1,107 @@
 """Closed-loop walking of the Cassie plant with the nominal controller.
 
 The regulator is the paper-form PD stand-in ``plant.controller.PDRegulator``
-(no adaptation), called every 10 ms like the co-simulation's communication step.
-Default runs are short; the 60 s matrix is behind ``@pytest.mark.slow``.
+(no adaptation, default gains) called every 10 ms like the co-simulation's
+communication step.  Every run starts from rest in the ``home`` pose (stand,
+weight shift, walk; no velocity kick).  Default runs are short (~25 s wall in
+all); the 60 s matrix, perturbations and pushes are ``@pytest.mark.slow``.
 """
 from __future__ import annotations
 
-import numpy as np
 import pytest
 
-from plant.controller import PDRegulator, PDRegulatorParams
+from plant.controller import OFFSET_KEYS, PDRegulator
+from plant.make_gaits import simulate_walk
 from plant.model import load_model
-from plant.sim import CassieWalker
-
-COMM_STEPS = 20  # 10 ms communication step = 20 plant steps of 0.5 ms
 
 
-def walk(source="menagerie", vx=0.5, vy=0.0, duration_s=10.0, model=None, push=None,
-         reg_params=None):
-    """Walk from rest; return (walker, list of (t, vx_step_avg, step_index, y))."""
-    w = CassieWalker(model if model is not None else load_model(source))
-    w.set_command(vx, vy)
-    reg = PDRegulator(reg_params or PDRegulatorParams())
-    log = []
-    while w.time_s < duration_s - 1e-9 and not w.fell():
-        if push is not None:
-            t0, dur, f = push
-            w.set_pelvis_force(f if t0 <= w.time_s < t0 + dur else (0.0, 0.0, 0.0))
-        w.set_offsets(reg.step(w.regulator_inputs(), vx, vy))
-        w.advance(COMM_STEPS)
-        tel = w.telemetry()
-        log.append((tel["t"], tel["vx_step_avg"], int(tel["step_index"]), tel["pelvis_y"]))
-    return w, log
+class FixedOffsets(PDRegulator):
+    """PD regulator plus constant extra offsets (to check the sign conventions)."""
+
+    def __init__(self, extra):
+        super().__init__()
+        self.extra = extra
+
+    def step(self, inp, vx_des, vy_des):
+        out = super().step(inp, vx_des, vy_des)
+        return {k: out[k] + self.extra.get(k, 0.0) for k in OFFSET_KEYS}
 
 
-def steady_speed(log, t_from):
-    """Mean of the step-averaged forward speed over the steps completed after t_from."""
-    seen, vals = set(), []
-    for t, v, k, _ in log:
-        if t >= t_from and k not in seen:
-            seen.add(k)
-            vals.append(v)
-    return float(np.mean(vals)), len(vals)
+@pytest.fixture(scope="module")
+def menagerie():
+    return load_model("menagerie")
 
 
-def test_walks_10s_from_rest_at_0p5():
-    w, log = walk(vx=0.5, duration_s=10.0)
-    assert not w.fell(), w.fall_reason
-    v, n = steady_speed(log, 5.0)
-    assert n > 10
-    # Tolerance 0.1 m/s: the calibrated gait converges to ~0.02 m/s in 10 s; the
-    # tighter 0.05 m/s criterion is checked on 60 s runs in the slow matrix.
-    assert abs(v - 0.5) < 0.1, v
+def test_walks_10s_from_rest_at_0p5(menagerie):
+    r = simulate_walk(menagerie, 0.5, 0.0, 10.0)
+    assert not r.fell, r.fall_reason
+    # Tolerance 0.05 m/s: the calibrated gait settles within ~0.01 m/s after ~4 s.
+    assert abs(r.steady_vx(5.0) - 0.5) < 0.05
+    _, vy = r.mean_velocity_xy(5.0)
+    assert abs(vy) < 0.05  # lateral drift
+
+
+def test_walks_in_place_10s(menagerie):
+    r = simulate_walk(menagerie, 0.0, 0.0, 10.0)
+    assert not r.fell, r.fall_reason
+    assert abs(r.steady_vx(5.0)) < 0.05
+
+
+def test_osu_walks_10s():
+    r = simulate_walk(load_model("osu"), 0.5, 0.0, 10.0)
+    assert not r.fell, r.fall_reason
+    assert abs(r.steady_vx(5.0) - 0.5) < 0.05
+
+
+def test_swing_offset_signs_closed_loop(menagerie):
+    """+delta_swing_hip_pitch slows the robot; +delta_swing_hip_roll pushes it toward -y."""
+    runs = {}
+    for sgn in (+1, -1):
+        reg = FixedOffsets({"delta_swing_hip_pitch": 0.01 * sgn, "delta_swing_hip_roll": 0.03 * sgn})
+        r = simulate_walk(menagerie, 0.5, 0.0, 7.0, regulator=reg)
+        assert not r.fell, r.fall_reason
+        runs[sgn] = (r.steady_vx(4.0), r.mean_velocity_xy(4.0)[1])
+    assert runs[+1][0] < runs[-1][0] - 0.02
+    assert runs[+1][1] < runs[-1][1] - 0.02
+
+
+# ----------------------------------------------------------------------- slow
+SPEED_CASES = [(0.0, 0.0), (0.25, 0.0), (0.5, 0.0), (0.75, 0.0), (1.0, 0.0), (0.3, -0.2), (0.3, 0.2)]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("source", ["menagerie", "osu"])
+@pytest.mark.parametrize("vx,vy", SPEED_CASES)
+def test_speed_matrix_60s(source, vx, vy):
+    r = simulate_walk(load_model(source), vx, vy, 60.0)
+    assert not r.fell, r.fall_reason
+    if source == "menagerie":  # nominal model: steady-state error <= 0.05 m/s
+        assert abs(r.steady_vx(30.0) - vx) <= 0.05
+        assert abs(r.mean_velocity_xy(30.0)[1] - vy) <= 0.05
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("mass_kg,com_dx_m", [(15.0, 0.0), (20.0, 0.0), (23.0, 0.0),
+                                              (None, 0.05), (None, 0.1), (None, -0.1)])
+def test_perturbed_30s(mass_kg, com_dx_m):
+    m = load_model("menagerie")
+    pid = m.body("cassie-pelvis").id
+    if mass_kg is not None:
+        m.body_mass[pid] = mass_kg
+    m.body_ipos[pid][0] += com_dx_m
+    mujoco_set_const(m)
+    r = simulate_walk(m, 0.5, 0.0, 30.0)
+    assert not r.fell, r.fall_reason
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("force_x", [30.0, -25.0])
+def test_push_while_walking(menagerie, force_x):
+    r = simulate_walk(menagerie, 0.5, 0.0, 15.0, push=(8.0, 0.1, (force_x, 0.0, 0.0)))
+    assert not r.fell, r.fall_reason
+
+
+def mujoco_set_const(m):
+    import mujoco
+
+    mujoco.mj_setConst(m, mujoco.MjData(m))
