@@ -123,18 +123,7 @@ class InProcessRegulator(RegulatorPath):
         values.update(parameters)
         params = core.RegulatorParams(**{n: types[n](v) for n, v in values.items()})
         core.validate_params(params)
-        if hasattr(core, "Regulator"):
-            reg = core.Regulator(params)
-            self._step_fn = reg.step
-        else:  # functional core: step(state, inputs, dt, params, networks) -> (state, outputs)
-            networks = core.build_networks(params)
-            box = {"state": core.initial_state(params, networks)}
-
-            def step_fn(inputs, dt):
-                box["state"], out = core.step(box["state"], inputs, dt, params, networks)
-                return out
-
-            self._step_fn = step_fn
+        self._step_fn = core.Regulator(params).step
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
         reg_in = self._core.RegulatorInputs(**{n: cast(inputs[n]) for n, cast in self._input_types})

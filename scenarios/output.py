@@ -107,7 +107,7 @@ def _json_default(o: Any) -> Any:
 
 
 def write_timeseries(path: Path, results: Sequence[Any]) -> None:
-    """All arms in one CSV; the first column is ``arm``; floats with 17 significant digits."""
+    """All arms in one CSV; the first column is ``arm``; floats round-trip exactly."""
     results = [r for r in results if len(r.rows)]
     with open(path, "w", newline="") as fh:
         if not results:
@@ -118,7 +118,8 @@ def write_timeseries(path: Path, results: Sequence[Any]) -> None:
         for r in results:
             if r.rows.dtype.names != names:
                 raise ValueError(f"arm {r.arm}: columns differ from arm {results[0].arm}")
-            fmts = ["%d" if r.rows.dtype[n].kind in "iu" else "%.17g" for n in names]
+            # Python floats' repr: the shortest text that reads back to the same double
+            fmts = ["%d" if r.rows.dtype[n].kind in "iu" else "%r" for n in names]
             buf = io.StringIO()
             cols = [r.rows[n] for n in names]
             table = np.empty((len(r.rows), len(names)), dtype=object)

@@ -364,3 +364,18 @@ def test_convergence_time_property(errs, t_from):
     if res > 0:
         k = int(np.argmax(inside))
         assert np.abs(ex[k - 1]) > metrics.CONVERGENCE_TOL_MPS
+
+
+def test_timeseries_csv_round_trips_exactly(tmp_path):
+    t = np.arange(50) * 0.005
+    rows = rows_from(t, 0.5 + np.sin(t) / 3.0, 0.5, step_index=np.arange(50) // 7)
+
+    class R:
+        arm = "adaptive"
+
+    R.rows = rows
+    output.write_timeseries(tmp_path / "ts.csv", [R])
+    back = np.genfromtxt(tmp_path / "ts.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    assert set(back["arm"]) == {"adaptive"}
+    for name in rows.dtype.names:
+        assert np.array_equal(back[name], rows[name]), name
