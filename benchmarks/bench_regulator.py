@@ -12,6 +12,10 @@ k]``); if the stepper has a ``close()`` attribute it is called at the end.
 * ``setup_regulator_step``: ``Regulator.step`` (in-process co-simulation path),
 * ``setup_pure_step``: the pure ``step`` function, state threaded by hand,
 * ``setup_pd_only``: ``step`` with ``adaptation_enabled = False`` (floor: no networks),
+* ``setup_fmu``: the built FMU through fmpy's ``FMU2Slave``: per step ``setReal`` of the
+  eight Real inputs, ``setInteger`` of ``step_index``, ``doStep`` and ``getReal`` of all
+  fourteen outputs (what a co-simulation master does each communication step); the FMU is
+  built by ``build.py`` into a temporary folder first,
 * ``setup_nengo``: ``nengo.Simulator.step()`` of three LIFRate ensembles (2-, 2- and
   4-dimensional, n_neurons each) with the core's encoders/gains/biases, input and error
   Nodes and PES-learning ``neurons -> output`` connections (2, 2 and 3 outputs): the
@@ -148,9 +152,58 @@ def setup_nengo(inputs, dt, n_neurons):
     return stepper
 
 
+def setup_fmu(inputs, dt, n_neurons):
+    import importlib.util
+    import tempfile
+
+    from fmpy import extract, read_model_description
+    from fmpy.fmi2 import FMU2Slave
+
+    from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS
+
+    root = Path(__file__).resolve().parents[1]
+    spec = importlib.util.spec_from_file_location("avr_build", root / "build.py")
+    build = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(build)
+    tmp = tempfile.TemporaryDirectory(prefix="bench_fmu_")
+    fmu_path = build.build_fmu(Path(tmp.name))
+    md = read_model_description(str(fmu_path))
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmu_path), unzipdir=tmp.name + "/x"),
+                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bench")
+    fmu.instantiate()
+    fmu.setInteger([vr["n_neurons"]], [n_neurons])
+    fmu.setupExperiment(startTime=0.0)
+    fmu.enterInitializationMode()
+    fmu.exitInitializationMode()
+    reals = [s.name for s in INPUT_SPECS if s.type == "Real"]
+    real_vrs, index_vr = [vr[n] for n in reals], [vr["step_index"]]
+    out_vrs = [vr[s.name] for s in OUTPUT_SPECS]
+
+    def stepper(k, offset=0):
+        u = inputs[offset + k]
+        fmu.setReal(real_vrs, [getattr(u, n) for n in reals])
+        fmu.setInteger(index_vr, [u.step_index])
+        fmu.doStep((offset + k) * dt, dt)
+        return fmu.getReal(out_vrs)
+
+    for k in range(WARMUP):
+        stepper(k)
+
+    def close():
+        fmu.terminate()
+        fmu.freeInstance()
+        tmp.cleanup()
+
+    timed = lambda k: stepper(k, offset=WARMUP)  # noqa: E731
+    timed.close = close
+    return timed
+
+
 #: (label, setup); the nengo reference must keep the label "nengo".
 PATHS = [
     ("Regulator.step", setup_regulator_step),
+    ("FMU via fmpy (set+doStep+get)", setup_fmu),
     ("pure step()", setup_pure_step),
     ("step(), adaptation off", setup_pd_only),
     ("nengo", setup_nengo),
@@ -192,9 +245,9 @@ def format_table(results: dict[str, tuple[float, float]], n_neurons: int,
     ref = results.get("nengo", (float("nan"),))[0]
     lines = [f"per-step wall time, 3 networks x {n_neurons} LIFRate neurons "
              f"(dt = {dt * 1e3:g} ms)",
-             f"{'path':<26}{'median µs':>11}{'p90 µs':>10}{'nengo/this':>12}"]
+             f"{'path':<31}{'median µs':>11}{'p90 µs':>10}{'nengo/this':>12}"]
     for label, (med, p90) in results.items():
-        lines.append(f"{label:<26}{med:>11.1f}{p90:>10.1f}{ref / med:>11.2f}x")
+        lines.append(f"{label:<31}{med:>11.1f}{p90:>10.1f}{ref / med:>11.2f}x")
     return "\n".join(lines)
 
 

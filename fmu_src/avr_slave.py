@@ -95,6 +95,9 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
         self._state = None
         for spec in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS):
             self.register_variable(self._declare(spec))
+        #: value reference -> (name, type) for the fast get/set paths below
+        self._by_vr = [(var.name, self._specs[var.name].type) for var in self.vars.values()]
+        self._input_names = tuple(spec.name for spec in INPUT_SPECS)
 
     # -- declarations -------------------------------------------------------------------
     def _declare(self, spec):
@@ -106,10 +109,51 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
                     description=spec.description, getter=lambda name=spec.name: self._values[name],
                     setter=lambda value, name=spec.name: self._set(name, value), **extra)
 
-    # -- setting variables ------------------------------------------------------------------
+    # -- getting and setting variables ---------------------------------------------------------
+    # pythonfmu's generic versions call one closure per variable; these do the same checks
+    # (type, legality, range) with one table lookup each: the FMI overhead is most of a step.
+    def _get(self, vrs, kind: str, cast):
+        values, by_vr = self._values, self._by_vr
+        out = []
+        for vr in vrs:
+            name, var_type = by_vr[vr]
+            if var_type != kind:
+                raise TypeError(f"Variable with valueReference={vr} ({name}) is not of type {kind}")
+            out.append(cast(values[name]))
+        return out
+
+    def get_real(self, vrs):
+        return self._get(vrs, "Real", float)
+
+    def get_integer(self, vrs):
+        return self._get(vrs, "Integer", int)
+
+    def get_boolean(self, vrs):
+        return self._get(vrs, "Boolean", bool)
+
+    def _set_many(self, vrs, values, kind: str) -> None:
+        by_vr = self._by_vr
+        names = []
+        for vr in vrs:
+            name, var_type = by_vr[vr]
+            if var_type != kind:
+                raise TypeError(f"Variable with valueReference={vr} ({name}) is not of type {kind}")
+            names.append(name)
+        for name, value in zip(names, values):
+            self._set(name, value)
+
+    def set_real(self, vrs, values):
+        self._set_many(vrs, values, "Real")
+
+    def set_integer(self, vrs, values):
+        self._set_many(vrs, values, "Integer")
+
+    def set_boolean(self, vrs, values):
+        self._set_many(vrs, values, "Boolean")
+
     def _set(self, name: str, value) -> None:
         spec = self._specs[name]
-        problem = self.set_problem(name, value)
+        problem = self.set_problem(name, value)  # the guard checked this already on linux64
         if problem is not None:
             self.log(problem, Fmi2Status.error)
             raise FmiCallError(problem)
@@ -171,8 +215,8 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
         try:
             problem = self._step_problem(current_time, step_size)
             if problem is None:
-                inputs = RegulatorInputs(**{spec.name: _CASTS[spec.type](self._values[spec.name])
-                                            for spec in INPUT_SPECS})
+                values = self._values
+                inputs = RegulatorInputs(**{name: values[name] for name in self._input_names})
                 new_state, outputs = step(self._state, inputs, float(step_size), self._params, self._networks)
                 self._state = new_state
                 self._values.update(outputs)
