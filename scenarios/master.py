@@ -28,6 +28,7 @@ the step).
 from __future__ import annotations
 
 import abc
+import itertools
 import logging
 import math
 import shutil
@@ -53,6 +54,53 @@ SENSED_INPUTS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_i
 REGULATORS = ("fmu", "inprocess")
 _FMI_STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 _LOG_KEEP = 200
+
+# fmpy's native logger proxy (which formats the FMU's printf-style messages) keeps ONE
+# process-wide pointer to the Python logger it forwards to, whichever callbacks struct
+# was registered last; a per-instance logger that is garbage-collected leaves it dangling
+# and the next FMU message from any instance crashes the process.  So there is one
+# logger for the whole process, alive as long as the module, routing messages by
+# instance name; names it does not know are printed as fmpy's default logger does.
+_LOG_ROUTES: dict[str, list[str]] = {}
+_INSTANCE_IDS = itertools.count(1)
+_SHARED_CALLBACKS = None
+
+
+def _route_fmu_message(component, instance_name, status, category, message) -> None:
+    label = _FMI_STATUS[status] if 0 <= status < len(_FMI_STATUS) else str(status)
+    name = instance_name.decode("utf-8", "replace") if isinstance(instance_name, bytes) else str(instance_name)
+    text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
+    cat = category.decode("utf-8", "replace") if isinstance(category, bytes) else str(category)
+    messages = _LOG_ROUTES.get(name)
+    if messages is None:
+        log.info("[%s] %s %s: %s", label, name, cat, text)
+        return
+    messages.append(f"[{label}] {cat}: {text}")
+    del messages[:-_LOG_KEEP]
+
+
+def _shared_callbacks():
+    """The process-lifetime fmi2CallbackFunctions with the routing logger."""
+    global _SHARED_CALLBACKS
+    if _SHARED_CALLBACKS is None:
+        from ctypes import byref
+
+        from fmpy import calloc, free
+        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                               fmi2CallbackLoggerTYPE)
+
+        callbacks = fmi2CallbackFunctions()
+        callbacks.logger = fmi2CallbackLoggerTYPE(_route_fmu_message)
+        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        try:
+            from fmpy.logging import addLoggerProxy
+
+            addLoggerProxy(byref(callbacks))
+        except Exception as exc:  # pragma: no cover - fmpy's native proxy is optional
+            log.warning("fmpy logger proxy unavailable (%s): FMU messages are not formatted", exc)
+        _SHARED_CALLBACKS = callbacks
+    return _SHARED_CALLBACKS
 
 
 # =========================================================================== regulator paths
@@ -145,7 +193,7 @@ class FmuRegulator(RegulatorPath):
         self.fmu_path = Path(fmu_path)
         if not self.fmu_path.is_file():
             raise CosimError(f"FMU not found: {self.fmu_path}")
-        self.instance_name = instance_name
+        self.instance_name = f"{instance_name}-{next(_INSTANCE_IDS)}"  # unique: log messages are routed by it
         self.md = read_model_description(str(self.fmu_path))
         if self.md.fmiVersion != "2.0" or self.md.coSimulation is None:
             raise CosimError(f"{self.fmu_path}: not an FMI 2.0 co-simulation FMU")
@@ -162,13 +210,6 @@ class FmuRegulator(RegulatorPath):
         return self._outputs
 
     # ---- logging and status
-    def _logger(self, component, instance_name, status, category, message) -> None:
-        label = _FMI_STATUS[status] if 0 <= status < len(_FMI_STATUS) else str(status)
-        text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
-        cat = category.decode("utf-8", "replace") if isinstance(category, bytes) else str(category)
-        self.messages.append(f"[{label}] {cat}: {text}")
-        del self.messages[:-_LOG_KEEP]
-
     def log_text(self) -> str:
         return "\n".join(self.messages) if self.messages else "(the FMU logged nothing)"
 
@@ -195,12 +236,10 @@ class FmuRegulator(RegulatorPath):
 
     # ---- life cycle
     def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
-        from ctypes import byref, c_int, c_double
+        from ctypes import c_double, c_int
 
         from fmpy import extract
-        from fmpy import calloc, free
-        from fmpy.fmi2 import (FMU2Slave, fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE,
-                               fmi2CallbackFunctions, fmi2CallbackLoggerTYPE)
+        from fmpy.fmi2 import FMU2Slave
 
         problems = []
         for name, value in parameters.items():
@@ -213,16 +252,8 @@ class FmuRegulator(RegulatorPath):
             raise CosimError("cannot set FMU parameters: " + "; ".join(problems))
 
         self._unzip = extract(str(self.fmu_path))
-        self._callbacks = fmi2CallbackFunctions()
-        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._logger)
-        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        try:
-            from fmpy.logging import addLoggerProxy
-
-            addLoggerProxy(byref(self._callbacks))
-        except Exception as exc:  # pragma: no cover - fmpy's native proxy is optional
-            log.warning("fmpy logger proxy unavailable (%s): FMU messages are not formatted", exc)
+        self._callbacks = _shared_callbacks()
+        _LOG_ROUTES[self.instance_name] = self.messages
         self._fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip,
                               modelIdentifier=self.md.coSimulation.modelIdentifier,
                               instanceName=self.instance_name)
@@ -321,6 +352,8 @@ class FmuRegulator(RegulatorPath):
                     log.warning("fmi2FreeInstance failed: %s", exc)
         finally:
             self._instantiated = self._initialized = False
+            if _LOG_ROUTES.get(self.instance_name) is self.messages:
+                del _LOG_ROUTES[self.instance_name]
             if self._unzip is not None:
                 shutil.rmtree(self._unzip, ignore_errors=True)
                 self._unzip = None
