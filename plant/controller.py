@@ -9,7 +9,7 @@ makes each motor a servo ``tau = kp (q_d - q) + kd (qd_d - qd) + tau_ff`` clippe
 to ``gear * ctrlrange`` (112.5/112.5/195.2/195.2/45 N m for hip roll/yaw/pitch,
 knee, foot).  The Python layer (:meth:`NominalController.update`) refreshes the
 targets ``q_d``, ``qd_d``, ``tau_ff`` every ``ControllerParams.control_substeps``
-plant steps (default 2 = every 1 ms, 1 kHz); between refreshes the servo keeps
+plant steps (default 4 = every 2 ms, 500 Hz); between refreshes the servo keeps
 tracking at plant rate with fresh joint measurements.
 
 * Phase ``tau = (t - t_step_start) / T`` with ``T`` the gait's step time; the step
@@ -64,16 +64,24 @@ step-averaged forward velocity of the last *completed* step, ``vx[k]`` = pelvis
 displacement along the heading over the whole step divided by its duration,
 held constant during a step (0 until the first step completes);
 ``step_index = k``; ``vy`` is the heading-frame lateral pelvis velocity through a
-first-order low-pass filter with time constant ``vy_filter_tau_s`` (a
+first-order low-pass filter with time constant ``vy_filter_tau_s`` = 0.1 s (a
 continuously filtered signal: the paper's mid-step average mixes the periodic
 sway with the drift and made the lateral loop unstable); pitch/roll and their
-rates as above.
+rates as above.  Because ``fmu_src.avr_core`` samples and holds its lateral PD
+once per step (like the longitudinal one), a held lateral term alone was unstable
+here too (falls within 8-17 s at Kp_y = 0.3); the nominal controller therefore
+closes the lateral sway loop itself, continuously, with the same filtered ``vy``:
+landing lateral angle ``+= lateral_speed_gain * (vy - vy_des)`` (0.3 rad per m/s,
+proportional only), and the regulator's held lateral PD trims the drift.
 
-Recommended regulator defaults (measured with this plant, see the tests and the
-gait calibration): ``Kp_x = 0.10`` rad/(m/s), ``Kd_x = 0`` (0.15 also works but
-rings; 0.25 oscillates and falls; any Kd_x > 0 on the step-to-step difference
-destabilised it), ``Kp_y = 0.3`` rad/(m/s) on the filtered ``vy``, ``Kd_y = 0``,
-torso gains 0 (the stance hip PD already holds the torso).
+All offsets are applied on top of the calibrated gait, so zero offsets at the
+commanded speed give (on the nominal model) the commanded speed.
+
+Recommended regulator defaults (measured with this plant and
+``fmu_src.avr_core`` with adaptation off): ``Kp_x = 0.10`` rad/(m/s) (0.15 works
+too; 0.25, the avr_core default, oscillates step to step and falls within 4-12 s),
+``Kd_x = 0`` (0.05 is fine), ``Kp_y = 0.1`` rad/(m/s), ``Kd_y = 0``, torso gains 0
+(the stance hip PD already holds the torso).
 
 :class:`PDRegulator` is a minimal stand-in for ``fmu_src.avr_core`` with exactly
 the paper's PD form (no adaptation) used by the gait calibration and tests.
@@ -156,8 +164,9 @@ class ControllerParams:
     stance_knee_ff_nm: float = 110.0
     #: Single-support hip-roll gravity feedforward (N m; + on the left leg, - on the right).
     stance_hip_roll_ff_nm: float = 50.0
-    #: Python layer runs every this many plant steps (2 -> 1 kHz at 0.5 ms).
-    control_substeps: int = 2
+    #: Python layer runs every this many plant steps (4 -> every 2 ms, 500 Hz, at the
+    #: 0.5 ms plant step); the joint PD servos run inside MuJoCo at every step.
+    control_substeps: int = 4
     #: Phase switching.
     switch_min_tau: float = 0.6
     switch_max_tau: float = 1.1
@@ -185,9 +194,26 @@ class ControllerParams:
     #: Proportional landing-angle feedback on the filtered forward speed error
     #: (rad per m/s), inside the step; no integral action.
     landing_speed_gain: float = 0.0
+    #: Lateral landing-angle feedback on the filtered lateral speed error (rad per
+    #: m/s), continuous (the foot lands where the latest vy asks): stabilises the
+    #: lateral sway; the regulator's held-per-step lateral PD only trims the drift.
+    lateral_speed_gain: float = 0.3
     #: Rate limit of the gait speed toward the command (m/s^2).
     accel_limit_mps2: float = 0.5
+
+    def __post_init__(self):
+        if not (isinstance(self.control_substeps, int) and self.control_substeps >= 1):
+            raise ValueError(f"control_substeps must be an int >= 1, got {self.control_substeps!r}")
+        if self.first_stance not in SIDES:
+            raise ValueError(f"first_stance must be one of {SIDES}, got {self.first_stance!r}")
     swing_leg_max_length_m: float = 0.93
+
+
+def _horner(coeffs, x: float) -> float:
+    r = 0.0
+    for c in coeffs:
+        r = r * x + c
+    return r
 
 
 class LegKinematics:
@@ -222,24 +248,25 @@ class LegKinematics:
             v = d.xanchor[legs.foot_jid] - d.xanchor[legs.hip_pitch_jid]
             L.append(math.hypot(v[0], v[2]))
             g.append(math.atan2(v[0], -v[2]))
-        self._L = np.polyfit(knees, L, 5)
-        self._g = np.polyfit(knees, g, 5)
-        self._kn = np.polyfit(L, knees, 5)
+        # Polynomial coefficients, highest power first, as Python floats (Horner below).
+        self._L = tuple(float(c) for c in np.polyfit(knees, L, 5))
+        self._g = tuple(float(c) for c in np.polyfit(knees, g, 5))
+        self._kn = tuple(float(c) for c in np.polyfit(L, knees, 5))
         self.L_range = (min(L), max(L))
         self.max_fit_error_m = float(np.max(np.abs(np.polyval(self._L, knees) - L)))
 
     def length(self, knee: float) -> float:
         """Hip-pitch pivot to ankle distance (m) for a knee angle (rad)."""
-        return float(np.polyval(self._L, knee))
+        return _horner(self._L, knee)
 
     def angle_offset(self, knee: float) -> float:
         """g(knee) (rad): leg line angle at zero hip pitch and level pelvis."""
-        return float(np.polyval(self._g, knee))
+        return _horner(self._g, knee)
 
     def knee_for_length(self, length_m: float) -> float:
         """Knee angle (rad) giving leg length ``length_m`` (clipped to the fitted range)."""
         lo, hi = self.L_range
-        return float(np.polyval(self._kn, min(max(length_m, lo), hi)))
+        return _horner(self._kn, min(max(length_m, lo), hi))
 
 
 @dataclass
@@ -249,6 +276,9 @@ class _Targets:
     ff: dict = field(default_factory=dict)
     kp: dict = field(default_factory=dict)
     kd: dict = field(default_factory=dict)
+
+
+_Q_NAMES = MOTOR_JOINTS + ("tarsus",)
 
 
 def joint_pd_torque(kp, kd, q_des, qd_des, tau_ff, q, qd, limit):
@@ -300,6 +330,18 @@ class NominalController:
         self._swing_start = (0.0, 0.0)
         self._last_t = phys.time_s
         self._stand_ref = None
+        legs = phys.legs
+        self._act_ids = np.array([legs[s].act[j] for s in SIDES for j in MOTOR_JOINTS])
+        self._q_idx = np.array([legs[s].qadr[j] for s in SIDES for j in _Q_NAMES])
+        self._qd_idx = np.array([legs[s].dadr[j] for s in SIDES for j in MOTOR_JOINTS])
+        self._kp = dict(zip(MOTOR_JOINTS, self.p.kp))
+        self._kd = dict(zip(MOTOR_JOINTS, self.p.kd))
+        #: (side, joint) keys in actuator-array order; default gains per key.
+        self._keys = tuple((s, j) for s in SIDES for j in MOTOR_JOINTS)
+        self._kp_all = {k: self._kp[k[1]] for k in self._keys}
+        self._kd_all = {k: self._kd[k[1]] for k in self._keys}
+        self._zeros = {k: 0.0 for k in self._keys}
+        self._stance_knee = {s: self.kin[s].knee_for_length(self.p.stance_leg_length_m) for s in SIDES}
         phys.configure_pd_servos()
         self.update()
 
@@ -370,18 +412,13 @@ class NominalController:
         ph, p = self.phys, self.p
         d = ph.data
         t = ph.time_s
-        yaw, pitch, roll = ph.euler_zyx()
-        w = ph.angular_velocity_heading()
-        roll_rate, pitch_rate = float(w[0]), float(w[1])
-        vh = ph.pelvis_velocity_heading()
+        yaw, pitch, roll, vx_h, vy_h, roll_rate, pitch_rate = ph.heading_state()
         dt = max(t - self._last_t, 0.0)
         self._last_t = t
         a = dt / (p.vy_filter_tau_s + dt) if dt > 0 else 0.0
-        self.vy_filt += a * (vh[1] - self.vy_filt)
+        self.vy_filt += a * (vy_h - self.vy_filt)
         ax = dt / (p.vx_filter_tau_s + dt) if dt > 0 else 0.0
-        self.vx_filt += ax * (vh[0] - self.vx_filt)
-        fl, fr = ph.foot_normal_forces_n()
-        self.foot_forces = (fl, fr)
+        self.vx_filt += ax * (vx_h - self.vx_filt)
 
         self._refresh_gait(dt)
         g = self.gait
@@ -394,18 +431,25 @@ class NominalController:
         if self.mode == "walk":
             T = g.step_time_s
             self.tau = (t - self.t_step_start) / T
-            f_sw = fl if self.swing == "left" else fr
-            if (self.tau > p.switch_min_tau and f_sw > p.touchdown_force_n) or self.tau >= p.switch_max_tau:
+            touchdown = False
+            if self.tau > p.switch_min_tau:
+                # Contact forces only when a touchdown can end the step (saves time).
+                fl, fr = ph.foot_normal_forces_n()
+                touchdown = (fl if self.swing == "left" else fr) > p.touchdown_force_n
+            if touchdown or self.tau >= p.switch_max_tau:
                 self._start_step(t, yaw, self.swing)
                 self.tau = 0.0
         else:
             self.tau = 0.0
 
-        q = {s: {j: float(d.qpos[ph.legs[s].qadr[j]]) for j in MOTOR_JOINTS + ("tarsus",)} for s in SIDES}
-        qd = {s: {j: float(d.qvel[ph.legs[s].dadr[j]]) for j in MOTOR_JOINTS} for s in SIDES}
-        T_ = _Targets()
-        kp = dict(zip(MOTOR_JOINTS, p.kp))
-        kd = dict(zip(MOTOR_JOINTS, p.kd))
+        qv = d.qpos[self._q_idx].tolist()
+        qdv = d.qvel[self._qd_idx].tolist()
+        n6, n5 = len(_Q_NAMES), len(MOTOR_JOINTS)
+        q = {"left": dict(zip(_Q_NAMES, qv[:n6])), "right": dict(zip(_Q_NAMES, qv[n6:]))}
+        qd = {"left": dict(zip(MOTOR_JOINTS, qdv[:n5])), "right": dict(zip(MOTOR_JOINTS, qdv[n5:]))}
+        T_ = _Targets(q={k: q[k[0]][k[1]] for k in self._keys}, qd=dict(self._zeros),
+                      ff=dict(self._zeros), kp=dict(self._kp_all), kd=dict(self._kd_all))
+        kp, kd = self._kp, self._kd
         o = self.offsets
 
         def stance_leg(s, share, shift_roll=0.0):
@@ -421,7 +465,7 @@ class NominalController:
             if share == 1.0:
                 # Gravity feedforward: the pelvis hangs inboard of the stance hip.
                 T_.ff[s, "hip-roll"] = p.stance_hip_roll_ff_nm * (1.0 if s == "left" else -1.0)
-            T_.q[s, "knee"] = self.kin[s].knee_for_length(p.stance_leg_length_m) + o["delta_stance_knee"]
+            T_.q[s, "knee"] = self._stance_knee[s] + o["delta_stance_knee"]
             T_.ff[s, "knee"] = p.stance_knee_ff_nm * share
             T_.q[s, "hip-yaw"] = 0.0
             T_.q[s, "foot"] = q[s]["foot"]
@@ -463,7 +507,8 @@ class NominalController:
                     + o["delta_swing_hip_pitch"])
             side = 1.0 if sw == "left" else -1.0
             ph_f = (math.asin(max(-0.5, min(0.5, self.vy_des * T / (2 * L)))) + g.lateral_offset_rad
-                    + side * g.step_width_rad + o["delta_swing_hip_roll"])
+                    + side * g.step_width_rad + o["delta_swing_hip_roll"]
+                    + p.lateral_speed_gain * (self.vy_filt - self.vy_des))
             th0, ph0 = self._swing_start
             th = th0 + (th_f - th0) * b
             phi = ph0 + (ph_f - ph0) * b
@@ -484,14 +529,16 @@ class NominalController:
             T_.q[sw, "hip-yaw"] = 0.0
             T_.q[sw, "foot"] = self.foot_flat_sum + pitch - q[sw]["hip-pitch"] - q[sw]["knee"] - q[sw]["tarsus"]
 
-        # ---------------- write servo commands
-        for s in SIDES:
-            for j in MOTOR_JOINTS:
-                kpj = T_.kp.get((s, j), kp[j])
-                kdj = T_.kd.get((s, j), kd[j])
-                ph.set_pd(s, j, kpj, kdj)
-                d.ctrl[ph.legs[s].act[j]] = (kpj * T_.q.get((s, j), q[s][j]) + kdj * T_.qd.get((s, j), 0.0)
-                                             + T_.ff.get((s, j), 0.0))
+        # ---------------- write servo commands (one vectorised write each)
+        keys = self._keys
+        Tkp, Tkd, Tq, Tqd, Tff = T_.kp, T_.kd, T_.q, T_.qd, T_.ff
+        kps = [-Tkp[k] for k in keys]  # bias = -kp q - kd qdot
+        kds = [-Tkd[k] for k in keys]
+        ctrl = [Tkp[k] * Tq[k] + Tkd[k] * Tqd[k] + Tff[k] for k in keys]
+        m = ph.model
+        m.actuator_biasprm[self._act_ids, 1] = kps
+        m.actuator_biasprm[self._act_ids, 2] = kds
+        d.ctrl[self._act_ids] = ctrl
         self.targets = T_
 
 
@@ -501,7 +548,7 @@ class PDRegulatorParams:
 
     Kp_x: float = 0.1
     Kd_x: float = 0.0
-    Kp_y: float = 0.3
+    Kp_y: float = 0.1
     Kd_y: float = 0.0
     Kp_pitch: float = 0.0
     Kd_pitch: float = 0.0
@@ -512,9 +559,11 @@ class PDRegulatorParams:
 class PDRegulator:
     """Paper-form PD velocity regulator without adaptation (stand-in for fmu_src.avr_core).
 
-    ``delta_swing_hip_pitch = Kp_x (vx[k]-vx_des) + Kd_x (vx[k]-vx[k-1])`` updated when
-    the step index changes; ``delta_swing_hip_roll = Kp_y (vy-vy_des) + Kd_y (vy-vy_prev)``
-    each call; torso terms from pitch/roll and their rates.
+    Same form and timing as ``fmu_src.avr_core`` with ``adaptation_enabled=False``:
+    ``delta_swing_hip_pitch = Kp_x (vx[k]-vx_des) + Kd_x (vx[k]-vx[k-1])`` and
+    ``delta_swing_hip_roll = Kp_y (vy-vy_des) + Kd_y (vy[k]-vy[k-1])``, both recomputed
+    only when ``step_index`` changes and held in between (no derivative kick on the
+    first call); torso terms from pitch/roll and their rates at every call.
     """
 
     def __init__(self, params: PDRegulatorParams | None = None):
@@ -527,17 +576,13 @@ class PDRegulator:
     def step(self, inp: Mapping[str, float], vx_des: float, vy_des: float) -> dict:
         p = self.p
         k = int(inp["step_index"])
+        vx, vy = float(inp["vx"]), float(inp["vy"])
         if k != self._k:
-            if k > 0:
-                vx = inp["vx"]
-                dvx = 0.0 if self._vx_prev is None else vx - self._vx_prev
-                self.out["delta_swing_hip_pitch"] = p.Kp_x * (vx - vx_des) + p.Kd_x * dvx
-                self._vx_prev = vx
-            self._k = k
-        vy = inp["vy"]
-        dvy = 0.0 if self._vy_prev is None else vy - self._vy_prev
-        self._vy_prev = vy
-        self.out["delta_swing_hip_roll"] = p.Kp_y * (vy - vy_des) + p.Kd_y * dvy
+            dvx = 0.0 if self._vx_prev is None else vx - self._vx_prev
+            dvy = 0.0 if self._vy_prev is None else vy - self._vy_prev
+            self.out["delta_swing_hip_pitch"] = p.Kp_x * (vx - vx_des) + p.Kd_x * dvx
+            self.out["delta_swing_hip_roll"] = p.Kp_y * (vy - vy_des) + p.Kd_y * dvy
+            self._vx_prev, self._vy_prev, self._k = vx, vy, k
         self.out["delta_stance_hip_pitch"] = p.Kp_pitch * inp["pitch"] + p.Kd_pitch * inp["pitch_rate"]
         self.out["delta_stance_hip_roll"] = p.Kp_roll * inp["roll"] + p.Kd_roll * inp["roll_rate"]
         return dict(self.out)

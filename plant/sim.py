@@ -72,11 +72,10 @@ class CassieWalker:
 
     def regulator_inputs(self) -> dict:
         """Signals for the regulator (see ``plant/controller.py`` for definitions)."""
-        ph, c = self.physics, self.controller
-        _, pitch, roll = ph.euler_zyx()
-        w = ph.angular_velocity_heading()
-        return {"vx": float(c.vx_step_avg), "vy": float(c.vy_filt), "pitch": float(pitch),
-                "roll": float(roll), "pitch_rate": float(w[1]), "roll_rate": float(w[0]),
+        c = self.controller
+        _, pitch, roll, _, _, roll_rate, pitch_rate = self.physics.heading_state()
+        return {"vx": float(c.vx_step_avg), "vy": float(c.vy_filt), "pitch": pitch,
+                "roll": roll, "pitch_rate": pitch_rate, "roll_rate": roll_rate,
                 "step_index": int(c.step_index)}
 
     def advance(self, n_steps: int) -> None:
@@ -118,15 +117,14 @@ class CassieWalker:
         """Named floats for logging (SI units; stance 0 = left, 1 = right)."""
         ph, c = self.physics, self.controller
         p = ph.pelvis_position()
-        v = ph.pelvis_velocity_heading()
-        _, pitch, roll = ph.euler_zyx()
+        _, pitch, roll, vx, vy, _, _ = ph.heading_state()
         fl, fr = ph.foot_normal_forces_n()
         return {
             "t": self.time_s,
             "pelvis_x": float(p[0]), "pelvis_y": float(p[1]), "pelvis_z": float(p[2]),
-            "vx": float(v[0]), "vy": float(v[1]),
+            "vx": vx, "vy": vy,
             "vx_step_avg": float(c.vx_step_avg), "vy_signal": float(c.vy_filt),
-            "pitch": float(pitch), "roll": float(roll),
+            "pitch": pitch, "roll": roll,
             "stance": 0.0 if c.stance == "left" else 1.0,
             "tau": float(c.tau), "step_index": float(c.step_index),
             "left_foot_force": float(fl), "right_foot_force": float(fr),
