@@ -156,16 +156,17 @@ _SIGN_NOTE = ("; negative values flip the sign for plants whose joint convention
               "opposite one")
 
 PARAM_SPECS: tuple[VarSpec, ...] = (
-    _p("Kp_x", 0.25, *_GAIN, "rad.s/m",
+    _p("Kp_x", 0.1, *_GAIN, "rad.s/m",
        "Longitudinal P gain: swing hip pitch offset per m/s of (vx - vx_des), "
-       "rad/(m/s), in [-5, 5]" + _SIGN_NOTE),
-    _p("Kd_x", 0.05, *_GAIN, "rad.s/m",
+       "rad/(m/s), in [-5, 5]; 0.1 is tuned on the MuJoCo Cassie (0.25 oscillates step to "
+       "step)" + _SIGN_NOTE),
+    _p("Kd_x", 0.0, *_GAIN, "rad.s/m",
        "Longitudinal D gain: swing hip pitch offset per m/s change of vx between two "
        "walking steps, rad/(m/s), in [-5, 5]" + _SIGN_NOTE),
-    _p("Kp_y", 0.25, *_GAIN, "rad.s/m",
+    _p("Kp_y", 0.1, *_GAIN, "rad.s/m",
        "Lateral P gain: swing hip roll offset per m/s of (vy - vy_des), rad/(m/s), "
        "in [-5, 5]" + _SIGN_NOTE),
-    _p("Kd_y", 0.05, *_GAIN, "rad.s/m",
+    _p("Kd_y", 0.0, *_GAIN, "rad.s/m",
        "Lateral D gain: swing hip roll offset per m/s change of vy between two walking "
        "steps, rad/(m/s), in [-5, 5]" + _SIGN_NOTE),
     _p("Kp_pitch", 0.0, *_GAIN, "1",

@@ -140,7 +140,7 @@ def test_params_types_are_normalised_and_bools_are_not_numbers():
 def test_replace_validates_and_names_unknown_fields():
     p = RegulatorParams()
     q = p.replace(Kp_x=0.5)
-    assert q.Kp_x == 0.5 and p.Kp_x == 0.25 and q.Kd_x == p.Kd_x
+    assert q.Kp_x == 0.5 and p.Kp_x == 0.1 and q.Kd_x == p.Kd_x
     with pytest.raises(ParameterError) as exc:
         p.replace(Kp_y=99, bogus=1)
     assert len(exc.value.problems) == 2
@@ -585,7 +585,7 @@ def test_regulator_rejects_changing_fixed_parameters():
     reg = Regulator(small())
     with pytest.raises(ParameterError, match=r"n_neurons = 10: fixed parameter"):
         reg.set_params(n_neurons=10, Kp_x=1.0)
-    assert reg.params.Kp_x == 0.25
+    assert reg.params.Kp_x == 0.1
     reg.set_params(seed=reg.params.seed, Kp_x=1.0)  # unchanged fixed values are fine
     assert reg.params.Kp_x == 1.0
     run(reg, [RegulatorInputs(vx=1.0)] * 5)

@@ -138,7 +138,7 @@ def test_refused_set_changes_nothing_and_stepping_continues(built_fmu):
     results = json.loads(proc.stdout.strip().splitlines()[-1])
     assert [r["status"] for r in results] == [OK] * 5 + [ERROR, OK, OK, ERROR, OK, OK, OK, OK]
     assert results[6]["value"] == 0.7  # the NaN was not applied
-    assert results[9]["value"] == 0.25  # nor the out-of-range gain: the default stays
+    assert results[9]["value"] == {s.name: s for s in PARAM_SPECS}["Kp_x"].default  # nor the bad gain
 
 
 # ---- in-process checks (legal calls only) ------------------------------------------------
