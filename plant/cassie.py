@@ -265,7 +265,8 @@ class CassiePhysics:
         return self.euler_zyx()[2]
 
     def heading_state(self) -> tuple:
-        """(yaw, pitch, roll, vx, vy, roll_rate, pitch_rate) in one pass, Python floats.
+        """(yaw, pitch, roll, vx, vy, roll_rate, pitch_rate, yaw_rate), Python floats.
+
 
         Angles rad (ZYX Euler); vx, vy m/s and the rates rad/s in the heading frame.
         Same values as the individual accessors, computed without numpy temporaries
@@ -281,9 +282,10 @@ class CassiePhysics:
         r = d.xmat[self.pelvis_body].tolist()
         wx = r[0] * a0 + r[1] * a1 + r[2] * a2
         wy = r[3] * a0 + r[4] * a1 + r[5] * a2
+        wz = r[6] * a0 + r[7] * a1 + r[8] * a2
         c, sn = math.cos(yaw), math.sin(yaw)
         return (yaw, pitch, roll, c * v0 + sn * v1, -sn * v0 + c * v1,
-                c * wx + sn * wy, -sn * wx + c * wy)
+                c * wx + sn * wy, -sn * wx + c * wy, wz)
 
     def pelvis_velocity_world(self) -> np.ndarray:
         """Pelvis linear velocity in the world frame (m/s), shape (3,)."""

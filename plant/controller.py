@@ -329,7 +329,8 @@ class NominalController:
         self._step_start_xy = phys.pelvis_position()[:2]
         self._swing_start = (0.0, 0.0)
         self._last_t = phys.time_s
-        self._stand_ref = None
+        #: Heading held by the hip yaw joints (rad): the pelvis yaw at start.
+        self.yaw_ref = phys.heading_yaw()
         legs = phys.legs
         self._act_ids = np.array([legs[s].act[j] for s in SIDES for j in MOTOR_JOINTS])
         self._q_idx = np.array([legs[s].qadr[j] for s in SIDES for j in _Q_NAMES])
@@ -412,7 +413,8 @@ class NominalController:
         ph, p = self.phys, self.p
         d = ph.data
         t = ph.time_s
-        yaw, pitch, roll, vx_h, vy_h, roll_rate, pitch_rate = ph.heading_state()
+        yaw, pitch, roll, vx_h, vy_h, roll_rate, pitch_rate, yaw_rate = ph.heading_state()
+        yaw_err = math.remainder(yaw - self.yaw_ref, math.tau)
         dt = max(t - self._last_t, 0.0)
         self._last_t = t
         a = dt / (p.vy_filter_tau_s + dt) if dt > 0 else 0.0
@@ -467,7 +469,10 @@ class NominalController:
                 T_.ff[s, "hip-roll"] = p.stance_hip_roll_ff_nm * (1.0 if s == "left" else -1.0)
             T_.q[s, "knee"] = self._stance_knee[s] + o["delta_stance_knee"]
             T_.ff[s, "knee"] = p.stance_knee_ff_nm * share
-            T_.q[s, "hip-yaw"] = 0.0
+            # Heading hold: hip yaw axes point up, so with the foot fixed the pelvis
+            # yaw falls as the hip yaw rises.
+            T_.q[s, "hip-yaw"] = q[s]["hip-yaw"] + yaw_err
+            T_.qd[s, "hip-yaw"] = qd[s]["hip-yaw"] + yaw_rate
             T_.q[s, "foot"] = q[s]["foot"]
             T_.kp[s, "foot"] = 0.0
             T_.kd[s, "foot"] = 0.0
@@ -526,7 +531,7 @@ class NominalController:
             T_.q[sw, "knee"] = kn + o["delta_swing_knee"] * b
             T_.q[sw, "hip-pitch"] = th + pitch - kin.angle_offset(kn)
             T_.q[sw, "hip-roll"] = phi - roll
-            T_.q[sw, "hip-yaw"] = 0.0
+            T_.q[sw, "hip-yaw"] = -yaw_err  # swing foot lands along the reference heading
             T_.q[sw, "foot"] = self.foot_flat_sum + pitch - q[sw]["hip-pitch"] - q[sw]["knee"] - q[sw]["tarsus"]
 
         # ---------------- write servo commands (one vectorised write each)

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import math
 import os
 import time
 from dataclasses import dataclass, replace
@@ -42,6 +43,8 @@ class WalkResult:
     t_end_s: float
     #: (t, vx_step_avg, step_index, pelvis_x, pelvis_y, delta_swing_hip_pitch, delta_swing_hip_roll)
     log: list
+    #: Largest |heading change| from the start over the run (rad).
+    max_abs_yaw_rad: float = 0.0
 
     def window(self, t_from: float):
         return [r for r in self.log if r[0] >= t_from]
@@ -80,6 +83,7 @@ def simulate_walk(model, vx: float, vy: float, duration_s: float, gaits=None, pa
     reg = regulator or PDRegulator(reg_params)
     rows = []
     zero = (0.0, 0.0, 0.0)
+    yaw0, max_yaw = w.physics.heading_yaw(), 0.0
     while w.time_s < duration_s - 1e-9 and not w.fell():
         if push is not None:
             t0, dur, f = push
@@ -92,7 +96,8 @@ def simulate_walk(model, vx: float, vy: float, duration_s: float, gaits=None, pa
         fq = w.physics.free_qadr
         rows.append((w.time_s, c.vx_step_avg, c.step_index, float(p[fq]), float(p[fq + 1]),
                      off["delta_swing_hip_pitch"], off["delta_swing_hip_roll"]))
-    return WalkResult(w.fell(), w.fall_reason, w.time_s, rows)
+        max_yaw = max(max_yaw, abs(math.remainder(w.physics.heading_yaw() - yaw0, math.tau)))
+    return WalkResult(w.fell(), w.fall_reason, w.time_s, rows, max_yaw)
 
 
 def _secant(hist, key_o, key_e, first_step, max_step=0.05):

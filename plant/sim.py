@@ -73,7 +73,7 @@ class CassieWalker:
     def regulator_inputs(self) -> dict:
         """Signals for the regulator (see ``plant/controller.py`` for definitions)."""
         c = self.controller
-        _, pitch, roll, _, _, roll_rate, pitch_rate = self.physics.heading_state()
+        _, pitch, roll, _, _, roll_rate, pitch_rate, _ = self.physics.heading_state()
         return {"vx": float(c.vx_step_avg), "vy": float(c.vy_filt), "pitch": pitch,
                 "roll": roll, "pitch_rate": pitch_rate, "roll_rate": roll_rate,
                 "step_index": int(c.step_index)}
@@ -117,7 +117,7 @@ class CassieWalker:
         """Named floats for logging (SI units; stance 0 = left, 1 = right)."""
         ph, c = self.physics, self.controller
         p = ph.pelvis_position()
-        _, pitch, roll, vx, vy, _, _ = ph.heading_state()
+        _, pitch, roll, vx, vy, _, _, _ = ph.heading_state()
         fl, fr = ph.foot_normal_forces_n()
         return {
             "t": self.time_s,
