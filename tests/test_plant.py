@@ -251,3 +251,26 @@ def test_controller_params_frozen():
     p = ControllerParams()
     with pytest.raises(Exception):
         p.kp = (1.0,)
+
+
+def test_state_machine_phase_and_steps(model):
+    """Stand -> shift -> walk; tau in [0, switch_max_tau); stance alternates with k."""
+    w = CassieWalker(model)
+    w.set_command(0.5, 0.0)
+    reg = PDRegulator()
+    c, p = w.controller, w.params
+    seen_modes, last = [], (None, None)
+    while w.time_s < 3.0:
+        w.set_offsets(reg.step(w.regulator_inputs(), 0.5, 0.0))
+        w.advance(20)
+        if not seen_modes or seen_modes[-1] != c.mode:
+            seen_modes.append(c.mode)
+        assert 0.0 <= c.tau < p.switch_max_tau
+        k, st = c.step_index, c.stance
+        if last[0] is not None and k == last[0] + 1:
+            assert st != last[1]  # each new step swaps the stance leg
+        last = (k, st)
+    assert seen_modes == ["stand", "shift", "walk"]
+    # Realised steps ~0.3 s (T = 0.4 s nominal, touchdown from tau = 0.6): >= 5 in ~2.2 s.
+    assert c.step_index >= 5
+    assert w.regulator_inputs()["step_index"] == c.step_index
