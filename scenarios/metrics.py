@@ -162,6 +162,9 @@ def summarize_arm(rows: np.ndarray, *, fell: bool, t_fall_s: float | None, pertu
         "wall_s": None if wall_s is None else float(wall_s),
         "realtime_factor": (sim_s / wall_s) if wall_s and wall_s > 0 else None,
     }
+    # the longitudinal offsets at the end: which joint carries the correction (redundancy)
+    for joint in ("swing_hip_pitch", "swing_knee"):
+        out[f"mean_delta_{joint}_last_s"] = mean_last(rows, f"out_delta_{joint}")
     psi = {}
     for name in ("psi_x", "psi_y", "psi_pitch", "psi_roll"):
         col = f"out_{name}"

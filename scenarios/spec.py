@@ -94,6 +94,8 @@ CHECKABLE_METRICS = (
     "mean_vy_last_s",
     "max_abs_pitch_rad",
     "max_abs_roll_rad",
+    "mean_delta_swing_hip_pitch_last_s",
+    "mean_delta_swing_knee_last_s",
 )
 CHECK_OPS = ("<", "<=", ">", ">=", "==", "!=")
 SUITE_DIR = Path(__file__).resolve().parent / "suite"

@@ -379,3 +379,18 @@ def test_timeseries_csv_round_trips_exactly(tmp_path):
     assert set(back["arm"]) == {"adaptive"}
     for name in rows.dtype.names:
         assert np.array_equal(back[name], rows[name]), name
+
+
+def test_mean_offsets_over_the_last_5_s():
+    import numpy.lib.recfunctions as rfn
+
+    t = np.arange(2000) * 0.005  # 10 s
+    rows = rows_from(t, np.full(2000, 0.5), 0.5)
+    knee = np.where(t < 5.0, 0.0, 0.08)
+    rows = rfn.append_fields(rows, ["out_delta_swing_knee", "out_delta_swing_hip_pitch"], [knee, -knee],
+                             usemask=False)
+    m = metrics.summarize_arm(rows, fell=False, t_fall_s=None)
+    assert m["mean_delta_swing_knee_last_s"] == pytest.approx(0.08)
+    assert m["mean_delta_swing_hip_pitch_last_s"] == pytest.approx(-0.08)
+    assert metrics.summarize_arm(rows_from(t, 0.5, 0.5), fell=False, t_fall_s=None)[
+        "mean_delta_swing_knee_last_s"] is None  # no such column: no number invented
