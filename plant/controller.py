@@ -32,6 +32,8 @@ tracking at plant rate with fresh joint measurements.
   per-speed offset from the gait library makes it settle at ``v_des``.  There is
   no integral action anywhere in the nominal controller, so a model change
   (pelvis mass, COM) leaves a steady-state speed error for the regulator.
+* Heading hold: the stance hip yaw acts as a PD on the pelvis yaw (reference:
+  the yaw at start), the swing hip yaw lands the foot along that heading.
 * The gait speed follows the command through a rate limit
   (``accel_limit_mps2``).
 * Start from rest: ``stand_time_s`` standing on both feet (COM fed back through
@@ -191,9 +193,6 @@ class ControllerParams:
     #: supplies the correction).  Proportional only: no integral action.
     neutral_point_blend: float = 1.0
     vx_filter_tau_s: float = 0.05
-    #: Proportional landing-angle feedback on the filtered forward speed error
-    #: (rad per m/s), inside the step; no integral action.
-    landing_speed_gain: float = 0.0
     #: Lateral landing-angle feedback on the filtered lateral speed error (rad per
     #: m/s), continuous (the foot lands where the latest vy asks): stabilises the
     #: lateral sway; the regulator's held-per-step lateral PD only trims the drift.
@@ -508,7 +507,6 @@ class NominalController:
             b = bezier(g.swing_shape, self.tau / g.swing_end_tau)
             v_np = self.vx_des + p.neutral_point_blend * (self.vx_filt - self.vx_des)
             th_f = (math.asin(max(-0.5, min(0.5, v_np * T / (2 * L)))) + g.leg_angle_offset_rad
-                    + p.landing_speed_gain * (self.vx_filt - self.vx_des)
                     + o["delta_swing_hip_pitch"])
             side = 1.0 if sw == "left" else -1.0
             ph_f = (math.asin(max(-0.5, min(0.5, self.vy_des * T / (2 * L)))) + g.lateral_offset_rad

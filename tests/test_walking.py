@@ -3,8 +3,11 @@
 The regulator is the paper-form PD stand-in ``plant.controller.PDRegulator``
 (no adaptation, default gains) called every 10 ms like the co-simulation's
 communication step.  Every run starts from rest in the ``home`` pose (stand,
-weight shift, walk; no velocity kick).  Default runs are short (~25 s wall in
-all); the 60 s matrix, perturbations and pushes are ``@pytest.mark.slow``.
+weight shift, walk; no velocity kick).  Default runs are short (~10 s wall in
+all); the 60 s matrix, perturbations and pushes are ``@pytest.mark.slow``: run
+them with ``pytest -m slow --slow tests/test_walking.py`` (the installed
+pytest-nengo plugin also skips ``slow`` tests unless ``--slow`` is given);
+~5 min on one core.
 """
 from __future__ import annotations
 
