@@ -12,7 +12,7 @@ from __future__ import annotations
 import bisect
 import json
 import logging
-from dataclasses import asdict, dataclass, fields, replace
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 from plant.controller import GaitParams

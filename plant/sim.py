@@ -31,7 +31,18 @@ log = logging.getLogger(__name__)
 
 
 class CassieWalker:
-    """Cassie plant with the nominal controller; see the module docstring."""
+    """Cassie plant with the nominal controller; see the module docstring.
+
+    Args:
+        model: compiled Cassie model (``plant.model.load_model``), already carrying
+            any perturbation; it is copied (and its actuators turned into PD
+            servos on the copy), the caller's object is not changed.
+        params: controller parameters (``ControllerParams``); defaults if None.
+        gaits: gait library; the committed ``plant/data/gait_library.json`` if None.
+
+    The fall check runs at the end of every :meth:`advance` and is latched.
+    Pelvis forces from :meth:`set_pelvis_force` persist until changed.
+    """
 
     def __init__(self, model: mujoco.MjModel, params: ControllerParams | None = None,
                  gaits: GaitLibrary | None = None):
