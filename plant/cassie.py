@@ -133,10 +133,11 @@ class CassiePhysics:
                                                          abs(m.actuator_ctrlrange[a, 1])))
             for s in SIDES for j, a in self.legs[s].act.items()}
         # Static ground geoms (world body) for ground_height_m().
+        ground_types = (int(mujoco.mjtGeom.mjGEOM_PLANE), int(mujoco.mjtGeom.mjGEOM_HFIELD))
         self._ground_geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == 0
-                              and m.geom_type[g] in (mujoco.mjtGeom.mjGEOM_PLANE,
-                                                     mujoco.mjtGeom.mjGEOM_HFIELD)
+                              and int(m.geom_type[g]) in ground_types
                               and (m.geom_contype[g] or m.geom_conaffinity[g])]
+        self._plane_type = int(mujoco.mjtGeom.mjGEOM_PLANE)
         self._force6 = np.zeros(6)
         self.home_key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home")
         self.reset_standing()
@@ -371,7 +372,7 @@ class CassiePhysics:
         m, d = self.model, self.data
         best = None
         for g in self._ground_geoms:
-            if m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE:
+            if int(m.geom_type[g]) == self._plane_type:
                 h = float(m.geom_pos[g][2])  # world geoms: model pose is the world pose
             else:
                 hid = m.geom_dataid[g]

@@ -274,3 +274,21 @@ def test_state_machine_phase_and_steps(model):
     # Realised steps ~0.3 s (T = 0.4 s nominal, touchdown from tau = 0.6): >= 5 in ~2.2 s.
     assert c.step_index >= 5
     assert w.regulator_inputs()["step_index"] == c.step_index
+
+
+def test_ground_height_on_terrain_matches_model_module():
+    from plant.model import Perturbation, TerrainSpec, terrain_height_at
+
+    m = load_model("menagerie", Perturbation(terrain=TerrainSpec(max_height_m=0.05, max_slope_deg=10.0,
+                                                                 seed=3, size_m=5.0)))
+    ph = CassiePhysics(m)
+    rng = np.random.default_rng(0)  # explicit seed
+    for x, y in rng.uniform(-4.5, 4.5, size=(20, 2)):
+        assert ph.ground_height_m(x, y) == pytest.approx(terrain_height_at(m, x, y), abs=1e-9)
+    # Standing on the flat start patch: pelvis height above ground as on the flat floor.
+    assert ph.pelvis_height_above_ground_m() == pytest.approx(1.006, abs=2e-3)
+
+
+def test_ground_geoms_found_on_both_models(phys):
+    assert phys._ground_geoms, "the floor plane must be found"
+    assert CassiePhysics(load_model("osu"))._ground_geoms
