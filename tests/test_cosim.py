@@ -1,7 +1,7 @@
 """Closed-loop co-simulation through the REAL built FMU (fmpy) and the in-process core.
 
 Short runs by default (a few simulated seconds each); the whole paper suite is behind
-``@pytest.mark.slow`` (``pytest -m slow tests/test_cosim.py``).
+``@pytest.mark.long`` (``pytest -m slow tests/test_cosim.py``).
 """
 from __future__ import annotations
 
@@ -189,9 +189,9 @@ value = false
     assert "## tiny_push" in text and "![tiny_push velocity.png](tiny_push/velocity.png)" in text
 
 
-@pytest.mark.slow
+@pytest.mark.long
 def test_full_paper_suite(tmp_path):
-    """Every suite scenario at full length through the FMU (minutes; ``-m slow``)."""
+    """Every suite scenario at full length through the FMU (minutes; ``-m long``)."""
     out = tmp_path / "suite"
     proc = subprocess.run([sys.executable, "-m", "scenarios", "run", "all", "--out", str(out), "--jobs", "2"],
                           cwd=REPO_ROOT, capture_output=True, text=True, timeout=7200)

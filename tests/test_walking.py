@@ -4,9 +4,9 @@ The regulator is the paper-form PD stand-in ``plant.controller.PDRegulator``
 (no adaptation, default gains) called every 10 ms like the co-simulation's
 communication step.  Every run starts from rest in the ``home`` pose (stand,
 weight shift, walk; no velocity kick).  Default runs are short (~10 s wall in
-all); the 60 s matrix, perturbations and pushes are ``@pytest.mark.slow``: run
-them with ``pytest -m slow --slow tests/test_walking.py`` (the installed
-pytest-nengo plugin also skips ``slow`` tests unless ``--slow`` is given);
+all); the 60 s matrix, perturbations and pushes are ``@pytest.mark.long``: run
+them with ``pytest -m long tests/test_walking.py`` (not ``slow``: nengo's pytest
+plugin claims that marker and skips it unless ``--slow`` is given);
 ~5 min on one core.
 """
 from __future__ import annotations
@@ -73,7 +73,7 @@ def test_swing_offset_signs_closed_loop(menagerie):
 SPEED_CASES = [(0.0, 0.0), (0.25, 0.0), (0.5, 0.0), (0.75, 0.0), (1.0, 0.0), (0.3, -0.2), (0.3, 0.2)]
 
 
-@pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.parametrize("source", ["menagerie", "osu"])
 @pytest.mark.parametrize("vx,vy", SPEED_CASES)
 def test_speed_matrix_60s(source, vx, vy):
@@ -85,7 +85,7 @@ def test_speed_matrix_60s(source, vx, vy):
         assert abs(r.mean_velocity_xy(30.0)[1] - vy) <= 0.05
 
 
-@pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.parametrize("mass_kg,com_dx_m", [(15.0, 0.0), (20.0, 0.0), (23.0, 0.0),
                                               (None, 0.05), (None, 0.1), (None, -0.1)])
 def test_perturbed_30s(mass_kg, com_dx_m):
@@ -95,7 +95,7 @@ def test_perturbed_30s(mass_kg, com_dx_m):
     assert not r.fell, r.fall_reason
 
 
-@pytest.mark.slow
+@pytest.mark.long
 @pytest.mark.parametrize("force_x", [30.0, -25.0])
 def test_push_while_walking(menagerie, force_x):
     r = simulate_walk(menagerie, 0.5, 0.0, 15.0, push=(8.0, 0.1, (force_x, 0.0, 0.0)))
