@@ -1,7 +1,8 @@
-"""The same input sequence through three importers (and the numpy core in-process).
+"""The same input sequence through four importers (and the numpy core in-process).
 
-fmpy FMU2Slave, fmpy simulate_fmu and libcosimpy (Open Simulation Platform, set up
-from an OSP system structure file) must give the core's outputs to 1e-12.  They
+fmpy FMU2Slave, fmpy simulate_fmu, libcosimpy (Open Simulation Platform, set up from
+an OSP system structure file) and an FMU container (fmu-manipulation-toolbox) must
+give the core's outputs to 1e-12.  They
 are in fact bit-identical (the same float64 code runs), the tolerance only allows
 for an importer that routes values through a different float formatting.
 """
@@ -102,3 +103,26 @@ def test_libcosimpy_matches_core(built_fmu, sequence, reference, tmp_path):
         assert execution.step()
         out.append(observer.last_real_values(index, [vr[n] for n in OUTPUT_NAMES]))
     np.testing.assert_allclose(np.array(out), reference, **TOL)
+
+
+def test_fmu_container_matches_core(built_fmu, sequence, reference, tmp_path):
+    """Our FMU inside an FMU container (fmu-manipulation-toolbox's fmucontainer), run by fmpy."""
+    import subprocess
+
+    shutil.copy(built_fmu, tmp_path / "AdaptiveVelocityRegulator.fmu")
+    (tmp_path / "avr_container.csv").write_text("rule;from_fmu;from_port;to_fmu;to_port\n"
+                                                 "FMU;AdaptiveVelocityRegulator.fmu;;;\n")
+    proc = subprocess.run(["fmucontainer", "-container", f"avr_container.csv:{H}", "-fmu-directory", str(tmp_path)],
+                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    container = tmp_path / "avr_container.fmu"
+    assert container.is_file(), proc.stdout + proc.stderr
+    s = Slave(container)
+    # the container exposes the inputs and outputs, not the parameters: run with the defaults
+    s.init()
+    regulator = Regulator(RegulatorParams())
+    expected = np.array([[o[n] for n in OUTPUT_NAMES]
+                         for o in (regulator.step(RegulatorInputs(**u), H) for u in sequence)])
+    out = np.array([s.step(k, u) for k, u in enumerate(sequence)])
+    s.fmu.terminate()
+    s.fmu.freeInstance()
+    np.testing.assert_allclose(out, expected, **TOL)
