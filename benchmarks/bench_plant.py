@@ -7,8 +7,10 @@
   time as the walker, restarting from ``home`` whenever the (uncontrolled) robot
   has fallen (pelvis < 0.6 m) so that the contact load stays comparable;
 * walker: :class:`plant.sim.CassieWalker` walking at 0.5 m/s from rest with the
-  PD regulator stand-in called every 10 ms (``advance(20)``), including the
-  regulator and telemetry calls the co-simulation makes.
+  regulator core ``fmu_src.avr_core`` (adaptation off, default gains) called
+  in-process every 10 ms (``advance(20)``) through
+  :func:`plant.sim.apply_regulator`, including the regulator and telemetry calls
+  the co-simulation makes.
 
 Prints simulated seconds per wall second for both, their ratio (target >= 0.5),
 and the Python controller rate.  Best of ``--repeat`` runs (machine is shared).
@@ -25,9 +27,10 @@ import mujoco
 os.environ.setdefault("MENAGERIE_ROOT", str(pathlib.Path(__file__).resolve().parents[2]
                                             / "shared" / "cassie" / "menagerie"))
 
-from plant.controller import PDRegulator  # noqa: E402
+from fmu_src.avr_core import Regulator  # noqa: E402
+from plant.make_gaits import COMM_STEPS, PD_ONLY_PARAMS  # noqa: E402
 from plant.model import load_model  # noqa: E402
-from plant.sim import CassieWalker  # noqa: E402
+from plant.sim import CassieWalker, apply_regulator  # noqa: E402
 
 
 def bench_bare(model, sim_s: float) -> float:
@@ -48,11 +51,12 @@ def bench_bare(model, sim_s: float) -> float:
 def bench_walker(model, sim_s: float) -> tuple[float, bool]:
     w = CassieWalker(model)
     w.set_command(0.5, 0.0)
-    reg = PDRegulator()
+    reg = Regulator(PD_ONLY_PARAMS)
+    dt_s = COMM_STEPS * w.SIM_DT_S
     t0 = time.perf_counter()
     while w.time_s < sim_s - 1e-9:
-        w.set_offsets(reg.step(w.regulator_inputs(), 0.5, 0.0))
-        w.advance(20)
+        apply_regulator(w, reg, dt_s)
+        w.advance(COMM_STEPS)
         w.telemetry()
     return w.time_s / (time.perf_counter() - t0), w.fell()
 

@@ -81,12 +81,12 @@ commanded speed give (on the nominal model) the commanded speed.
 
 Recommended regulator defaults (measured with this plant and
 ``fmu_src.avr_core`` with adaptation off): ``Kp_x = 0.10`` rad/(m/s) (0.15 works
-too; 0.25, the avr_core default, oscillates step to step and falls within 4-12 s),
-``Kd_x = 0`` (0.05 is fine), ``Kp_y = 0.1`` rad/(m/s), ``Kd_y = 0``, torso gains 0
-(the stance hip PD already holds the torso).
-
-:class:`PDRegulator` is a minimal stand-in for ``fmu_src.avr_core`` with exactly
-the paper's PD form (no adaptation) used by the gait calibration and tests.
+too; 0.25 oscillates step to step and falls within 4-12 s), ``Kd_x = 0`` (0.05 is
+fine), ``Kp_y = 0.1`` rad/(m/s), ``Kd_y = 0``, torso gains 0 (the stance hip PD
+already holds the torso).  These are ``fmu_src.avr_core.RegulatorParams``'
+defaults; the gait calibration, the walking tests and the plant benchmark run
+that core in-process with ``adaptation_enabled=False`` through
+:func:`plant.sim.apply_regulator`.
 """
 from __future__ import annotations
 
@@ -544,48 +544,3 @@ class NominalController:
         d.ctrl[self._act_ids] = ctrl
         self.targets = T_
 
-
-@dataclass(frozen=True)
-class PDRegulatorParams:
-    """Gains of the minimal PD regulator (rad per m/s, rad per m/s, rad/rad, rad s/rad)."""
-
-    Kp_x: float = 0.1
-    Kd_x: float = 0.0
-    Kp_y: float = 0.1
-    Kd_y: float = 0.0
-    Kp_pitch: float = 0.0
-    Kd_pitch: float = 0.0
-    Kp_roll: float = 0.0
-    Kd_roll: float = 0.0
-
-
-class PDRegulator:
-    """Paper-form PD velocity regulator without adaptation (stand-in for fmu_src.avr_core).
-
-    Same form and timing as ``fmu_src.avr_core`` with ``adaptation_enabled=False``:
-    ``delta_swing_hip_pitch = Kp_x (vx[k]-vx_des) + Kd_x (vx[k]-vx[k-1])`` and
-    ``delta_swing_hip_roll = Kp_y (vy-vy_des) + Kd_y (vy[k]-vy[k-1])``, both recomputed
-    only when ``step_index`` changes and held in between (no derivative kick on the
-    first call); torso terms from pitch/roll and their rates at every call.
-    """
-
-    def __init__(self, params: PDRegulatorParams | None = None):
-        self.p = params or PDRegulatorParams()
-        self._k = None
-        self._vx_prev = None
-        self._vy_prev = None
-        self.out = {k: 0.0 for k in OFFSET_KEYS}
-
-    def step(self, inp: Mapping[str, float], vx_des: float, vy_des: float) -> dict:
-        p = self.p
-        k = int(inp["step_index"])
-        vx, vy = float(inp["vx"]), float(inp["vy"])
-        if k != self._k:
-            dvx = 0.0 if self._vx_prev is None else vx - self._vx_prev
-            dvy = 0.0 if self._vy_prev is None else vy - self._vy_prev
-            self.out["delta_swing_hip_pitch"] = p.Kp_x * (vx - vx_des) + p.Kd_x * dvx
-            self.out["delta_swing_hip_roll"] = p.Kp_y * (vy - vy_des) + p.Kd_y * dvy
-            self._vx_prev, self._vy_prev, self._k = vx, vy, k
-        self.out["delta_stance_hip_pitch"] = p.Kp_pitch * inp["pitch"] + p.Kd_pitch * inp["pitch_rate"]
-        self.out["delta_stance_hip_roll"] = p.Kp_roll * inp["roll"] + p.Kd_roll * inp["roll_rate"]
-        return dict(self.out)

@@ -2,13 +2,13 @@
 
 For every grid point (vx_des, vy_des) the landing offsets of the gait
 (``leg_angle_offset_rad``, ``lateral_offset_rad``) are adjusted so that the
-closed loop of nominal controller + PD regulator (:class:`PDRegulator`, default
-gains) settles with zero mean regulator output, i.e. with zero steady-state speed
-error: each iteration walks ``--duration`` s from rest and adds the mean
-``delta_swing_hip_pitch`` / ``delta_swing_hip_roll`` of the second half to the
-offsets (a fixed-point iteration; it converges because the regulator gain is
-larger than the sensitivity of the landing angle needed for a speed, ~0.03 rad
-per m/s).  Deterministic (no randomness), so no seed.
+closed loop of nominal controller + the regulator core ``fmu_src.avr_core`` with
+adaptation off (the paper's PD, default gains) settles with zero mean regulator
+output, i.e. with zero steady-state speed error: each iteration walks
+``--duration`` s from rest and adds the mean ``delta_swing_hip_pitch`` /
+``delta_swing_hip_roll`` of the second half to the offsets (a fixed-point
+iteration; it converges because the regulator gain is larger than the
+sensitivity of the landing angle needed for a speed, ~0.03 rad per m/s).  Deterministic (no randomness), so no seed.
 
 Writes ``plant/data/gait_library.json`` (or ``--out``).  Options: ``--source``
 (menagerie|osu|path), ``--iterations``, ``--duration``, ``--quick`` (fewer points).
@@ -25,15 +25,19 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from plant.controller import GaitParams, PDRegulator, PDRegulatorParams
+from fmu_src.avr_core import Regulator, RegulatorParams
+from plant.controller import GaitParams
 from plant.gaits import DEFAULT_LIBRARY_PATH, GaitLibrary
-from plant.sim import CassieWalker
+from plant.sim import CassieWalker, apply_regulator
 
 log = logging.getLogger(__name__)
 
 VX_GRID = (0.0, 0.25, 0.5, 0.75, 1.0)
 VY_GRID = (-0.2, 0.0, 0.2)
 COMM_STEPS = 20  # regulator called every 10 ms (20 plant steps), like the co-simulation
+#: The regulator of the calibration and the walking tests: the core's paper-form PD
+#: with its default gains (Kp_x = Kp_y = 0.1 rad/(m/s), all other gains 0).
+PD_ONLY_PARAMS = RegulatorParams(adaptation_enabled=False)
 
 
 @dataclass
@@ -72,15 +76,20 @@ class WalkResult:
 
 
 def simulate_walk(model, vx: float, vy: float, duration_s: float, gaits=None, params=None,
-                  reg_params: PDRegulatorParams | None = None, push=None, regulator=None) -> WalkResult:
-    """Walk from rest with the PD regulator every 10 ms; stop early on a fall.
+                  reg_params: RegulatorParams | None = None, push=None, regulator=None) -> WalkResult:
+    """Walk from rest at the command (vx, vy) (m/s) for ``duration_s`` (s) with the
+    regulator called every 10 ms (``COMM_STEPS`` plant steps); stop early on a fall.
 
-    ``push`` = (t_start_s, duration_s, force_xyz_n) applies a pelvis force.
-    ``regulator``: any object with ``step(inputs, vx_des, vy_des) -> offsets``.
+    The regulator is ``fmu_src.avr_core.Regulator(reg_params)``, by default
+    ``PD_ONLY_PARAMS`` (adaptation off), unless ``regulator`` is given: any object
+    with the core's ``step(RegulatorInputs, dt_s) -> dict`` (see
+    :func:`plant.sim.apply_regulator`).  ``push`` = (t_start_s, duration_s,
+    force_xyz_n) applies a pelvis force (N).
     """
     w = CassieWalker(model, params=params, gaits=gaits)
     w.set_command(vx, vy)
-    reg = regulator or PDRegulator(reg_params)
+    reg = regulator or Regulator(reg_params or PD_ONLY_PARAMS)
+    dt_s = COMM_STEPS * w.SIM_DT_S
     rows = []
     zero = (0.0, 0.0, 0.0)
     yaw0, max_yaw = w.physics.heading_yaw(), 0.0
@@ -88,8 +97,7 @@ def simulate_walk(model, vx: float, vy: float, duration_s: float, gaits=None, pa
         if push is not None:
             t0, dur, f = push
             w.set_pelvis_force(f if t0 <= w.time_s < t0 + dur else zero)
-        off = reg.step(w.regulator_inputs(), vx, vy)
-        w.set_offsets(off)
+        off = apply_regulator(w, reg, dt_s)
         w.advance(COMM_STEPS)
         c = w.controller
         p = w.physics.data.qpos
@@ -187,7 +195,7 @@ def main(argv=None):
         meta_pts.append({"vx": vx, "vy": vy, "history": hist})
     lib = GaitLibrary(tuple(vxg), tuple(vyg), pts, base, {
         "generated_by": "python -m plant.make_gaits", "source": a.source,
-        "regulator": "PDRegulator defaults " + repr(PDRegulatorParams()),
+        "regulator": "fmu_src.avr_core.Regulator " + repr(PD_ONLY_PARAMS),
         "duration_s": a.duration, "calibration": meta_pts,
         "wall_s": round(time.time() - t0, 1)})
     lib.save(a.out)

@@ -7,12 +7,14 @@ import mujoco
 import numpy as np
 import pytest
 
+from fmu_src.avr_core import Regulator
 from plant.cassie import FALL_HEIGHT_M, FALL_TILT_RAD, MOTOR_JOINTS, SIDES, CassiePhysics
 from plant.controller import (OFFSET_KEYS, ControllerParams, GaitParams, LegKinematics,
-                              PDRegulator, bezier, joint_pd_torque)
+                              bezier, joint_pd_torque)
 from plant.gaits import DEFAULT_LIBRARY_PATH, GaitLibrary
+from plant.make_gaits import PD_ONLY_PARAMS
 from plant.model import load_model
-from plant.sim import CassieWalker
+from plant.sim import CassieWalker, apply_regulator
 
 REG_KEYS = {"vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index"}
 TEL_KEYS = {"t", "pelvis_x", "pelvis_y", "pelvis_z", "vx", "vy", "vx_step_avg", "vy_signal",
@@ -175,9 +177,9 @@ def test_advance_counts_substeps_across_calls(model):
 def _walker_in_walk(model):
     w = CassieWalker(model)
     w.set_command(0.5, 0.0)
-    reg = PDRegulator()
+    reg = Regulator(PD_ONLY_PARAMS)
     while w.controller.mode != "walk" or w.controller.tau < 0.3:
-        w.set_offsets(reg.step(w.regulator_inputs(), 0.5, 0.0))
+        apply_regulator(w, reg, 0.01)
         w.advance(20)
     return w
 
@@ -257,11 +259,11 @@ def test_state_machine_phase_and_steps(model):
     """Stand -> shift -> walk; tau in [0, switch_max_tau); stance alternates with k."""
     w = CassieWalker(model)
     w.set_command(0.5, 0.0)
-    reg = PDRegulator()
+    reg = Regulator(PD_ONLY_PARAMS)
     c, p = w.controller, w.params
     seen_modes, last = [], (None, None)
     while w.time_s < 3.0:
-        w.set_offsets(reg.step(w.regulator_inputs(), 0.5, 0.0))
+        apply_regulator(w, reg, 0.01)
         w.advance(20)
         if not seen_modes or seen_modes[-1] != c.mode:
             seen_modes.append(c.mode)

@@ -1,9 +1,10 @@
 """Closed-loop walking of the Cassie plant with the nominal controller.
 
-The regulator is the paper-form PD stand-in ``plant.controller.PDRegulator``
-(no adaptation, default gains) called every 10 ms like the co-simulation's
-communication step.  Every run starts from rest in the ``home`` pose (stand,
-weight shift, walk; no velocity kick).  Default runs are short (~10 s wall in
+The regulator is the project's core ``fmu_src.avr_core.Regulator`` in-process
+with adaptation off (the paper-form PD, default gains:
+``plant.make_gaits.PD_ONLY_PARAMS``) called every 10 ms like the
+co-simulation's communication step.  Every run starts from rest in the ``home``
+pose (stand, weight shift, walk; no velocity kick).  Default runs are short (~10 s wall in
 all); the 60 s matrix, perturbations and pushes are ``@pytest.mark.long``: run
 them with ``pytest -m long tests/test_walking.py`` (not ``slow``: nengo's pytest
 plugin claims that marker and skips it unless ``--slow`` is given);
@@ -13,20 +14,22 @@ from __future__ import annotations
 
 import pytest
 
-from plant.controller import OFFSET_KEYS, PDRegulator
-from plant.make_gaits import simulate_walk
+from fmu_src.avr_core import Regulator
+from plant.controller import OFFSET_KEYS
+from plant.make_gaits import PD_ONLY_PARAMS, simulate_walk
 from plant.model import Perturbation, load_model
 
 
-class FixedOffsets(PDRegulator):
-    """PD regulator plus constant extra offsets (to check the sign conventions)."""
+class FixedOffsets:
+    """The core's PD (adaptation off) plus constant extra offsets (rad), to check the
+    sign conventions; same ``step(inputs, dt_s)`` as the core."""
 
     def __init__(self, extra):
-        super().__init__()
+        self.core = Regulator(PD_ONLY_PARAMS)
         self.extra = extra
 
-    def step(self, inp, vx_des, vy_des):
-        out = super().step(inp, vx_des, vy_des)
+    def step(self, inputs, dt_s):
+        out = self.core.step(inputs, dt_s)
         return {k: out[k] + self.extra.get(k, 0.0) for k in OFFSET_KEYS}
 
 
