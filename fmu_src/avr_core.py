@@ -191,6 +191,11 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
     _p("psi_limit", 0.3, 0.0, 1.0, "rad",
        "Saturation of every network output Psi (before psi_gain), rad, in [0, 1]; "
        "saturated outputs stop integrating outward (anti-windup)"),
+    _p("learn_from_step", 1, 0, _INT32_MAX, "1",
+       "The networks learn only while step_index >= learn_from_step, in [0, 2147483647]; "
+       "the default 1 waits for the first completed walking step (before it there is no "
+       "step-averaged velocity vx[k] to learn from); 0 learns from the first call. Psi "
+       "is still applied while learning waits", type="Integer"),
     _p("psi_gain_swing_hip_pitch", 1.0, *_GAIN, "1",
        "Gain of Psi_x[0] on delta_swing_hip_pitch, in [-5, 5]; 0 switches it off"),
     _p("psi_gain_swing_knee", 1.0, *_GAIN, "1",
@@ -333,6 +338,7 @@ class RegulatorParams:
     roll_des: float = _d("roll_des")  # rad
     learning_rate: float = _d("learning_rate")  # PES kappa (nengo convention)
     psi_limit: float = _d("psi_limit")  # rad
+    learn_from_step: int = _d("learn_from_step")  # walking steps
     psi_gain_swing_hip_pitch: float = _d("psi_gain_swing_hip_pitch")
     psi_gain_swing_knee: float = _d("psi_gain_swing_knee")
     psi_gain_swing_hip_roll: float = _d("psi_gain_swing_hip_roll")
@@ -805,7 +811,7 @@ def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
         raw = [prod[0] * k, prod[4] * k, prod[8] * k, prod[11] * k]  # x, y, pitch, roll
         lim = P.psi_limit
         psi = [lim if r > lim else (-lim if r < -lim else r) for r in raw]  # rad
-        if P.learning_rate != 0.0:
+        if P.learning_rate != 0.0 and si >= P.learn_from_step:
             alpha = -P.learning_rate * dt / n * _INV_TAU_RC  # per unit of s3
             err = (vx_des - vx, vy_des - vy, P.pitch_des - pitch, P.roll_des - roll)
             # The update moves raw[j] by -learning_rate dt/n E_j |rates|^2, i.e. in the

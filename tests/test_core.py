@@ -30,6 +30,9 @@ HYP = settings(derandomize=True, deadline=None, max_examples=40,
 
 
 def small(**changes) -> RegulatorParams:
+    """A small network that learns from the first call (learn_from_step=0): the learning
+    tests drive step_index freely; the gate has tests of its own."""
+    changes.setdefault("learn_from_step", 0)
     return RegulatorParams(n_neurons=changes.pop("n_neurons", 60), **changes)
 
 
@@ -78,7 +81,7 @@ def run(reg_or_state, seq, params=None, nets=None, dt=DT):
 def test_specs_match_dataclasses_and_api_order():
     assert [s.name for s in PARAM_SPECS] == [
         "Kp_x", "Kd_x", "Kp_y", "Kd_y", "Kp_pitch", "Kd_pitch", "Kp_roll", "Kd_roll",
-        "pitch_des", "roll_des", "learning_rate", "psi_limit",
+        "pitch_des", "roll_des", "learning_rate", "psi_limit", "learn_from_step",
         "psi_gain_swing_hip_pitch", "psi_gain_swing_knee", "psi_gain_swing_hip_roll",
         "psi_gain_stance_hip_roll", "psi_gain_stance_hip_pitch", "psi_gain_stance_knee",
         "adaptation_enabled", "velocity_scale_mps", "angle_scale_rad",
@@ -370,7 +373,7 @@ def test_constant_error_drives_psi_with_the_sign_of_the_pd_term(field_, err_in, 
 
 def test_default_learning_speed_matches_documentation():
     """Defaults: a constant 0.3 m/s error moves Psi by ~0.05 rad in ~10 s (dt 5 ms)."""
-    reg = Regulator(RegulatorParams(n_neurons=1000))
+    reg = Regulator(RegulatorParams(n_neurons=1000, learn_from_step=0))
     for k in range(2000):
         out = reg.step(RegulatorInputs(vx=0.8, vx_des=0.5, step_index=k // 80), DT)
     assert 0.02 < out["psi_x"] < 0.15  # "of the order of 0.05 rad"
@@ -632,3 +635,21 @@ def test_property_outputs_compose_pd_and_gained_psi(gains, seed):
             assert o[f"delta_{j}"] == pytest.approx(v, rel=1e-15, abs=1e-15), j
         for k in ("error_vx", "error_vy", "error_pitch", "error_roll"):
             assert o[k] == d[k]
+
+
+def test_learning_waits_for_learn_from_step_but_psi_keeps_acting():
+    """Default learn_from_step = 1: no step-averaged velocity exists before the first
+    completed walking step, so step_index 0 must not teach the networks anything."""
+    p = small(learn_from_step=1, learning_rate=1e-4)
+    nets = build_networks(p)
+    s0 = initial_state(p, nets)
+    u = RegulatorInputs(vx=0.0, vx_des=0.5, step_index=0)
+    s1, out = step(s0, u, 0.005, p, nets)
+    assert np.array_equal(s1.weights, s0.weights) and out["psi_x"] == 0.0  # waited
+    s2, _ = step(s1, RegulatorInputs(vx=0.8, vx_des=0.5, step_index=1), 0.005, p, nets)
+    assert not np.array_equal(s2.weights, s1.weights)  # learns from the first step on
+    s3, out3 = step(s2, RegulatorInputs(vx=0.8, vx_des=0.5, step_index=1), 0.005,
+                    p.replace(learn_from_step=5), nets)
+    assert np.array_equal(s3.weights, s2.weights)  # gate closed again: frozen ...
+    assert out3["psi_x"] != 0.0  # ... but what was learned still acts
+    assert RegulatorParams().learn_from_step == 1

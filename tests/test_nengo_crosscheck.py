@@ -101,7 +101,7 @@ def nengo_run(params, seq, dt):
 def test_core_matches_nengo_pes_networks(n_neurons, dt, n_steps, learning_rate, seed):
     # psi_limit at its maximum and no saturation reached (asserted below): nengo has no
     # output clip, so anti-windup must not engage for the comparison to be meaningful.
-    params = RegulatorParams(n_neurons=n_neurons, seed=seed, learning_rate=learning_rate,
+    params = RegulatorParams(n_neurons=n_neurons, seed=seed, learn_from_step=0, learning_rate=learning_rate,
                              psi_limit=1.0, Kp_x=0.0, Kd_x=0.0, Kp_y=0.0, Kd_y=0.0,
                              pitch_des=0.02, roll_des=-0.01)
     seq = random_walk(seed, n_steps)
