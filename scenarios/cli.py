@@ -57,20 +57,19 @@ def load_build_module():
 
 
 def ensure_fmu(fmu: Path | None, *, rebuild: bool = False) -> Path:
-    """The FMU to use; the default one is built when missing (or on ``rebuild``)."""
+    """The FMU to use; the default one is (re)built when missing, older than its sources
+    (``fmu_src/``, ``build.py``: a stale FMU would silently run old code) or on ``rebuild``."""
     if fmu is not None:
         fmu = Path(fmu)
         if not fmu.is_file():
             raise AvrError(f"--fmu {fmu}: no such file")
         return fmu
-    if rebuild or not DEFAULT_FMU.is_file():
-        log.info("building the FMU into %s", DEFAULT_FMU.parent)
+    sources = [*(REPO_ROOT / "fmu_src").rglob("*.py"), *(REPO_ROOT / "fmu_src").rglob("*.c"), REPO_ROOT / "build.py"]
+    stale = DEFAULT_FMU.is_file() and max(p.stat().st_mtime for p in sources) > DEFAULT_FMU.stat().st_mtime
+    if rebuild or stale or not DEFAULT_FMU.is_file():
+        log.info("building the FMU into %s%s", DEFAULT_FMU.parent, " (older than its sources)" if stale else "")
         DEFAULT_FMU.parent.mkdir(parents=True, exist_ok=True)
-        built = Path(load_build_module().build_fmu(DEFAULT_FMU.parent))
-        return built
-    sources = list((REPO_ROOT / "fmu_src").glob("*.py"))
-    if sources and max(p.stat().st_mtime for p in sources) > DEFAULT_FMU.stat().st_mtime:
-        log.warning("%s is older than fmu_src/: pass --rebuild-fmu to rebuild it", DEFAULT_FMU)
+        return Path(load_build_module().build_fmu(DEFAULT_FMU.parent))
     return DEFAULT_FMU
 
 

@@ -200,3 +200,19 @@ def test_full_paper_suite(tmp_path):
         summary = json.loads((out / s.name / "summary.json").read_text())
         assert summary["status"] == "ok", (s.name, summary.get("error"))
         assert set(summary["arms"]) == {a.name for a in s.arms}
+
+
+def test_cli_rebuilds_a_default_fmu_older_than_its_sources(tmp_path, monkeypatch):
+    import os
+    import zipfile
+
+    from scenarios import cli
+
+    stale = tmp_path / "AdaptiveVelocityRegulator.fmu"
+    stale.write_bytes(b"an FMU built from older sources")
+    os.utime(stale, (0, 0))  # 1970: older than every source file
+    monkeypatch.setattr(cli, "DEFAULT_FMU", stale)
+    path = cli.ensure_fmu(None)
+    assert path == stale and zipfile.is_zipfile(path)  # rebuilt in place
+    mtime = path.stat().st_mtime
+    assert cli.ensure_fmu(None) == stale and stale.stat().st_mtime == mtime  # fresh: kept
