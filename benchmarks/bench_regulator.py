@@ -38,14 +38,12 @@ import numpy as np
 
 try:
     from fmu_src.avr_core import (
-        Regulator, RegulatorInputs, RegulatorParams, build_networks, initial_state,
-        network_inputs, step,
+        Regulator, RegulatorInputs, RegulatorParams, build_networks, initial_state, step,
     )
 except ImportError:  # run from a checkout without the editable install
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
     from fmu_src.avr_core import (
-        Regulator, RegulatorInputs, RegulatorParams, build_networks, initial_state,
-        network_inputs, step,
+        Regulator, RegulatorInputs, RegulatorParams, build_networks, initial_state, step,
     )
 
 DT = 0.005  # s, a typical co-simulation communication step
@@ -116,31 +114,10 @@ def setup_pd_only(inputs, dt, n_neurons):
 def setup_nengo(inputs, dt, n_neurons):
     import nengo  # test/benchmark dependency only
 
-    params = _params(n_neurons)
-    nets = build_networks(params)
-    xs = [np.array([network_inputs(u, params)[k] for u in inputs]) for k in range(3)]
-    e = np.array([[u.vx_des - u.vx, u.vy_des - u.vy, params.pitch_des - u.pitch,
-                   params.roll_des - u.roll] for u in inputs])
-    errors = [e[:, [0, 0]], e[:, [1, 1]], e[:, [2, 2, 3]]]
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    from nengo_reference import build_reference  # the model the cross-check test uses
 
-    def at(table):  # row of step k at t = (k + 1) dt
-        return lambda t: table[min(max(int(round(t / dt)) - 1, 0), len(table) - 1)]
-
-    with nengo.Network(seed=0) as model:
-        for k, net in enumerate(nets):
-            inp = nengo.Node(at(xs[k]))
-            ens = nengo.Ensemble(net.n_neurons, net.dimensions, encoders=net.encoders,
-                                 gain=net.gain, bias=net.bias, normalize_encoders=False,
-                                 neuron_type=nengo.LIFRate(tau_rc=0.02, tau_ref=0.002))
-            nengo.Connection(inp, ens, synapse=None)
-            n_out = errors[k].shape[1]
-            out = nengo.Node(size_in=n_out)
-            conn = nengo.Connection(
-                ens.neurons, out, transform=np.zeros((n_out, net.n_neurons)),
-                learning_rule_type=nengo.PES(learning_rate=params.learning_rate,
-                                             pre_synapse=None),
-                synapse=None)
-            nengo.Connection(nengo.Node(at(errors[k])), conn.learning_rule, synapse=None)
+    model, _ = build_reference(_params(n_neurons), inputs, dt)
     sim = nengo.Simulator(model, dt=dt, progress_bar=False, optimize=True)
     for _ in range(WARMUP):
         sim.step()

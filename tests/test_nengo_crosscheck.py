@@ -31,9 +31,9 @@ import pytest
 nengo = pytest.importorskip("nengo")
 
 from fmu_src.avr_core import (  # noqa: E402
-    Regulator, RegulatorInputs, RegulatorParams, build_networks, network_inputs,
-    neuron_rates,
+    Regulator, RegulatorInputs, RegulatorParams, build_networks, neuron_rates,
 )
+from nengo_reference import build_reference  # noqa: E402
 
 RTOL, ATOL = 1e-9, 1e-10
 
@@ -54,37 +54,13 @@ def random_walk(seed, n_steps):
 
 
 def nengo_run(params, seq, dt):
-    """Simulate the three PES networks in nengo; returns (outputs, weights, sim)."""
-    nets = build_networks(params)
-    xs = [np.array([network_inputs(u, params)[k] for u in seq]) for k in range(3)]
-    e = np.array([[u.vx_des - u.vx, u.vy_des - u.vy, params.pitch_des - u.pitch,
-                   params.roll_des - u.roll] for u in seq])
-    errors = [np.stack([e[:, 0], e[:, 0]], 1), np.stack([e[:, 1], e[:, 1]], 1),
-              np.stack([e[:, 2], e[:, 2], e[:, 3]], 1)]
-
-    def at(table):  # node function: row of step k at t = (k + 1) dt
-        return lambda t: table[max(int(round(t / dt)) - 1, 0)]
-
+    """Simulate the three PES networks in nengo; returns (outputs, weights, built ensembles)."""
+    model, parts = build_reference(params, seq, dt)
     probes = {}
-    with nengo.Network(seed=0) as model:
-        for k, net in enumerate(nets):
-            inp = nengo.Node(at(xs[k]), label=f"x_{net.name}")
-            ens = nengo.Ensemble(net.n_neurons, net.dimensions, encoders=net.encoders,
-                                 gain=net.gain, bias=net.bias, neuron_type=lif(),
-                                 normalize_encoders=False,  # already unit (to 1 ulp);
-                                 label=net.name)            # re-normalising moves ulps
-            nengo.Connection(inp, ens, synapse=None)
-            n_out = errors[k].shape[1]
-            out = nengo.Node(size_in=n_out)
-            conn = nengo.Connection(
-                ens.neurons, out, transform=np.zeros((n_out, net.n_neurons)),
-                learning_rule_type=nengo.PES(learning_rate=params.learning_rate,
-                                             pre_synapse=None),
-                synapse=None)
-            err = nengo.Node(at(errors[k]), label=f"E_{net.name}")
-            nengo.Connection(err, conn.learning_rule, synapse=None)
-            probes[net.name] = (ens, nengo.Probe(out, synapse=None),
-                                nengo.Probe(conn, "weights", synapse=None))
+    with model:
+        for name, (ens, out, conn) in parts.items():
+            probes[name] = (ens, nengo.Probe(out, synapse=None),
+                            nengo.Probe(conn, "weights", synapse=None))
     with nengo.Simulator(model, dt=dt, progress_bar=False, optimize=True) as sim:
         for _ in seq:
             sim.step()

@@ -1,0 +1,49 @@
+"""The regulator's three PES networks as a nengo 4.1 model: the reference that
+``tests/test_nengo_crosscheck.py`` compares the core against and that
+``benchmarks/bench_regulator.py`` times.  Test/benchmark code only (nengo is a test
+dependency; ``fmu_src`` stays numpy-only).
+
+Each network is an ``Ensemble`` with the core's *explicit* encoders, gains and biases
+(``normalize_encoders=False``: they are unit already, re-normalising moves ulps) and
+``LIFRate(0.02, 0.002)`` neurons; its outputs come from a ``Connection(ens.neurons,
+out, transform=0, learning_rule_type=PES(learning_rate, pre_synapse=None),
+synapse=None)`` whose error Node replays the regulator's ``E = desired - actual``.
+"""
+import nengo
+import numpy as np
+
+from fmu_src.avr_core import build_networks, network_inputs
+
+
+def build_reference(params, inputs, dt):
+    """``(model, parts)`` replaying ``inputs`` (row k at t = (k + 1) dt); ``parts`` maps
+    each network's name to ``(ensemble, output node, learning connection)``."""
+    nets = build_networks(params)
+    xs = [np.array([network_inputs(u, params)[k] for u in inputs]) for k in range(3)]
+    e = np.array([[u.vx_des - u.vx, u.vy_des - u.vy, params.pitch_des - u.pitch,
+                   params.roll_des - u.roll] for u in inputs])
+    errors = [e[:, [0, 0]], e[:, [1, 1]], e[:, [2, 2, 3]]]  # one error per output
+
+    def at(table):  # node function: row of step k at t = (k + 1) dt
+        return lambda t: table[min(max(int(round(t / dt)) - 1, 0), len(table) - 1)]
+
+    parts = {}
+    with nengo.Network(seed=0) as model:
+        for k, net in enumerate(nets):
+            inp = nengo.Node(at(xs[k]), label=f"x_{net.name}")
+            ens = nengo.Ensemble(net.n_neurons, net.dimensions, encoders=net.encoders,
+                                 gain=net.gain, bias=net.bias, normalize_encoders=False,
+                                 neuron_type=nengo.LIFRate(tau_rc=0.02, tau_ref=0.002),
+                                 label=net.name)
+            nengo.Connection(inp, ens, synapse=None)
+            n_out = errors[k].shape[1]
+            out = nengo.Node(size_in=n_out)
+            conn = nengo.Connection(
+                ens.neurons, out, transform=np.zeros((n_out, net.n_neurons)),
+                learning_rule_type=nengo.PES(learning_rate=params.learning_rate,
+                                             pre_synapse=None),
+                synapse=None)
+            nengo.Connection(nengo.Node(at(errors[k]), label=f"E_{net.name}"), conn.learning_rule,
+                             synapse=None)
+            parts[net.name] = (ens, out, conn)
+    return model, parts
