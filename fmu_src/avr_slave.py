@@ -43,11 +43,11 @@ from pythonfmu.enums import Fmi2Status
 
 try:  # inside the FMU these are top-level modules in resources/
     from .avr_core import (INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, RegulatorInputs, RegulatorParams, build_networks,
-                           initial_state, state_from_bytes, state_to_bytes, step, validate_params)
+                           initial_state, state_from_bytes, state_to_bytes, step)
     from .avr_errors import AvrError, StateError
 except ImportError:  # pragma: no cover - exercised inside the built FMU
     from avr_core import (INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, RegulatorInputs, RegulatorParams, build_networks,
-                          initial_state, state_from_bytes, state_to_bytes, step, validate_params)
+                          initial_state, state_from_bytes, state_to_bytes, step)
     from avr_errors import AvrError, StateError
 
 # FMI phases tracked by the slave (FMI 2.0 section 4.2.4)
@@ -106,8 +106,7 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
         if spec.causality != "input":  # FMI forbids `initial` on inputs
             extra["initial"] = Fmi2Initial.exact
         return kind(spec.name, causality=_CAUSALITY[spec.causality], variability=_VARIABILITY[spec.variability],
-                    description=spec.description, getter=lambda name=spec.name: self._values[name],
-                    setter=lambda value, name=spec.name: self._set(name, value), **extra)
+                    description=spec.description, getter=lambda name=spec.name: self._values[name], **extra)
 
     # -- getting and setting variables ---------------------------------------------------------
     # pythonfmu's generic versions call one closure per variable; these do the same checks
@@ -178,9 +177,7 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
         return None
 
     def _make_params(self) -> RegulatorParams:
-        params = RegulatorParams(**{spec.name: self._values[spec.name] for spec in PARAM_SPECS})
-        validate_params(params)
-        return params
+        return RegulatorParams(**{spec.name: self._values[spec.name] for spec in PARAM_SPECS})  # validates
 
     # -- FMI life cycle -----------------------------------------------------------------
     def _require(self, call: str, *phases: str) -> None:
@@ -247,8 +244,8 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
 
     def _set_fmu_state(self, state):
         values, phase, time_s, core = self._fmu_state_parts(state)
+        # construction validates every parameter (ParameterError lists all problems)
         params = RegulatorParams(**{spec.name: _CASTS[spec.type](values[spec.name]) for spec in PARAM_SPECS})
-        validate_params(params)
         if core:
             networks = build_networks(params) if self._networks_stale(params) else self._networks
             core_state = state_from_bytes(core, params)
