@@ -141,6 +141,12 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
     if not results:
         return []
     written = []
+
+    def save(name: str, fig) -> str:
+        fig.tight_layout()
+        fig.savefig(out_dir / name, dpi=90)
+        plt.close(fig)
+        return name
     colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
 
     # -- velocity vs command
@@ -165,10 +171,7 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
     axes[0].legend(loc="best", fontsize=8)
     axes[0].set_title(f"{scenario.name}: velocity vs command (faint: instantaneous)")
     axes[-1].set_xlabel("t (s)")
-    fig.tight_layout()
-    fig.savefig(out_dir / "velocity.png", dpi=90)
-    plt.close(fig)
-    written.append("velocity.png")
+    written.append(save("velocity.png", fig))
 
     # -- Psi (network outputs) and the joint offsets they produce
     deltas = [n[4:] for n in results[0].rows.dtype.names if n.startswith("out_delta_")]
@@ -190,10 +193,7 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
     if panels:
         axes[0][0].legend(fontsize=8)
     fig.suptitle(f"{scenario.name}: Psi outputs and joint offsets per arm")
-    fig.tight_layout()
-    fig.savefig(out_dir / "psi.png", dpi=90)
-    plt.close(fig)
-    written.append("psi.png")
+    written.append(save("psi.png", fig))
 
     # -- torso angles
     fig, axes = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
@@ -205,10 +205,7 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
     axes[0].legend(fontsize=8)
     axes[0].set_title(f"{scenario.name}: torso angles")
     axes[-1].set_xlabel("t (s)")
-    fig.tight_layout()
-    fig.savefig(out_dir / "torso.png", dpi=90)
-    plt.close(fig)
-    written.append("torso.png")
+    written.append(save("torso.png", fig))
     return written
 
 
