@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import importlib.util
 import json
 import os
 import subprocess
@@ -123,10 +122,9 @@ def ensure_fmu(path: str | None) -> Path:
     if path:
         return Path(path)
     out = Path(tempfile.mkdtemp(prefix="bench_fmu_"))
-    mod_spec = importlib.util.spec_from_file_location("avr_build", REPO_ROOT / "build.py")
-    build = importlib.util.module_from_spec(mod_spec)
-    mod_spec.loader.exec_module(build)
-    return Path(build.build_fmu(out))
+    from scenarios.cli import load_build_module
+
+    return Path(load_build_module().build_fmu(out))
 
 
 def main(argv=None) -> int:

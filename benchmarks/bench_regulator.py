@@ -130,7 +130,6 @@ def setup_nengo(inputs, dt, n_neurons):
 
 
 def setup_fmu(inputs, dt, n_neurons):
-    import importlib.util
     import tempfile
 
     from fmpy import extract, read_model_description
@@ -138,12 +137,10 @@ def setup_fmu(inputs, dt, n_neurons):
 
     from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS
 
-    root = Path(__file__).resolve().parents[1]
-    spec = importlib.util.spec_from_file_location("avr_build", root / "build.py")
-    build = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(build)
+    from scenarios.cli import load_build_module
+
     tmp = tempfile.TemporaryDirectory(prefix="bench_fmu_")
-    fmu_path = build.build_fmu(Path(tmp.name))
+    fmu_path = load_build_module().build_fmu(Path(tmp.name))
     md = read_model_description(str(fmu_path))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmu_path), unzipdir=tmp.name + "/x"),

@@ -2,6 +2,8 @@
 import os
 from pathlib import Path
 
+import pytest
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SHARED_CASSIE = REPO_ROOT.parent / "shared" / "cassie"
 
@@ -9,23 +11,12 @@ SHARED_CASSIE = REPO_ROOT.parent / "shared" / "cassie"
 # the offline copy unless the user has set it already.
 os.environ.setdefault("MENAGERIE_ROOT", str(SHARED_CASSIE / "menagerie"))
 
-import importlib.util
-import sys
-
-import pytest
-
-
-def load_build_module():
-    """build.py as a module (named avr_build: `import build` would clash with PyPA's build)."""
-    spec = importlib.util.spec_from_file_location("avr_build", REPO_ROOT / "build.py")
-    module = importlib.util.module_from_spec(spec)
-    sys.modules.setdefault("avr_build", module)
-    spec.loader.exec_module(module)
-    return module
-
 
 @pytest.fixture(scope="session")
 def build_module():
+    """build.py as a module (the CLI's loader: `import build` would clash with PyPA's build)."""
+    from scenarios.cli import load_build_module
+
     return load_build_module()
 
 
