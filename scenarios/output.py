@@ -195,7 +195,9 @@ def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequ
     """
     dest = Path(dest)
     summary = build_summary(scenario, regulator, outcomes)
-    results = [o.result for o in outcomes if o.status == "complete" and len(o.result.rows)]
+    by_arm = {o.arm: o for o in outcomes}  # the scenario's arm order, not the order the arms ended in
+    ordered = [by_arm[a.name] for a in scenario.arms if a.name in by_arm]
+    results = [o.result for o in ordered if o.status == "complete" and len(o.result.rows)]
     if results:
         write_timeseries(dest / "timeseries.csv", results)
     summary["plots"] = write_plots(dest, scenario, results)

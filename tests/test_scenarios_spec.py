@@ -324,6 +324,14 @@ def test_report_lists_missing_failed_and_ok(tmp_path):
         assert key in summary["arms"]["adaptive"]
     header = (tmp_path / "nominal" / "timeseries.csv").read_text().splitlines()[0]
     assert header.startswith("arm,t,")
+
+    # arms are written in the scenario's order, whatever order they ended in (--jobs 2)
+    (tmp_path / "again").mkdir()
+    output.write_results(tmp_path / "again", s, "inprocess",
+                         [output.ArmOutcome("pd_only", "complete", result=R("pd_only", False)),
+                          output.ArmOutcome("adaptive", "complete", result=R("adaptive", True))])
+    arms = [line.split(",", 1)[0] for line in (tmp_path / "again" / "timeseries.csv").read_text().splitlines()[1:]]
+    assert arms == ["adaptive"] * 1000 + ["pd_only"] * 1000
     table = output.format_table([summary])
     assert "adaptive" in table and "pd_only" in table  # the failed arm is listed, not hidden
 
