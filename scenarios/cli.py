@@ -248,9 +248,8 @@ class _RunSession:
         write = partial(output.write_results, scenario=scenario, regulator=self.args.regulator, outcomes=outcomes)
         try:
             self.summaries[scenario.name] = self.results_dir.publish(scenario.name, write, replace=replace)
-        except (OSError, AvrError) as exc:
+        except (OSError, AvrError) as exc:  # e.g. the disk is full: the other scenarios go on
             self.write_errors.append(f"{scenario.name}: results not written: {exc}")
-            log.error("%s", self.write_errors[-1])
 
     def report(self, scenarios: list, out_root: Path) -> int:
         """Print the table (or, after Ctrl-C, one line); the exit status."""
@@ -258,7 +257,8 @@ class _RunSession:
 
         ordered = [self.summaries[s.name] for s in scenarios if s.name in self.summaries]
         if self.stop.requested:
-            print(_interrupted_line(scenarios, self.summaries, self.left_as_were, out_root), file=sys.stderr)
+            line = _interrupted_line(scenarios, self.summaries, self.left_as_were, out_root)
+            print(line + "".join(f"; {e}" for e in self.write_errors), file=sys.stderr)
             return 130
         print(output.format_table(ordered))
         for name in self.left_as_were:
@@ -314,8 +314,11 @@ def cmd_report(args) -> int:
 
     try:
         path, problems = write_report(Path(args.dir))
-    except (AvrError, OSError) as exc:
-        print(getattr(exc, "strerror", None) and f"{args.dir}: {exc.strerror}" or str(exc), file=sys.stderr)
+    except AvrError as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"{args.dir}: cannot write report.md: {exc.strerror or exc}", file=sys.stderr)
         return 2
     print(path)
     for p in problems:

@@ -3,8 +3,12 @@
 For every scenario of the suite and every other result folder found in ``DIR``: the
 table rows (one per arm), the plots, the paper's claim beside the measured numbers
 and a pass/miss verdict per check with both sides' values. Nothing is hidden: a
-scenario of the suite without results is listed as "not run", a failed run with its
-error, an arm that fell with its fall time.
+scenario of the suite without results is listed as "not run", a failed or interrupted
+run with why, an arm that fell with its fall time. Nothing is taken on trust either:
+each summary.json is checked against the format this package writes
+(:func:`scenarios.output.summary_problems`; one of another shape is listed as invalid,
+naming the file and what is wrong) and every verdict is recomputed from the arms, a
+pass only when every arm is complete.
 """
 from __future__ import annotations
 

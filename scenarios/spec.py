@@ -8,7 +8,9 @@ regulator parameter overrides (by FMU variable name), the arms to compare
 checks for the report.
 
 Every problem in a file is collected and reported at once (``ScenarioError.problems``),
-each naming its field, e.g. ``push[1].duration_s = -0.1: must be > 0``.
+each naming its field, e.g. ``push[1].duration_s = -0.1: must be > 0``; a file that
+cannot be read (missing, a directory, not UTF-8) is one problem naming it. Scenario
+names must be unique within a run (:func:`distinct`): the name is the output folder.
 
 Layout of a file (every key below is known; anything else is an error)::
 
@@ -458,7 +460,9 @@ def parse_scenario(doc: Mapping[str, Any], source: str | None = None, *, base_di
     """Validate a parsed TOML document; raise ScenarioError listing every problem.
 
     ``base_dir`` resolves a relative model path (the scenario file's folder).
-    ``check_plant`` also runs the plant's own ``Perturbation.validate()`` (needs mujoco).
+    ``check_plant`` also checks what loading the plant would fail on (needs mujoco): the
+    model parses safely, compiles and is a Cassie, and the perturbation is valid on it
+    (:func:`scenarios.plantio.check_plant`).
     """
     probs = _Problems()
     _unknown_keys(doc, TOP_KEYS, "", probs)
