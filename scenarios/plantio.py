@@ -60,16 +60,22 @@ def check_plant(scenario: "Scenario") -> list[tuple[str, str]]:
     return [("perturbation", p) for p in (pert.problems() if pert is not None else [])]
 
 
-def _file_stamp(model: str) -> tuple[int, int] | None:
+def _file_stamp(model: str) -> tuple | None:
+    """What the cached check of ``model`` depends on besides its name: the file's mtime and
+    size (the OSU file's for ``osu``), or ``MENAGERIE_ROOT`` for ``menagerie``."""
+    from plant.model import osu_model_path
+
+    if model == "menagerie":
+        return ("MENAGERIE_ROOT", os.environ.get("MENAGERIE_ROOT"))
     try:
-        st = os.stat(model)
+        st = os.stat(osu_model_path() if model == "osu" else model)
     except OSError:
         return None
     return st.st_mtime_ns, st.st_size
 
 
 @functools.lru_cache(maxsize=16)
-def _base_model_check(model: str, stamp: tuple[int, int] | None) -> tuple[float | None, str | None]:
+def _base_model_check(model: str, stamp: tuple | None) -> tuple[float | None, str | None]:
     """(pelvis mass, None) when ``model`` loads as a Cassie, else (None, the reason)."""
     from fmu_src.avr_errors import ModelError
     from plant.model import load_model, model_summary

@@ -190,6 +190,32 @@ def test_second_run_on_one_out_refused_and_a_killed_runs_lock_and_scratch_do_not
     assert sorted(p.name for p in out.iterdir()) == ["quick"]  # its scratch folder and lock are gone
 
 
+def test_a_write_cut_short_changes_nothing_and_a_killed_swap_is_repaired(tmp_path):
+    from scenarios.store import REPLACED_TAG, ResultsDir
+
+    out = tmp_path / "out"
+    (out / "kept").mkdir(parents=True)
+    (out / "kept" / "summary.json").write_text("old")
+
+    def half_then_ctrl_c(folder: Path) -> None:
+        (folder / "timeseries.csv").write_text("arm,t\n")
+        raise KeyboardInterrupt
+
+    with ResultsDir(out) as rd:
+        with pytest.raises(KeyboardInterrupt):
+            rd.publish("kept", half_then_ctrl_c, replace=True)
+        assert snapshot(out / "kept") == {"summary.json": b"old"}
+        assert list((rd.scratch / "stage").iterdir()) == []
+    # a run killed between its two renames: the old folder is aside, the new one not in place
+    (out / "kept").rename(out / f".kept{REPLACED_TAG}12345")
+    (out / "done").mkdir()
+    (out / f".done{REPLACED_TAG}12345").mkdir()  # killed after the second rename: the new one stays
+    with ResultsDir(out):
+        pass
+    assert sorted(p.name for p in out.iterdir()) == ["done", "kept"]
+    assert snapshot(out / "kept") == {"summary.json": b"old"}
+
+
 # --------------------------------------------------------------------------- defect 7: Ctrl-C
 def wait_for(predicate, proc: subprocess.Popen, timeout: float = 180.0) -> None:
     t0 = time.monotonic()
