@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 
 from fmu_src.avr_core import OUTPUT_SPECS, Regulator, RegulatorInputs, RegulatorParams
 
@@ -39,8 +39,8 @@ def host(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def unzipped(built_fmu):
-    return extract(str(built_fmu)), read_model_description(str(built_fmu))
+def unzipped(fmu_dir):
+    return fmu_dir, read_model_description(fmu_dir)
 
 
 def _env(md, preload):
