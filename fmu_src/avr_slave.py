@@ -14,23 +14,30 @@ What this class adds is FMI behaviour that pythonfmu 0.7.0 does not give:
   ``False``, which pythonfmu reports as ``fmi2Discard``; the regulator's state is
   left exactly as it was, and the reason is logged.
 * A refused ``set`` raises :class:`FmiCallError`.  pythonfmu can only report
-  that as ``fmi2Fatal``; the FMU's binary guard (``guard/fmi2_guard.c``, the
-  library the host actually loads on linux64) checks the same rules first and
-  answers ``fmi2Error`` without calling Python, so on linux64 this path is a
-  second line of defence only.
+  that as ``fmi2Fatal``; the FMU's binary guard (``guard/*.c``, the library the
+  host actually loads on linux64) checks the same rules first and answers
+  ``fmi2Error`` without calling Python, so on linux64 this path is a second line
+  of defence only.
 * FMU state: ``_get_fmu_state`` returns one self-describing ``bytes`` blob
-  (variable values, time, FMI phase and the core's weights and memories); the
-  same blob is the serialized form, so get/set/serialize/deserialize round
-  trips are bit-exact.
+  (:mod:`avr_fmustate`: variable values, time, FMI phase and the core's weights
+  and memories, with a CRC-32); the same blob is the serialized form, so
+  get/set/serialize/deserialize round trips are bit-exact.  Deserializing checks
+  the whole blob (checksum, every value's type and range, the core's weights)
+  and never raises: a refused blob deserializes to ``REFUSED_STATE`` + the
+  reason, which the guard reads back and answers with ``fmi2Error``.  Restoring
+  a state whose fixed parameters (``n_neurons``, ``seed``, input scales) differ
+  from the instance's current values is refused.
 
-Statuses (host sees; linux64 with the guard / Python-only):
+Statuses (host sees; linux64 with the guard / pythonfmu's library alone):
     doStep in a wrong phase, non-finite or non-positive step, current time not
-    the end of the last step, NaN/inf input, negative step_index:
-        fmi2Error (guard) / fmi2Discard (slave returns False);
+    the end of the last step: fmi2Error (guard) / fmi2Discard (slave returns False);
     set of an output, of a fixed parameter after initialization, of anything
-    after terminate, parameter out of its [min, max] or NaN:
+    after terminate, a value NaN or outside its declared [min, max] (inputs too):
         fmi2Error (guard) / fmi2Fatal (pythonfmu);
-    corrupt state blob: fmi2Error (guard) / fmi2Fatal.
+    corrupt, truncated, foreign or non-finite state blob, or one saved with other
+    fixed parameters: fmi2Error (the guard checks its CRC-64, GUID, time and fixed
+    parameters in C, then the slave's verdict) / deserialize OK, then fmi2Fatal
+    on fmi2SetFMUstate (pythonfmu).
 """
 from __future__ import annotations
 
@@ -273,6 +280,8 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
 
 def _parse_state(blob):
     """Everything in a state blob, checked: (parts, parameters, core state or None)."""
+    if bytes(blob[:len(REFUSED_STATE)]) == REFUSED_STATE:  # without the guard, a refused blob can come back
+        raise StateError(bytes(blob[len(REFUSED_STATE):]).decode("utf-8", "replace"))
     parts = fmustate.decode(blob, _ALL_SPECS)
     params = RegulatorParams(**{spec.name: parts.values[spec.name] for spec in PARAM_SPECS})  # validates
     core_state = state_from_bytes(parts.core, params) if parts.core else None

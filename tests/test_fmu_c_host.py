@@ -50,7 +50,8 @@ def _env(md, preload):
     env["AVR_VRS"] = ",".join(str(vr[n]) for n in names)
     if preload:
         libpython = Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("LDLIBRARY")
-        env["LD_PRELOAD"] = str(libpython)
+        # after whatever is preloaded already (the sanitizer run preloads libasan, which must come first)
+        env["LD_PRELOAD"] = " ".join(filter(None, [os.environ.get("LD_PRELOAD"), str(libpython)]))
         env["PYTHONHOME"] = sys.base_prefix
         env["PYTHONPATH"] = str(Path(np.__file__).parents[1])  # where numpy is installed
     return env

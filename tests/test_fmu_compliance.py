@@ -19,6 +19,10 @@ from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
+# Imported here, before any test instantiates the FMU in this process: pythonfmu puts the FMU's
+# resources/ (which holds a copy of the pythonfmu package, without its binaries) first on sys.path.
+import pythonfmu
+from pythonfmu.builder import FmuBuilder
 
 from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
 
@@ -261,8 +265,6 @@ class CounterSlave(Fmi2Slave):
 
 
 def test_two_different_fmus_in_one_process(fmu_dir, tmp_path, unzip):
-    from pythonfmu.builder import FmuBuilder
-
     script = tmp_path / "avr_test_counter_slave.py"
     script.write_text(OTHER_SLAVE)
     other_path = FmuBuilder.build_FMU(script, dest=tmp_path)
@@ -315,8 +317,6 @@ def test_guard_header_matches_model_description(built_fmu):
 
 
 def test_pythonfmu_exit_use_after_free_is_patched(build_module, built_fmu):
-    import pythonfmu
-
     original = (Path(pythonfmu.__file__).parent / "resources" / "binaries" / "linux64" /
                 "libpythonfmu-export.so").read_bytes()
     offset = build_module._elf_symbol_file_offset(original, build_module.EXIT_BUG_SYMBOL)

@@ -86,15 +86,18 @@ def test_a_state_with_other_fixed_parameters_is_refused_until_they_match(fmu_dir
     assert r["into matching instance"] == [OK, OK] and r["continues like the original"]
 
 
-@pytest.fixture(scope="module")
-def faulty_fmu_dir(tmp_path_factory, built_fmu, unzip):
-    """A copy of the FMU whose slave raises in exit_initialization_mode: pythonfmu answers fmi2Fatal."""
-    folder = Path(unzip(built_fmu, tmp_path_factory.mktemp("faulty")))
-    slave = folder / "resources" / "avr_slave.py"
+def inject_fault(fmu_dir) -> str:
+    """Make the extracted FMU's slave raise in exit_initialization_mode: pythonfmu answers fmi2Fatal."""
+    slave = Path(fmu_dir) / "resources" / "avr_slave.py"
     slave.write_text(slave.read_text() + "\n\ndef _injected_fault(self):\n"
                      "    raise RuntimeError('fault injected by the test')\n\n\n"
                      "AdaptiveVelocityRegulator.exit_initialization_mode = _injected_fault\n")
-    return folder
+    return str(fmu_dir)
+
+
+@pytest.fixture(scope="module")
+def faulty_fmu_dir(tmp_path_factory, built_fmu, unzip):
+    return inject_fault(unzip(built_fmu, tmp_path_factory.mktemp("faulty")))
 
 
 def test_after_a_fatal_error_nothing_reaches_pythonfmu_and_free_is_safe(faulty_fmu_dir, raw_host):
