@@ -243,8 +243,11 @@ classic PD regulator exactly.</li>
 <h2>FMI behaviour</h2>
 <p>Co-simulation, any communication step &gt; 0. Calls the FMI 2.0 state machine forbids, sets of outputs or of
 fixed parameters after initialization, NaN/inf values and values outside [min, max] are refused with
-fmi2Error and a log message naming the variable and its range; a refused call changes nothing. FMU state can be
-saved, restored and serialized (all weights and memories). Requires Python 3 with numpy in the host process
+fmi2Error and a log message naming the variable and its range; a refused call changes nothing. The six offsets
+are clipped to &plusmn;<code>delta_limit_rad</code>. FMU state can be saved, restored and serialized (all weights
+and memories); a serialized state carries a CRC-64, the FMU's GUID and the fixed parameters' values, and a
+corrupted, truncated, foreign or non-finite state, or one saved with other fixed parameters, is refused with
+fmi2Error naming why. Requires Python 3 with numpy in the host process
 (see <code>resources/requirements.txt</code>).</p>
 <h2>Variables</h2>
 <table border="1"><tr><th>name</th><th>causality</th><th>type</th><th>variability</th><th>unit</th>

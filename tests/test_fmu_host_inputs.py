@@ -32,7 +32,10 @@ def folders(tmp_path_factory, built_fmu, unzip):
     no_module = base / "no_module"
     no_module.mkdir()
     (no_module / "slavemodule.txt").write_text("avr_slave\n")
-    return {"spaced": spaced / "resources", "pct20": pct20 / "resources", "other": other, "no_module": no_module}
+    broken = Path(unzip(built_fmu, base / "broken"))  # this FMU, but its slave fails to import
+    (broken / "resources" / "avr_slave.py").write_text("raise RuntimeError('broken on purpose')\n")
+    return {"spaced": spaced / "resources", "pct20": pct20 / "resources", "other": other, "no_module": no_module,
+            "broken": broken / "resources"}
 
 
 def _attempts(fmu_dir, folders):
@@ -65,6 +68,7 @@ def _attempts(fmu_dir, folders):
         "another FMU's resources": (_hex(folders["other"].as_uri()), "another FMU's resources"),
         "resources without the slave module": (_hex(folders["no_module"].as_uri()), "lacks avr_slave.py"),
         "a path pythonfmu would garble (%20 in a folder name)": (_hex(folders["pct20"].as_uri()), "%20"),
+        "a slave that fails to import": (_hex(folders["broken"].as_uri()), "could not create the Python slave"),
     }
     names = {  # label -> (name, guid, reason)
         "instanceName NULL": (None, "default", "instanceName is NULL"),

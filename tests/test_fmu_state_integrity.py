@@ -107,4 +107,5 @@ def test_after_a_fatal_error_nothing_reaches_pythonfmu_and_free_is_safe(faulty_f
     for cycle in r["cycles"]:
         assert cycle == {"exit": [OK, OK, FATAL], "doStep": FATAL, "set": FATAL, "reset": FATAL,
                          "free state": OK}, r
-    assert any("only fmi2FreeInstance is allowed" in m for m in r["log_tail"]), r["log_tail"]
+    assert any("the Python slave failed" in m for m in r["log"]), r["log"]
+    assert any("only fmi2FreeInstance is allowed" in m for m in r["log"]), r["log"]

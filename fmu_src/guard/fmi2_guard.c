@@ -138,9 +138,14 @@ fmi2Status check_phase(Guard *g, const char *call, unsigned allowed) {
     return refuse(g, call, "not allowed in state %s (allowed in: %s)", PHASE_NAMES[g->phase], list);
 }
 
-/* Records what the inner library answered; a Fatal makes the instance unusable for good. */
+/* Records what the inner library answered; a Fatal makes the instance unusable for good.
+ * (pythonfmu logs its reason only with loggingOn, so say at least what happened.) */
 fmi2Status track(Guard *g, fmi2Status status) {
-    if (status == fmi2Fatal) g->phase = FATAL;
+    if (status == fmi2Fatal && g->phase != FATAL) {
+        g->phase = FATAL;
+        guard_log(g, fmi2Fatal, "the Python slave failed (pythonfmu answered fmi2Fatal; its reason is logged when "
+                  "logging is on); only fmi2FreeInstance is allowed now");
+    }
     return status;
 }
 
@@ -204,7 +209,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     fixed_defaults(g->fixed);
     g->inner = inner.fmi2Instantiate(instanceName, fmuType, fmuGUID, path, &g->to_inner, visible, loggingOn);
     free(path);
-    if (g->inner == NULL) {  /* pythonfmu has logged why */
+    if (g->inner == NULL) {
+        guard_log(g, fmi2Error, "fmi2Instantiate failed: pythonfmu could not create the Python slave (its reason "
+                  "is logged when loggingOn = fmi2True)");
         g->tag = 0;
         free(copy);
         free(g);

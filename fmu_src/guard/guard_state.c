@@ -234,28 +234,13 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state) {
     return s;
 }
 
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size) {
-    PROLOGUE(fmi2SerializedFMUstateSize);
-    GuardState *gs = live_state(g, call, state);
-    if (gs == NULL) return fmi2Error;
-    if (size == NULL) return refuse(g, call, "the size pointer is NULL");
-    size_t n = 0;
-    fmi2Status s = track(g, inner.fmi2SerializedFMUstateSize(g->inner, gs->inner, &n));
-    if (s == fmi2OK) *size = HEAD_BYTES + n + CRC_BYTES;
-    return s;
+/* The live state `state` and the size of its serialized form (header + slave blob + CRC). */
+static fmi2Status serialized_size(Guard *g, const char *call, fmi2FMUstate state, GuardState **gs, size_t *n_blob) {
+    if ((*gs = live_state(g, call, state)) == NULL) return fmi2Error;
+    return track(g, inner.fmi2SerializedFMUstateSize(g->inner, (*gs)->inner, n_blob));
 }
 
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
-    PROLOGUE(fmi2SerializeFMUstate);
-    GuardState *gs = live_state(g, call, state);
-    if (gs == NULL) return fmi2Error;
-    if (bytes == NULL) return refuse(g, call, "the byte buffer is NULL");
-    size_t n = 0;
-    fmi2Status s = track(g, inner.fmi2SerializedFMUstateSize(g->inner, gs->inner, &n));
-    if (s != fmi2OK) return s;
-    if (size != HEAD_BYTES + n + CRC_BYTES)
-        return refuse(g, call, "size = %zu, but this state needs %zu bytes (fmi2SerializedFMUstateSize)", size,
-                      (size_t)(HEAD_BYTES + n + CRC_BYTES));
+static void write_header(fmi2Byte *bytes, const GuardState *gs, size_t n_blob) {
     memset(bytes, 0, HEAD_BYTES);
     memcpy(bytes, STATE_MAGIC, 4);
     put_u32(bytes + 4, STATE_VERSION);
@@ -267,7 +252,30 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte b
         put_u32(bytes + HEAD_FIXED_OFFSET + FIXED_ENTRY * i, AVR_FIXED_VRS[i]);
         put_f64(bytes + HEAD_FIXED_OFFSET + FIXED_ENTRY * i + 4, gs->fixed[i]);
     }
-    put_u64(bytes + HEAD_BYTES - 8, (uint64_t)n);
+    put_u64(bytes + HEAD_BYTES - 8, (uint64_t)n_blob);
+}
+
+fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size) {
+    PROLOGUE(fmi2SerializedFMUstateSize);
+    if (size == NULL) return refuse(g, call, "the size pointer is NULL");
+    GuardState *gs;
+    size_t n = 0;
+    fmi2Status s = serialized_size(g, call, state, &gs, &n);
+    if (s == fmi2OK) *size = HEAD_BYTES + n + CRC_BYTES;
+    return s;
+}
+
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
+    PROLOGUE(fmi2SerializeFMUstate);
+    if (bytes == NULL) return refuse(g, call, "the byte buffer is NULL");
+    GuardState *gs;
+    size_t n = 0;
+    fmi2Status s = serialized_size(g, call, state, &gs, &n);
+    if (s != fmi2OK) return s;
+    if (size != HEAD_BYTES + n + CRC_BYTES)
+        return refuse(g, call, "size = %zu, but this state needs %zu bytes (fmi2SerializedFMUstateSize)", size,
+                      (size_t)(HEAD_BYTES + n + CRC_BYTES));
+    write_header(bytes, gs, n);
     s = track(g, inner.fmi2SerializeFMUstate(g->inner, gs->inner, bytes + HEAD_BYTES, n));
     if (s == fmi2OK) put_u64(bytes + size - CRC_BYTES, crc64(bytes, size - CRC_BYTES));
     return s;
