@@ -7,13 +7,22 @@ ignore SIGINT themselves (a Ctrl-C on a terminal reaches the whole process group
 watch a shared event instead. Each task ends as an :class:`~scenarios.output.ArmOutcome`:
 complete, failed (with the first line of the error; the traceback is logged) or
 interrupted.
+
+With ``jobs`` > 1 the arms go to the workers longest first (:func:`longest_first`), so
+that no long arm is left running alone at the end. A worker imports the heavy modules
+once, before its first arm, and every process compiles each distinct plant once
+(``load_plant_model(shared=True)``). A complete arm's ``timings`` also say when it
+started and ended (s since the tasks began) and in which process, and a worker's first
+complete arm carries what starting that worker cost.
 """
 from __future__ import annotations
 
 import concurrent.futures as cf
 import logging
 import multiprocessing
+import os
 import signal
+import time
 import traceback
 from pathlib import Path
 from typing import Any, Callable, Sequence
@@ -24,7 +33,23 @@ from scenarios.spec import Scenario
 log = logging.getLogger(__name__)
 
 Task = tuple[Scenario, str]
-_WORKER_STOP: Any = None  # the shared event, in a worker process
+_WORKER: dict[str, Any] = {}  # in a worker process: the stop event, the tasks' clock origin, its start-up cost
+
+#: Cost per simulated second of a plant on a height field relative to a flat floor, for
+#: the order of the arms only (MuJoCo's contacts with the terrain;
+#: benchmarks/bench_suite.py prints every arm's CPU time per simulated second).
+TERRAIN_COST = 1.5
+
+
+def arm_cost(scenario: Scenario) -> float:
+    """The expected cost of one arm of ``scenario``: its communication steps, times
+    :data:`TERRAIN_COST` on terrain."""
+    return scenario.n_comm_steps * (TERRAIN_COST if scenario.terrain is not None else 1.0)
+
+
+def longest_first(tasks: Sequence[Task]) -> list[Task]:
+    """``tasks`` by :func:`arm_cost`, the longest first (equal costs keep their order)."""
+    return sorted(tasks, key=lambda task: -arm_cost(task[0]))
 
 
 class StopFlag:
@@ -46,49 +71,71 @@ class StopFlag:
 
 
 def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None, unpack_dir: str | None,
-             stop: Callable[[], bool], progress: Callable[[int], None] | None = None) -> ArmOutcome:
-    """One scenario x arm (its own plant model and regulator instance) as an outcome."""
+             stop: Callable[[], bool], progress: Callable[[int], None] | None = None,
+             origin: float | None = None) -> ArmOutcome:
+    """One scenario x arm (its own walker and regulator instance) as an outcome; a
+    complete arm's timings say when it ran (s since ``origin``, a ``perf_counter``)."""
     from scenarios.master import make_regulator, run_arm
+    from scenarios.plantio import load_plant_model
 
     if stop():
         return ArmOutcome(arm, "interrupted", started=False)
+    started, cpu0 = time.perf_counter(), time.process_time()
     try:
+        model, summary = load_plant_model(scenario, shared=True)
+        model_s = time.perf_counter() - started
         reg = make_regulator(regulator, fmu_path, unpack_dir=unpack_dir)
-        return ArmOutcome(arm, "complete", result=run_arm(scenario, arm, reg, progress=progress, stop=stop))
+        result = run_arm(scenario, arm, reg, progress=progress, stop=stop, model=model, model_summary=summary)
     except KeyboardInterrupt:
         return ArmOutcome(arm, "interrupted")
     except Exception as exc:  # one arm's failure is reported, the run goes on
         first = f"{type(exc).__name__}: {exc}".strip().splitlines()[0]
         return ArmOutcome(arm, "failed", error=first + "\n" + traceback.format_exc(limit=4))
+    base = started if origin is None else origin
+    result.timings.update(model_s=model_s, cpu_s=time.process_time() - cpu0, started_s=started - base,
+                          ended_s=time.perf_counter() - base, pid=os.getpid())
+    return ArmOutcome(arm, "complete", result=result)
 
 
-def _init_worker(event: Any) -> None:
-    global _WORKER_STOP
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the parent decides; see the module doc
-    _WORKER_STOP = event
+def _init_worker(event: Any, origin: float) -> None:
+    """Ignore SIGINT (the parent decides; see the module doc), import what every arm
+    needs, and note what starting this worker cost."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    _WORKER.update(stop=event, origin=origin)
+    import fmpy.fmi2  # noqa: F401
+    import mujoco  # noqa: F401
+    import plant.sim  # noqa: F401
+    import scenarios.master  # noqa: F401
+    _WORKER["startup"] = {"worker_startup_s": time.perf_counter() - origin,
+                          "worker_startup_cpu_s": time.process_time()}
 
 
 def _worker_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
                  unpack_dir: str | None) -> ArmOutcome:
-    return run_task(scenario, arm, regulator, fmu_path, unpack_dir, _WORKER_STOP.is_set)
+    out = run_task(scenario, arm, regulator, fmu_path, unpack_dir, _WORKER["stop"].is_set,
+                   origin=_WORKER["origin"])
+    if out.status == "complete" and "startup" in _WORKER:  # reported once, with the first complete arm
+        out.result.timings.update(_WORKER.pop("startup"))
+    return out
 
 
 def run_tasks(tasks: Sequence[Task], *, regulator: str, fmu_path: str | None, unpack_dir: Path | None, jobs: int,
               stop: StopFlag, on_outcome: Callable[[Scenario, ArmOutcome], None],
               progress: Callable[[int], None] | None = None) -> None:
-    """Run every task (``jobs`` > 1: in that many spawned processes) and hand each outcome
-    to ``on_outcome`` in the calling thread; after a stop, the tasks not run are
+    """Run every task (``jobs`` > 1: in that many spawned processes, longest first) and
+    hand each outcome to ``on_outcome`` in the calling thread; after a stop, the tasks not run are
     reported interrupted (not started). ``progress(n)``: communication steps done
     (``jobs == 1``) or arms done (``jobs > 1``)."""
     unpack = None if unpack_dir is None else str(unpack_dir)
     if jobs == 1:
+        origin = time.perf_counter()
         for s, arm in tasks:
-            out = run_task(s, arm, regulator, fmu_path, unpack, stop, progress)
+            out = run_task(s, arm, regulator, fmu_path, unpack, stop, progress, origin)
             if progress is not None and out.status == "complete":
                 progress(s.n_comm_steps - len(out.result.rows))  # the steps a fall skipped
             on_outcome(s, _first_line(s, out))
         return
-    _run_pool(tasks, regulator, fmu_path, unpack, jobs, stop, on_outcome, progress)
+    _run_pool(longest_first(tasks), regulator, fmu_path, unpack, jobs, stop, on_outcome, progress)
 
 
 def _run_pool(tasks, regulator, fmu_path, unpack, jobs, stop, on_outcome, progress) -> None:
@@ -97,7 +144,7 @@ def _run_pool(tasks, regulator, fmu_path, unpack, jobs, stop, on_outcome, progre
     if stop.requested:
         stop.event.set()
     pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker,
-                                  initargs=(stop.event,))
+                                  initargs=(stop.event, time.perf_counter()))
     futures = {pool.submit(_worker_task, s, a, regulator, fmu_path, unpack): (s, a) for s, a in tasks}
     pending = set(futures)
     try:
