@@ -452,7 +452,7 @@ TIMINGS = {
     "plant_s": "the plant's steps (physics and nominal controller)",
     "record_s": "storing each step's row",
     "finish_s": "closing the regulator, building the rows",
-    "cpu_s": "CPU time of the process over the whole arm, from the model on",
+    "cpu_s": "CPU time of the process over all of the above",
 }
 
 

@@ -11,9 +11,12 @@ interrupted.
 With ``jobs`` > 1 the arms go to the workers longest first (:func:`longest_first`), so
 that no long arm is left running alone at the end. A worker imports the heavy modules
 once, before its first arm, and every process compiles each distinct plant once
-(``load_plant_model(shared=True)``). A complete arm's ``timings`` also say when it
-started and ended (s since the tasks began) and in which process, and a worker's first
-complete arm carries what starting that worker cost.
+(``load_plant_model(shared=True)``). A complete arm's ``timings``
+(:data:`scenarios.master.TIMINGS`) also say how long getting its model took
+(``model_s``), the CPU time of the whole task (``task_cpu_s``), when it started and
+ended (``started_s``, ``ended_s``: s since the tasks began) and in which process
+(``pid``); a worker's first complete arm carries what starting that worker cost
+(``worker_startup_s`` since the pool was made, ``worker_startup_cpu_s``).
 """
 from __future__ import annotations
 
@@ -92,7 +95,7 @@ def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
         first = f"{type(exc).__name__}: {exc}".strip().splitlines()[0]
         return ArmOutcome(arm, "failed", error=first + "\n" + traceback.format_exc(limit=4))
     base = started if origin is None else origin
-    result.timings.update(model_s=model_s, cpu_s=time.process_time() - cpu0, started_s=started - base,
+    result.timings.update(model_s=model_s, task_cpu_s=time.process_time() - cpu0, started_s=started - base,
                           ended_s=time.perf_counter() - base, pid=os.getpid())
     return ArmOutcome(arm, "complete", result=result)
 
