@@ -1,0 +1,258 @@
+/*
+ * The regulator's numerics (see avr_model.h).  Each function mirrors the numpy core's
+ * function of the same purpose, operation for operation and in the same order, so that
+ * with IEEE float64, no FMA contraction (-ffp-contract=off) and no -ffast-math:
+ *   - the networks are bit-identical to avr_core.build_networks on glibc (only +, *, /,
+ *     sqrt, which are correctly rounded, and expm1 from the same libm);
+ *   - a step differs from avr_core.step only by the summation order of the dot products
+ *     (numpy hands them to BLAS), a few ulp per call.
+ */
+#include "avr_model.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+#define TAU_RATIO (AVR_TAU_REF / AVR_TAU_RC)
+#define INV_TAU_RC (1.0 / AVR_TAU_RC)
+#define SPLITMIX_GAMMA UINT64_C(0x9E3779B97F4A7C15)
+
+static const int DIMS[AVR_N_NETS] = {2, 2, 4};
+static const int FIRST_INPUT[AVR_N_NETS] = {0, 2, 4};
+
+/* ---- random numbers (avr_core.SplitMix64) ------------------------------------------ */
+uint64_t avr_splitmix64_mix(uint64_t z) {
+    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
+    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
+    return z ^ (z >> 31);
+}
+
+double avr_uniform(uint64_t key, uint64_t index) {
+    return (double)(avr_splitmix64_mix(key + index * SPLITMIX_GAMMA) >> 11) * 0x1p-53;
+}
+
+static uint64_t stream_key(uint32_t seed, int net, int field) {
+    return avr_splitmix64_mix(16u * (uint64_t)seed + 4u * (uint64_t)net + (uint64_t)field);
+}
+
+/* avr_core.sphere_encoders: rejection from the cube, candidates in stream order. */
+static void sphere_encoders(uint64_t key, int n, int d, double *out) {
+    uint64_t index = 0;
+    for (int have = 0; have < n;) {
+        double v[4] = {0.0, 0.0, 0.0, 0.0};
+        for (int j = 0; j < d; ++j) v[j] = 2.0 * avr_uniform(key, ++index) - 1.0;
+        double r2 = v[0] * v[0];
+        for (int j = 1; j < d; ++j) r2 = r2 + v[j] * v[j];
+        if (r2 > 0.0 && r2 <= 1.0) {
+            double norm = sqrt(r2);
+            for (int j = 0; j < d; ++j) out[(size_t)have * d + j] = v[j] / norm;
+            ++have;
+        }
+    }
+}
+
+static void uniform_range(uint64_t key, int n, double lo, double hi, double *out) {
+    for (int i = 0; i < n; ++i) out[i] = lo + (hi - lo) * avr_uniform(key, (uint64_t)i + 1);
+}
+
+/* ---- networks (avr_core._make_network, lif_gain_bias, Networks.stacked) ------------- */
+static void make_network(AvrNetworks *net, int k) {
+    int n = net->n, d = DIMS[k];
+    sphere_encoders(stream_key(net->seed, k, 0), n, d, net->encoders[k]);
+    uniform_range(stream_key(net->seed, k, 1), n, AVR_MAX_RATE_LO_HZ, AVR_MAX_RATE_HI_HZ, net->max_rates[k]);
+    uniform_range(stream_key(net->seed, k, 2), n, AVR_INTERCEPT_LO, AVR_INTERCEPT_HI, net->intercepts[k]);
+    for (int i = 0; i < n; ++i) {
+        double j_max_minus_1 = 1.0 / expm1((1.0 / net->max_rates[k][i] - AVR_TAU_REF) / AVR_TAU_RC);
+        double gain = j_max_minus_1 / (1.0 - net->intercepts[k][i]);
+        net->gain[k][i] = gain;
+        net->bias[k][i] = 1.0 - gain * net->intercepts[k][i];
+        net->bias_m1[(size_t)k * n + i] = net->bias[k][i] - 1.0;
+        for (int j = 0; j < d; ++j)
+            net->scaled_t[(size_t)(FIRST_INPUT[k] + j) * n + i] = net->encoders[k][(size_t)i * d + j] * gain;
+    }
+}
+
+AvrNetworks *avr_networks_new(int n, uint32_t seed) {
+    if (n < 1) return NULL;
+    size_t per_net = 0;
+    for (int k = 0; k < AVR_N_NETS; ++k) per_net += (size_t)n * (DIMS[k] + 4);
+    size_t total = per_net + (size_t)n * (AVR_N_INPUTS + AVR_N_NETS);
+    AvrNetworks *net = calloc(1, sizeof *net);
+    double *block = calloc(total, sizeof *block);
+    if (net == NULL || block == NULL) {
+        free(net);
+        free(block);
+        return NULL;
+    }
+    net->n = n;
+    net->seed = seed;
+    double *p = block;
+    for (int k = 0; k < AVR_N_NETS; ++k) {
+        net->encoders[k] = p, p += (size_t)n * DIMS[k];
+        net->max_rates[k] = p, p += n;
+        net->intercepts[k] = p, p += n;
+        net->gain[k] = p, p += n;
+        net->bias[k] = p, p += n;
+    }
+    net->scaled_t = p, p += (size_t)n * AVR_N_INPUTS;
+    net->bias_m1 = p;
+    for (int k = 0; k < AVR_N_NETS; ++k) make_network(net, k);
+    return net;
+}
+
+void avr_networks_free(AvrNetworks *net) {
+    if (net == NULL) return;
+    free(net->encoders[0]); /* the start of the one block */
+    free(net);
+}
+
+int avr_core_init(AvrCore *core, int n) {
+    memset(core, 0, sizeof *core);
+    core->weights = calloc((size_t)AVR_N_ROWS * n, sizeof(double));
+    core->rates = calloc((size_t)AVR_N_NETS * n, sizeof(double));
+    if (core->weights == NULL || core->rates == NULL) {
+        avr_core_free(core);
+        return -1;
+    }
+    core->n = n;
+    core->last_step_index = -1;
+    return 0;
+}
+
+void avr_core_free(AvrCore *core) {
+    free(core->weights);
+    free(core->rates);
+    core->weights = core->rates = NULL;
+    core->n = 0;
+}
+
+/* ---- one call (avr_core.step) -------------------------------------------------------- */
+#define V(name) values[AVR_VR_##name]
+
+/* a, b divided by their norm if it exceeds 1 (avr_core._ball2). */
+static void ball2(double *a, double *b) {
+    double r = hypot(*a, *b);
+    if (r > 1.0) *a /= r, *b /= r;
+}
+
+/* The 8 network inputs, scaled and radially projected into the unit ball (avr_core._scaled_values). */
+static void network_inputs(const double *values, double x[AVR_N_INPUTS]) {
+    double vs = V(velocity_scale_mps), sa = V(angle_scale_rad), sr = V(rate_scale_radps);
+    x[0] = V(vx) / vs, x[1] = V(vx_des) / vs;
+    x[2] = V(vy) / vs, x[3] = V(vy_des) / vs;
+    x[4] = V(pitch) / sa, x[5] = V(roll) / sa, x[6] = V(pitch_rate) / sr, x[7] = V(roll_rate) / sr;
+    ball2(&x[0], &x[1]);
+    ball2(&x[2], &x[3]);
+    double m = 0.0; /* 4-d norm, scaled so that huge inputs cannot overflow */
+    for (int i = 4; i < 8; ++i) m = fmax(m, fabs(x[i]));
+    if (m > 1.0) {
+        double s = 0.0;
+        for (int i = 4; i < 8; ++i) s += (x[i] / m) * (x[i] / m);
+        double norm = m * sqrt(s);
+        if (norm > 1.0)
+            for (int i = 4; i < 8; ++i) x[i] /= norm;
+    } else if (m > 0.0) {
+        double norm = sqrt(x[4] * x[4] + x[5] * x[5] + x[6] * x[6] + x[7] * x[7]);
+        if (norm > 1.0)
+            for (int i = 4; i < 8; ++i) x[i] /= norm;
+    }
+}
+
+/* tau_rc * LIF rate of every neuron of network k for input x (avr_core._lif_rates_times_tau_rc). */
+static void network_rates(const AvrNetworks *net, int k, const double x[AVR_N_INPUTS], double *restrict s) {
+    int n = net->n;
+    const double *restrict bias_m1 = net->bias_m1 + (size_t)k * n;
+    const double *restrict e0 = net->scaled_t + (size_t)FIRST_INPUT[k] * n;
+    const double *restrict e1 = e0 + n;
+    double x0 = x[FIRST_INPUT[k]], x1 = x[FIRST_INPUT[k] + 1];
+    if (DIMS[k] == 2) {
+        for (int i = 0; i < n; ++i) s[i] = x0 * e0[i] + x1 * e1[i] + bias_m1[i];
+    } else {
+        const double *restrict e2 = e1 + n, *restrict e3 = e2 + n;
+        double x2 = x[FIRST_INPUT[k] + 2], x3 = x[FIRST_INPUT[k] + 3];
+        for (int i = 0; i < n; ++i) s[i] = x0 * e0[i] + x1 * e1[i] + x2 * e2[i] + x3 * e3[i] + bias_m1[i];
+    }
+    for (int i = 0; i < n; ++i) { /* s[i] holds j = J - 1; rate 0 where j <= 0 */
+        double j = s[i];
+        s[i] = j > 0.0 ? 1.0 / (TAU_RATIO + log1p(1.0 / fmax(j, 1e-300))) : 0.0;
+    }
+}
+
+/* Learning with anti-windup (the PES block of avr_core.step): raw = unsaturated outputs. */
+static void learn(AvrCore *core, const double *values, double dt, const double raw[AVR_N_ROWS]) {
+    int n = core->n;
+    double alpha = -V(learning_rate) * dt / (double)n * INV_TAU_RC;
+    double lim = V(psi_limit);
+    double err[AVR_N_ROWS] = {V(vx_des) - V(vx), V(vy_des) - V(vy), V(pitch_des) - V(pitch), V(roll_des) - V(roll)};
+    static const int NET_OF_ROW[AVR_N_ROWS] = {0, 1, 2, 2};
+    for (int r = 0; r < AVR_N_ROWS; ++r) {
+        int saturated_outward = (raw[r] >= lim || raw[r] <= -lim) && raw[r] * err[r] < 0.0;
+        double coef = saturated_outward ? 0.0 : alpha * err[r];
+        if (coef == 0.0) continue;
+        double *restrict w = core->weights + (size_t)r * n;
+        const double *restrict s = core->rates + (size_t)NET_OF_ROW[r] * n;
+        for (int i = 0; i < n; ++i) w[i] = coef * s[i] + w[i];
+    }
+}
+
+/* Saturated network outputs psi (x, y, pitch, roll) from the weights before this call's update. */
+static void network_outputs(AvrCore *core, const AvrNetworks *net, double *values, double dt, int64_t si,
+                            double psi[AVR_N_ROWS]) {
+    double x[AVR_N_INPUTS];
+    int n = net->n;
+    network_inputs(values, x);
+    for (int k = 0; k < AVR_N_NETS; ++k) network_rates(net, k, x, core->rates + (size_t)k * n);
+    const double *restrict w0 = core->weights, *restrict w1 = w0 + n, *restrict w2 = w1 + n, *restrict w3 = w2 + n;
+    const double *restrict s0 = core->rates, *restrict s1 = s0 + n, *restrict s2 = s1 + n;
+    double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+    for (int i = 0; i < n; ++i) {
+        a0 += w0[i] * s0[i];
+        a1 += w1[i] * s1[i];
+        a2 += w2[i] * s2[i];
+        a3 += w3[i] * s2[i];
+    }
+    double raw[AVR_N_ROWS] = {a0 * INV_TAU_RC, a1 * INV_TAU_RC, a2 * INV_TAU_RC, a3 * INV_TAU_RC};
+    double lim = V(psi_limit);
+    for (int r = 0; r < AVR_N_ROWS; ++r) psi[r] = raw[r] > lim ? lim : (raw[r] < -lim ? -lim : raw[r]);
+    if (V(learning_rate) != 0.0 && si >= (int64_t)V(learn_from_step)) learn(core, values, dt, raw);
+}
+
+void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) {
+    double vx = V(vx), vy = V(vy);
+    int64_t si = (int64_t)V(step_index);
+    if (si != core->last_step_index) { /* PD_x, PD_y: recomputed when step_index changes, held otherwise */
+        int first = core->last_step_index < 0;
+        double vx_prev = first ? vx : core->vx_at_step, vy_prev = first ? vy : core->vy_at_step;
+        core->pd_x = V(Kp_x) * (vx - V(vx_des)) + V(Kd_x) * (vx - vx_prev);
+        core->pd_y = V(Kp_y) * (vy - V(vy_des)) + V(Kd_y) * (vy - vy_prev);
+        core->vx_at_step = vx, core->vy_at_step = vy;
+    }
+    double pd_pitch = V(Kp_pitch) * (V(pitch) - V(pitch_des)) + V(Kd_pitch) * V(pitch_rate);
+    double pd_roll = V(Kp_roll) * (V(roll) - V(roll_des)) + V(Kd_roll) * V(roll_rate);
+    double psi[AVR_N_ROWS] = {0.0, 0.0, 0.0, 0.0};
+    if (V(adaptation_enabled) != 0.0) {
+        network_outputs(core, net, values, dt, si, psi);
+        double g_roll = V(psi_gain_stance_hip_roll);
+        V(delta_swing_hip_pitch) = core->pd_x + V(psi_gain_swing_hip_pitch) * psi[0];
+        V(delta_swing_knee) = V(psi_gain_swing_knee) * psi[0] + 0.0; /* -0.0 -> 0.0 */
+        V(delta_swing_hip_roll) = core->pd_y + V(psi_gain_swing_hip_roll) * psi[1];
+        V(delta_stance_hip_roll) = pd_roll + g_roll * psi[1] + g_roll * psi[3];
+        V(delta_stance_hip_pitch) = pd_pitch + V(psi_gain_stance_hip_pitch) * psi[2];
+        V(delta_stance_knee) = V(psi_gain_stance_knee) * psi[2] + 0.0;
+    } else { /* exactly the classic PD regulator; the weights are kept */
+        V(delta_swing_hip_pitch) = core->pd_x;
+        V(delta_swing_knee) = 0.0;
+        V(delta_swing_hip_roll) = core->pd_y;
+        V(delta_stance_hip_roll) = pd_roll;
+        V(delta_stance_hip_pitch) = pd_pitch;
+        V(delta_stance_knee) = 0.0;
+    }
+    V(psi_x) = psi[0], V(psi_y) = psi[1], V(psi_pitch) = psi[2], V(psi_roll) = psi[3];
+    V(error_vx) = vx - V(vx_des);
+    V(error_vy) = vy - V(vy_des);
+    V(error_pitch) = V(pitch) - V(pitch_des);
+    V(error_roll) = V(roll) - V(roll_des);
+    core->last_step_index = si;
+    core->n_calls += 1;
+    core->time_s += dt;
+}
