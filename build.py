@@ -308,9 +308,23 @@ NATIVE_PLATFORMS = {
     3: {"x86_64-linux": "linux", "x86_64-windows": "windows"},
 }
 MINGW_CC = "x86_64-w64-mingw32-gcc"  # Debian package gcc-mingw-w64-x86-64
-#: -ffp-contract=off: no FMA contraction, so the C numerics follow numpy's operation order.
-NATIVE_CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror", "-fvisibility=hidden")
+#: Besides the options the FMU's sources declare (fmu_src/native/describe.py COMPILER_OPTIONS).
+NATIVE_WARNINGS = ("-Wall", "-Wextra", "-Werror", "-fvisibility=hidden")
 FMUS_JSON = "fmus.json"
+
+
+def _native_modules():
+    """fmu_src.native's ``header`` and ``describe`` (build.py also runs without the package installed)."""
+    sys.path.insert(0, str(REPO_ROOT))
+    try:
+        from fmu_src.native import describe, header
+    finally:
+        sys.path.remove(str(REPO_ROOT))
+    return header, describe
+
+
+def native_cflags() -> tuple[str, ...]:
+    return (*_native_modules()[1].COMPILER_OPTIONS.split(), *NATIVE_WARNINGS)
 
 
 def native_fmu_name(fmi_version: int) -> str:
@@ -322,27 +336,27 @@ def native_sources(fmi_version: int) -> tuple[str, ...]:
     return NATIVE_CORE_SOURCES + NATIVE_API_SOURCES[fmi_version]
 
 
-def _native_compile_command(target: str, sources, out_name: str) -> list[str]:
+def _native_compile_command(target: str, sources, out_name: str, extra_flags=()) -> list[str]:
     """Compiler command (run in the folder holding the sources) for target "linux" or "windows"."""
     if target == "linux":
         compiler = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
         if compiler is None:
             raise RuntimeError("build.py needs a C compiler (cc or gcc; set CC) for the native FMUs")
-        return [compiler, *NATIVE_CFLAGS, "-shared", "-fPIC", "-Wl,--build-id=none",
+        return [compiler, *native_cflags(), *extra_flags, "-shared", "-fPIC", "-Wl,--build-id=none",
                 "-I.", *sources, "-o", out_name, "-lm"]
     compiler = shutil.which(MINGW_CC)
     if compiler is None:
         raise RuntimeError(f"build.py needs the MinGW-w64 cross compiler {MINGW_CC} for the win64 binaries "
                            "(Debian: apt-get install gcc-mingw-w64-x86-64)")
     # --no-insert-timestamp: a PE header without the link time, so builds are byte-identical
-    return [compiler, *NATIVE_CFLAGS, "-shared", "-static-libgcc", "-Wl,--no-insert-timestamp", "-I.", *sources,
+    return [compiler, *native_cflags(), *extra_flags, "-shared", "-static-libgcc", "-Wl,--no-insert-timestamp", "-I.", *sources,
             "-o", out_name]
 
 
 def compile_native(sources_dir: Path, fmi_version: int, target: str, out_path: Path, extra_flags=()) -> Path:
-    """Compile the FMU's C sources in ``sources_dir`` into the shared library ``out_path``."""
-    cmd = _native_compile_command(target, native_sources(fmi_version), out_path.name)
-    cmd[1:1] = list(extra_flags)
+    """Compile the FMU's C sources in ``sources_dir`` into the shared library ``out_path``
+    (``extra_flags`` after the usual ones, e.g. sanitizers for the tests)."""
+    cmd = _native_compile_command(target, native_sources(fmi_version), out_path.name, extra_flags)
     result = subprocess.run(cmd, cwd=sources_dir, capture_output=True, text=True)
     if result.returncode != 0:
         raise RuntimeError(f"compiling the native FMU failed:\n{' '.join(cmd)}\n{result.stderr}")
@@ -352,11 +366,7 @@ def compile_native(sources_dir: Path, fmi_version: int, target: str, out_path: P
 
 def _native_source_entries(fmi_version: int, guid: str) -> dict[str, bytes]:
     """``sources/`` of the FMU: the C files and headers, the generated headers, the FMI headers."""
-    sys.path.insert(0, str(REPO_ROOT))
-    try:
-        from fmu_src.native import describe, header
-    finally:
-        sys.path.remove(str(REPO_ROOT))
+    header, describe = _native_modules()
     files = {name: (NATIVE_SRC / name).read_bytes() for name in native_sources(fmi_version) + NATIVE_HEADERS}
     files.update({name: (NATIVE_SRC / "include" / name).read_bytes() for name in FMI_HEADERS[fmi_version]})
     files["avr_vars.h"] = header.vars_header().encode()
@@ -368,11 +378,7 @@ def _native_source_entries(fmi_version: int, guid: str) -> dict[str, bytes]:
 
 
 def _native_metadata(fmi_version: int, guid: str) -> dict[str, bytes]:
-    sys.path.insert(0, str(REPO_ROOT))
-    try:
-        from fmu_src.native import describe
-    finally:
-        sys.path.remove(str(REPO_ROOT))
+    describe = _native_modules()[1]
     return {
         "modelDescription.xml": describe.model_description(fmi_version, NATIVE_MODEL_IDENTIFIER, guid,
                                                            native_sources(fmi_version), UNITS, DEFAULT_EXPERIMENT),

@@ -37,6 +37,7 @@ typedef struct {
     int n;
     double *weights; /* (4, n) row-major, rad/Hz */
     double *rates;   /* scratch, 3 rows of n: tau_rc * rate of each neuron in the current call */
+    double *scratch; /* scratch, 2n doubles: the active neurons' currents and indices */
     int64_t last_step_index; /* -1 before the first call */
     int64_t n_calls;
     double vx_at_step, vy_at_step, pd_x, pd_y, time_s;
