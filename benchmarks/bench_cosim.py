@@ -10,7 +10,9 @@ Measured on the same machine in the same process, one after the other:
   that returns zero offsets: walker + nominal controller + the loop's bookkeeping
   (without the regulator the walker may fall early: its rate is over the part run);
 - ``in-process``: the same loop with the regulator core called directly;
-- ``FMU``: the same loop through the built FMU (fmpy).
+- ``FMU``: the same loop through the built FMU (fmpy);
+- ``native FMU``: the same loop through the native FMI 2.0 FMU (C, ``fmu_src/native``) via
+  the master's own FMU path (``scenarios.master.FmuRegulator`` takes any FMI 2.0 FMU).
 
 Each closed-loop figure is the best of ``--repeat`` runs of ``--duration`` simulated
 seconds of the ``nominal`` scenario (``adaptive`` arm), start-up (FMU extraction and
@@ -18,7 +20,7 @@ instantiation) included; the three paths are interleaved so that load from other
 processes hits them alike, and rates are given per CPU second of this process (the
 ratios use these: on a shared machine wall time mostly measures the neighbours) and
 per wall second. Targets: FMU wall <= 1.2 x in-process wall; FMU closed loop
->= 0.5 x the bare mj_step rate. ``--suite`` also times ``python -m scenarios run all
+>= 0.5 x the bare mj_step rate; native FMU closed loop >= 0.9 x the plant-only rate. ``--suite`` also times ``python -m scenarios run all
 --jobs 2`` (minutes).
 """
 from __future__ import annotations
@@ -118,13 +120,14 @@ def regulator_step_cost(make, n: int = 2000) -> float:
         reg.close()
 
 
-def ensure_fmu(path: str | None) -> Path:
+def ensure_fmu(path: str | None, native: bool = False) -> Path:
     if path:
         return Path(path)
     out = Path(tempfile.mkdtemp(prefix="bench_fmu_"))
     from scenarios.cli import load_build_module
 
-    return Path(load_build_module().build_fmu(out))
+    build = load_build_module()
+    return Path(build.build_native_fmu(2, out) if native else build.build_fmu(out))
 
 
 def main(argv=None) -> int:
@@ -132,11 +135,13 @@ def main(argv=None) -> int:
     ap.add_argument("--duration", type=float, default=10.0, help="simulated seconds per closed-loop run")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--fmu", default=None, help="FMU file (default: build one into a temp folder)")
+    ap.add_argument("--native-fmu", default=None, help="native FMI 2.0 FMU file (default: build one)")
     ap.add_argument("--suite", action="store_true", help="also time `run all --jobs 2` (minutes)")
     ap.add_argument("--json", default=None, help="write the numbers to this file")
     args = ap.parse_args(argv)
 
     fmu = ensure_fmu(args.fmu)
+    native_fmu = ensure_fmu(args.native_fmu, native=True)
     scenario = spec.override(spec.resolve_targets(["nominal"])[0], duration_s=args.duration)
     res: dict[str, Any] = {"duration_s": args.duration, "repeat": args.repeat, "fmu": str(fmu)}
     bare = [bare_mj_step(min(args.duration, 5.0)) for _ in range(args.repeat)]
@@ -145,10 +150,12 @@ def main(argv=None) -> int:
         "plant_only": ZeroRegulator,
         "inprocess": master.InProcessRegulator,
         "fmu": lambda: master.FmuRegulator(fmu),
+        "native_fmu": lambda: master.FmuRegulator(native_fmu),
     }, args.repeat))
     res["regulator_step_us"] = {
         "inprocess": 1e6 * regulator_step_cost(master.InProcessRegulator),
         "fmu": 1e6 * regulator_step_cost(lambda: master.FmuRegulator(fmu)),
+        "native_fmu": 1e6 * regulator_step_cost(lambda: master.FmuRegulator(native_fmu)),
     }
     t0 = time.perf_counter()
     reg = master.FmuRegulator(fmu)
@@ -161,6 +168,7 @@ def main(argv=None) -> int:
         "fmu_rate_over_bare_mj_step": res["fmu"]["rtf_cpu"] / res["bare_mj_step"]["rtf_cpu"],
         "plant_only_rate_over_bare_mj_step": res["plant_only"]["rtf_cpu"] / res["bare_mj_step"]["rtf_cpu"],
         "fmu_over_inprocess_wall": res["inprocess"]["rtf"] / res["fmu"]["rtf"],
+        "native_fmu_rate_over_plant_only": res["native_fmu"]["rtf_cpu"] / res["plant_only"]["rtf_cpu"],
     }
     if args.suite:
         with tempfile.TemporaryDirectory(prefix="bench_suite_") as out:
@@ -177,18 +185,22 @@ def main(argv=None) -> int:
     b = res["bare_mj_step"]
     print(f"  bare mj_step          {b['rtf_cpu']:10.2f}   {b['rtf']:10.2f}")
     for key, label in (("plant_only", "plant only (zero)"), ("inprocess", "in-process regulator"),
-                       ("fmu", "FMU regulator")):
+                       ("fmu", "FMU regulator"), ("native_fmu", "native FMU regulator")):
         m = res[key]
         fell = f"  (fell at {m['fell_at_s']:.2f} s)" if m["fell_at_s"] is not None else ""
         print(f"  {label:21s} {m['rtf_cpu']:10.2f}   {m['rtf']:10.2f}   {m['sim_s']:.2f} simulated s{fell}")
     print(f"regulator step alone: in-process {res['regulator_step_us']['inprocess']:.1f} us, "
-          f"FMU {res['regulator_step_us']['fmu']:.1f} us; FMU start-up {res['fmu_startup_s'] * 1e3:.0f} ms")
+          f"FMU {res['regulator_step_us']['fmu']:.1f} us, native FMU {res['regulator_step_us']['native_fmu']:.1f} us; "
+          f"FMU start-up {res['fmu_startup_s'] * 1e3:.0f} ms")
     ok1 = r["fmu_over_inprocess"] <= 1.2
     ok2 = r["fmu_rate_over_bare_mj_step"] >= 0.5
     print(f"FMU / in-process CPU per simulated s  {r['fmu_over_inprocess']:.3f}  (target <= 1.20: "
           f"{'met' if ok1 else 'MISSED'}; by wall {r['fmu_over_inprocess_wall']:.3f})")
     print(f"FMU rate / bare mj_step rate          {r['fmu_rate_over_bare_mj_step']:.3f}  (target >= 0.50: "
           f"{'met' if ok2 else 'MISSED'})")
+    ok3 = r["native_fmu_rate_over_plant_only"] >= 0.9
+    print(f"native FMU rate / plant-only rate     {r['native_fmu_rate_over_plant_only']:.3f}  (target >= 0.90: "
+          f"{'met' if ok3 else 'MISSED'})")
     print(f"plant-only rate / bare mj_step rate   {r['plant_only_rate_over_bare_mj_step']:.3f}; "
           f"in-process / plant-only CPU per simulated s {r['inprocess_over_plant_only']:.3f}")
     if "suite_jobs2_wall_s" in res:
