@@ -18,6 +18,7 @@ from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
 from fmu_src.avr_core import OUTPUT_SPECS, Regulator, RegulatorInputs, RegulatorParams
+from test_fmu_compliance import input_sequence  # noqa: F401 (the same seeded inputs as the pythonfmu suite)
 
 H = 0.005  # communication step, s
 OUTPUT_NAMES = [s.name for s in OUTPUT_SPECS]
@@ -112,15 +113,6 @@ def core_outputs(sequence, **params) -> np.ndarray:
     regulator = Regulator(RegulatorParams(**params))
     return np.array([[o[n] for n in OUTPUT_NAMES]
                      for o in (regulator.step(RegulatorInputs(**u), H) for u in sequence)])
-
-
-def input_sequence(n, seed):
-    """A seeded sequence of plausible regulator inputs (a walking step every 70 calls)."""
-    rng = np.random.default_rng(seed)
-    return [{"vx": float(0.5 + 0.3 * rng.standard_normal()), "vy": float(0.1 * rng.standard_normal()),
-             "vx_des": 0.5, "vy_des": 0.0, "pitch": float(0.05 * rng.standard_normal()),
-             "roll": float(0.05 * rng.standard_normal()), "pitch_rate": float(0.3 * rng.standard_normal()),
-             "roll_rate": float(0.3 * rng.standard_normal()), "step_index": k // 70} for k in range(n)]
 
 
 def compile_c(compiler: Path, sources, out: Path, *flags, cwd=None) -> Path:

@@ -161,53 +161,16 @@ def test_fmpy_simulate_fmu_matches_core(native_fmus, sequence, reference, fmi):
     np.testing.assert_allclose(out, reference, **TOL)
 
 
-OSP_SYSTEM = """<?xml version="1.0" encoding="utf-8"?>
-<OspSystemStructure xmlns="http://opensimulationplatform.com/MSMI/OSPSystemStructure" version="0.1">
-  <StartTime>0.0</StartTime>
-  <BaseStepSize>{h}</BaseStepSize>
-  <Algorithm>fixedStep</Algorithm>
-  <Simulators>
-    <Simulator name="avr" source="{fmu}" stepSize="{h}">
-      <InitialValues>
-{initial}
-      </InitialValues>
-    </Simulator>
-  </Simulators>
-</OspSystemStructure>
-"""
+def test_libcosimpy_matches_core(native_fmus, tmp_path):
+    """libcosimpy (OSP) runs the native FMI 2.0 FMU: the pythonfmu suite's test, on this FMU."""
+    import test_fmu_importers as importers
 
-
-def test_libcosimpy_matches_core(native_fmus, sequence, reference, tmp_path):
-    from libcosimpy.CosimExecution import CosimExecution
-    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
-    from libcosimpy.CosimManipulator import CosimManipulator
-    from libcosimpy.CosimObserver import CosimObserver
-
-    log_output_level(CosimLogLevel.ERROR)
-    shutil.copy(native_fmus[2], tmp_path / native_fmus[2].name)
-    typed = {"n_neurons": "Integer", "seed": "Integer"}
-    initial = "\n".join(
-        f'        <InitialValue variable="{k}"><{typed.get(k, "Real")} value="{v!r}"/></InitialValue>'
-        for k, v in PARAMS.items())
-    (tmp_path / "OspSystemStructure.xml").write_text(OSP_SYSTEM.format(h=H, fmu=native_fmus[2].name, initial=initial))
-    execution = CosimExecution.from_osp_config_file(osp_path=str(tmp_path))
-    index = execution.slave_index_from_instance_name("avr")
-    vr = {v.name.decode(): v.reference for v in execution.slave_variables(slave_index=index)}
-    manipulator, observer = CosimManipulator.create_override(), CosimObserver.create_last_value()
-    execution.add_manipulator(manipulator=manipulator)
-    execution.add_observer(observer=observer)
-    reals = [n for n in INPUT_NAMES if n != "step_index"]
-    out = []
-    for u in sequence:
-        manipulator.slave_real_values(index, [vr[n] for n in reals], [u[n] for n in reals])
-        manipulator.slave_integer_values(index, [vr["step_index"]], [u["step_index"]])
-        assert execution.step()
-        out.append(observer.last_real_values(index, [vr[n] for n in OUTPUT_NAMES]))
-    np.testing.assert_allclose(np.array(out), reference, **TOL)
+    seq = input_sequence(importers.N_STEPS, seed=21)
+    importers.test_libcosimpy_matches_core(native_fmus[2], seq, core_outputs(seq, **importers.PARAMS), tmp_path)
 
 
 def test_fmu_container_matches_core(native_fmus, sequence, tmp_path):
-    """The native FMI 2.0 FMU inside an FMU container (fmucontainer), run by fmpy."""
+    """The native FMI 2.0 FMU inside an FMU container (fmucontainer, found beside this interpreter), run by fmpy."""
     shutil.copy(native_fmus[2], tmp_path / native_fmus[2].name)
     (tmp_path / "avr_container.csv").write_text("rule;from_fmu;from_port;to_fmu;to_port\n"
                                                  f"FMU;{native_fmus[2].name};;;\n")

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 
 from fmu_src.avr_core import OUTPUT_SPECS
 from native_support import AnySlave, input_sequence, native_fmus  # noqa: F401 (fixture)
-from test_fmu_call_sequences import FmiModel, _coerce, calls
+from test_fmu_call_sequences import FmiModel, _coerce, _send, calls
 from test_native_fmu import DRIVERS
 
 FMI = pytest.mark.parametrize("fmi", [2, 3])
@@ -146,15 +146,6 @@ def driver(request, native_fmus):
     yield fmi, proc
     proc.stdin.close()
     assert proc.wait(timeout=60) == 0, proc.stderr.read()[-2000:]
-
-
-def _send(proc, call):
-    proc.stdin.write(json.dumps(list(call)) + "\n")
-    line = proc.stdout.readline()
-    while line and not line.startswith("{"):  # FMU log lines printed by fmpy's default logger
-        line = proc.stdout.readline()
-    assert line, f"the FMU process died on {call}: exit {proc.poll()}, {proc.stderr.read()[-2000:]}"
-    return json.loads(line)
 
 
 @settings(max_examples=150, deadline=None, derandomize=True,

@@ -81,9 +81,16 @@ AvrStatus avr_prepare_networks(AvrInstance *inst, const char *call, int n, uint3
                                AvrCore *core);
 void avr_adopt(AvrInstance *inst, AvrNetworks *net, AvrCore *core);
 
-AvrBlob *avr_state_get(const AvrInstance *inst, AvrBlob *reuse);
 AvrStatus avr_state_check(const AvrInstance *inst, const char *call, const unsigned char *bytes, size_t size);
-AvrStatus avr_state_set(AvrInstance *inst, const char *call, const AvrBlob *blob);
-AvrBlob *avr_blob_copy(const unsigned char *bytes, size_t size);
+
+/* The FMI FMUstate functions of both versions (an FMUstate is an AvrBlob *). */
+AvrStatus avr_fmustate_get(AvrInstance *inst, const char *call, void **state);
+AvrStatus avr_fmustate_set(AvrInstance *inst, const char *call, const void *state);
+void avr_fmustate_free(void **state);
+AvrStatus avr_fmustate_size(const AvrInstance *inst, const char *call, const void *state, size_t *size);
+AvrStatus avr_fmustate_serialize(const AvrInstance *inst, const char *call, const void *state, unsigned char *bytes,
+                                 size_t size);
+AvrStatus avr_fmustate_deserialize(const AvrInstance *inst, const char *call, const unsigned char *bytes, size_t size,
+                                   void **state);
 
 #endif

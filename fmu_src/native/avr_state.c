@@ -80,7 +80,7 @@ static int has_networks(AvrPhase phase) {
     return phase == AVR_STEP_MODE || phase == AVR_TERMINATED;
 }
 
-AvrBlob *avr_state_get(const AvrInstance *inst, AvrBlob *reuse) {
+static AvrBlob *state_get(const AvrInstance *inst, AvrBlob *reuse) {
     int n = has_networks(inst->phase) ? inst->core.n : 0;
     size_t size = blob_size(n);
     AvrBlob *blob = reuse;
@@ -115,13 +115,6 @@ AvrBlob *avr_state_get(const AvrInstance *inst, AvrBlob *reuse) {
     return blob;
 }
 
-AvrBlob *avr_blob_copy(const unsigned char *bytes, size_t size) {
-    AvrBlob *blob = malloc(sizeof *blob + size);
-    if (blob == NULL) return NULL;
-    blob->size = size;
-    memcpy(blob->bytes, bytes, size);
-    return blob;
-}
 
 static int finite_doubles(const unsigned char *p, size_t count) {
     for (size_t i = 0; i < count; ++i)
@@ -179,7 +172,7 @@ AvrStatus avr_state_check(const AvrInstance *inst, const char *call, const unsig
     return s == AVR_OK ? check_contents(inst, call, bytes, size) : s;
 }
 
-AvrStatus avr_state_set(AvrInstance *inst, const char *call, const AvrBlob *blob) {
+static AvrStatus state_set(AvrInstance *inst, const char *call, const AvrBlob *blob) {
     if (blob == NULL) return avr_refuse(inst, call, "FMUstate is NULL");
     const unsigned char *p = blob->bytes;
     if (avr_state_check(inst, call, p, blob->size) != AVR_OK) return AVR_ERROR;
@@ -201,5 +194,52 @@ AvrStatus avr_state_set(AvrInstance *inst, const char *call, const AvrBlob *blob
     inst->phase = (AvrPhase)get_u32(p + 68);
     inst->time = get_f64(p + 72);
     for (int vr = 0; vr < AVR_N_VARS; ++vr) inst->values[vr] = get_f64(p + BLOB_HEADER + 8 * vr);
+    return AVR_OK;
+}
+
+/* ---- the FMI FMUstate functions ------------------------------------------------------- */
+AvrStatus avr_fmustate_get(AvrInstance *inst, const char *call, void **state) {
+    if (state == NULL) return avr_refuse(inst, call, "FMUstate pointer is NULL");
+    AvrBlob *blob = state_get(inst, (AvrBlob *)*state);
+    if (blob == NULL) return avr_refuse(inst, call, "out of memory");
+    *state = blob;
+    return AVR_OK;
+}
+
+AvrStatus avr_fmustate_set(AvrInstance *inst, const char *call, const void *state) {
+    return state_set(inst, call, (const AvrBlob *)state);
+}
+
+void avr_fmustate_free(void **state) {
+    if (state == NULL) return;
+    free(*state);
+    *state = NULL;
+}
+
+AvrStatus avr_fmustate_size(const AvrInstance *inst, const char *call, const void *state, size_t *size) {
+    if (state == NULL || size == NULL) return avr_refuse(inst, call, "NULL FMUstate or size pointer");
+    *size = ((const AvrBlob *)state)->size;
+    return AVR_OK;
+}
+
+AvrStatus avr_fmustate_serialize(const AvrInstance *inst, const char *call, const void *state, unsigned char *bytes,
+                                 size_t size) {
+    const AvrBlob *blob = (const AvrBlob *)state;
+    if (blob == NULL || bytes == NULL) return avr_refuse(inst, call, "NULL FMUstate or byte buffer");
+    if (size != blob->size) return avr_refuse(inst, call, "size = %zu, but this state needs %zu bytes", size, blob->size);
+    memcpy(bytes, blob->bytes, size);
+    return AVR_OK;
+}
+
+AvrStatus avr_fmustate_deserialize(const AvrInstance *inst, const char *call, const unsigned char *bytes, size_t size,
+                                   void **state) {
+    if (bytes == NULL || state == NULL) return avr_refuse(inst, call, "NULL byte buffer or FMUstate pointer");
+    if (avr_state_check(inst, call, bytes, size) != AVR_OK) return AVR_ERROR;
+    AvrBlob *blob = malloc(sizeof *blob + size);
+    if (blob == NULL) return avr_refuse(inst, call, "out of memory");
+    blob->size = size;
+    memcpy(blob->bytes, bytes, size);
+    free(*state); /* a state the host passes back to be replaced */
+    *state = blob;
     return AVR_OK;
 }

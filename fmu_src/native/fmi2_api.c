@@ -173,56 +173,36 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     return fmi2OK;
 }
 
-/* ---- FMU state --------------------------------------------------------------------------------- */
+/* ---- FMU state (avr_state.c) --------------------------------------------------------------------- */
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state) {
     BEGIN(fmi2GetFMUstate)
-    if (state == NULL) REFUSE("FMUstate pointer is NULL");
-    AvrBlob *blob = avr_state_get(inst, (AvrBlob *)*state);
-    if (blob == NULL) REFUSE("out of memory");
-    *state = blob;
-    return fmi2OK;
+    return (fmi2Status)avr_fmustate_get(inst, call, state);
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
     BEGIN(fmi2SetFMUstate)
-    return (fmi2Status)avr_state_set(inst, call, (const AvrBlob *)state);
+    return (fmi2Status)avr_fmustate_set(inst, call, state);
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state) {
     BEGIN(fmi2FreeFMUstate)
-    if (state != NULL) {
-        free(*state);
-        *state = NULL;
-    }
+    avr_fmustate_free(state);
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size) {
     BEGIN(fmi2SerializedFMUstateSize)
-    if (state == NULL || size == NULL) REFUSE("NULL FMUstate or size pointer");
-    *size = ((const AvrBlob *)state)->size;
-    return fmi2OK;
+    return (fmi2Status)avr_fmustate_size(inst, call, state, size);
 }
 
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte bytes[], size_t size) {
+fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte serializedState[], size_t size) {
     BEGIN(fmi2SerializeFMUstate)
-    const AvrBlob *blob = (const AvrBlob *)state;
-    if (blob == NULL || bytes == NULL) REFUSE("NULL FMUstate or byte buffer");
-    if (size != blob->size) REFUSE("size = %zu, but this state needs %zu bytes", size, blob->size);
-    memcpy(bytes, blob->bytes, size);
-    return fmi2OK;
+    return (fmi2Status)avr_fmustate_serialize(inst, call, state, (unsigned char *)serializedState, size);
 }
 
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
-                                   fmi2FMUstate *state) {
+fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *state) {
     BEGIN(fmi2DeSerializeFMUstate)
-    if (serializedState == NULL || state == NULL) REFUSE("NULL byte buffer or FMUstate pointer");
-    if (avr_state_check(inst, call, (const unsigned char *)serializedState, size) != AVR_OK) return fmi2Error;
-    AvrBlob *blob = avr_blob_copy((const unsigned char *)serializedState, size);
-    if (blob == NULL) REFUSE("out of memory");
-    free(*state);
-    *state = blob;
-    return fmi2OK;
+    return (fmi2Status)avr_fmustate_deserialize(inst, call, (const unsigned char *)serializedState, size, state);
 }
 
 /* ---- not provided (the model description says so) ------------------------------------------------ */

@@ -209,57 +209,36 @@ SETTER(fmi3SetFloat64, fmi3Float64, AVR_REAL, READ_NUMBER)
 SETTER(fmi3SetInt32, fmi3Int32, AVR_INTEGER, READ_NUMBER)
 SETTER(fmi3SetBoolean, fmi3Boolean, AVR_BOOLEAN, READ_BYTE)
 
-/* ---- FMU state ---------------------------------------------------------------------------------- */
+/* ---- FMU state (avr_state.c) --------------------------------------------------------------------- */
 fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
     BEGIN(fmi3GetFMUState)
-    if (FMUState == NULL) REFUSE("FMUState pointer is NULL");
-    AvrBlob *blob = avr_state_get(inst, (AvrBlob *)*FMUState);
-    if (blob == NULL) REFUSE("out of memory");
-    *FMUState = blob;
-    return fmi3OK;
+    return (fmi3Status)avr_fmustate_get(inst, call, FMUState);
 }
 
 fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
     BEGIN(fmi3SetFMUState)
-    return (fmi3Status)avr_state_set(inst, call, (const AvrBlob *)FMUState);
+    return (fmi3Status)avr_fmustate_set(inst, call, FMUState);
 }
 
 fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
     BEGIN(fmi3FreeFMUState)
-    if (FMUState != NULL) {
-        free(*FMUState);
-        *FMUState = NULL;
-    }
+    avr_fmustate_free(FMUState);
     return fmi3OK;
 }
 
 fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size) {
     BEGIN(fmi3SerializedFMUStateSize)
-    if (FMUState == NULL || size == NULL) REFUSE("NULL FMUState or size pointer");
-    *size = ((const AvrBlob *)FMUState)->size;
-    return fmi3OK;
+    return (fmi3Status)avr_fmustate_size(inst, call, FMUState, size);
 }
 
-fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[],
-                                 size_t size) {
+fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size) {
     BEGIN(fmi3SerializeFMUState)
-    const AvrBlob *blob = (const AvrBlob *)FMUState;
-    if (blob == NULL || serializedState == NULL) REFUSE("NULL FMUState or byte buffer");
-    if (size != blob->size) REFUSE("size = %zu, but this state needs %zu bytes", size, blob->size);
-    memcpy(serializedState, blob->bytes, size);
-    return fmi3OK;
+    return (fmi3Status)avr_fmustate_serialize(inst, call, FMUState, (unsigned char *)serializedState, size);
 }
 
-fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size,
-                                   fmi3FMUState *FMUState) {
+fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size, fmi3FMUState *FMUState) {
     BEGIN(fmi3DeserializeFMUState)
-    if (serializedState == NULL || FMUState == NULL) REFUSE("NULL byte buffer or FMUState pointer");
-    if (avr_state_check(inst, call, serializedState, size) != AVR_OK) return fmi3Error;
-    AvrBlob *blob = avr_blob_copy(serializedState, size);
-    if (blob == NULL) REFUSE("out of memory");
-    free(*FMUState);
-    *FMUState = blob;
-    return fmi3OK;
+    return (fmi3Status)avr_fmustate_deserialize(inst, call, (const unsigned char *)serializedState, size, FMUState);
 }
 
 /* ---- stepping ------------------------------------------------------------------------------------ */

@@ -16,6 +16,9 @@ from fmpy.fmi3 import FMU3Slave
 sys.path.insert(0, str(Path(__file__).parents[1] / "fmi"))
 from driver import Driver  # noqa: E402  (tests/fmi/driver.py)
 
+#: The FMU state methods the FMI 2.0 driver calls, spelled as FMI 3.0 spells them.
+FMU_STATE_NAMES = {"getFMUstate": "getFMUState", "setFMUstate": "setFMUState",
+                   "serializeFMUstate": "serializeFMUState", "deSerializeFMUstate": "deserializeFMUState"}
 TYPED = {"Float64": ("getFloat64", "setFloat64"), "Int32": ("getInt32", "setInt32"),
          "Boolean": ("getBoolean", "setBoolean")}
 
@@ -36,6 +39,8 @@ class Driver3(Driver):
                 self.fmu = None
                 return {"status": "instantiate-failed"}
             self.states, self.blobs = [], []
+            for fmi2_name, fmi3_name in FMU_STATE_NAMES.items():
+                setattr(self.fmu, fmi2_name, getattr(self.fmu, fmi3_name))
         elif op == "setup":
             self.start_time = args[0]
         elif op == "enter":
@@ -49,19 +54,7 @@ class Driver3(Driver):
                 getattr(fmu, setter)([var.valueReference], [args[1]])
                 return None
             return {"value": getattr(fmu, getter)([var.valueReference])[0]}
-        elif op == "get_state":
-            self.states.append(fmu.getFMUState())
-            return {"index": len(self.states) - 1}
-        elif op == "set_state":
-            fmu.setFMUState(self.states[args[0]])
-        elif op == "serialize":
-            self.blobs.append(bytes(fmu.serializeFMUState(self.states[args[0]])))
-            return {"index": len(self.blobs) - 1, "size": len(self.blobs[-1])}
-        elif op == "deserialize":
-            blob = b"\x00garbage" * 8 if args[0] < 0 else self.blobs[args[0]]
-            self.states.append(fmu.deserializeFMUState(blob))
-            return {"index": len(self.states) - 1}
-        else:  # exit, terminate, reset, free: the same calls as FMI 2.0
+        else:  # exit, terminate, reset, free and the FMU state ops: the FMI 2.0 driver's, with FMI 3.0 names
             return super()._call(op, *args)
         return None
 
