@@ -165,3 +165,15 @@ def test_random_call_sequences_never_crash_and_illegal_calls_are_refused(driver,
         else:
             assert answer["status"] != 0, f"FMI {fmi}: illegal call {call} answered OK in phase {model.phase}"
     assert proc.poll() is None
+
+
+def test_fmi3_time_is_the_independent_variable(native_fmus):
+    s = AnySlave(native_fmus[3]).init()
+    time_vr = s.vars["time"].valueReference
+    for k in range(3):
+        s.step(k, {"vx": 0.1})
+    assert s.fmu.getFloat64([time_vr]) == [3 * 0.005]
+    with pytest.raises(FMICallException):
+        s.fmu.setFloat64([time_vr], [1.0])
+    assert s.fmu.getFloat64([time_vr]) == [3 * 0.005]
+    s.close()
