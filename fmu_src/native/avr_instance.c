@@ -179,23 +179,26 @@ static void range_text(const AvrVar *v, char *out, size_t size) {
     snprintf(out, size, "[%s, %s]", lo, hi);
 }
 
-/* Why `x` is not a valid value of v (writes the reason, returns 1), or 0. */
+/* Why `x` is not a valid value of v (writes the reason, returns 1), or 0.  Texts are made
+ * only for a refusal: setting a valid value costs a few comparisons. */
 int avr_value_problem(const AvrVar *v, double x, char *out, size_t size) {
-    char range[100], value[40];
-    range_text(v, range, sizeof range);
-    avr_fmt_double(value, sizeof value, x);
+    const char *why;
     if (v->type == AVR_BOOLEAN) {
         if (x == 0.0 || x == 1.0) return 0;
-        snprintf(out, size, "%s = %s: a Boolean must be true (1) or false (0)", v->name, value);
+        why = "a Boolean must be true (1) or false (0)";
     } else if (!isfinite(x)) {
-        snprintf(out, size, "%s = %s: must be a finite number in %s", v->name, value, range);
+        why = "must be a finite number in";
     } else if (v->type == AVR_INTEGER && x != floor(x)) {
-        snprintf(out, size, "%s = %s: must be an integer in %s", v->name, value, range);
+        why = "must be an integer in";
     } else if ((v->has_min && x < v->min) || (v->has_max && x > v->max)) {
-        snprintf(out, size, "%s = %s: out of range %s", v->name, value, range);
+        why = "out of range";
     } else {
         return 0;
     }
+    char range[100] = "", value[40];
+    if (v->type != AVR_BOOLEAN) range_text(v, range, sizeof range);
+    avr_fmt_double(value, sizeof value, x);
+    snprintf(out, size, "%s = %s: %s%s%s", v->name, value, why, range[0] ? " " : "", range);
     return 1;
 }
 
