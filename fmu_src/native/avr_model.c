@@ -118,8 +118,9 @@ int avr_core_init(AvrCore *core, int n) {
     memset(core, 0, sizeof *core);
     core->weights = calloc((size_t)AVR_N_ROWS * n, sizeof(double));
     core->rates = calloc((size_t)AVR_N_NETS * n, sizeof(double));
-    core->scratch = calloc((size_t)2 * n, sizeof(double)); /* n doubles + n ints (an int fits a double's room) */
-    if (core->weights == NULL || core->rates == NULL || core->scratch == NULL) {
+    core->active = calloc((size_t)AVR_N_NETS * n, sizeof(int));
+    core->currents = calloc((size_t)n, sizeof(double));
+    if (core->weights == NULL || core->rates == NULL || core->active == NULL || core->currents == NULL) {
         avr_core_free(core);
         return -1;
     }
@@ -131,8 +132,10 @@ int avr_core_init(AvrCore *core, int n) {
 void avr_core_free(AvrCore *core) {
     free(core->weights);
     free(core->rates);
-    free(core->scratch);
-    core->weights = core->rates = core->scratch = NULL;
+    free(core->active);
+    free(core->currents);
+    core->weights = core->rates = core->currents = NULL;
+    core->active = NULL;
     core->n = 0;
 }
 
@@ -197,55 +200,66 @@ static inline double log1p_positive(double y) {
     return k * ln2_hi + (log_m + (k * ln2_lo + e / u));
 }
 
-/* tau_rc * LIF rate of every neuron of network k for input x (avr_core._lif_rates_times_tau_rc). */
-VECTOR_CLONES static void network_rates(const AvrNetworks *net, int k, const double x[AVR_N_INPUTS], double *restrict s,
-                          double *restrict scratch) {
+/* The active neurons of network k for input x and their tau_rc * LIF rates
+ * (avr_core._lif_rates_times_tau_rc): indices into active[], rates into rates[]; returns
+ * their number.  The currents are computed for all n; the active ones are packed
+ * branch-free, then their rates computed in one straight loop that the compiler
+ * vectorizes: no unpredictable branch per neuron, no work for silent ones. */
+VECTOR_CLONES static int network_rates(const AvrNetworks *net, int k, const double x[AVR_N_INPUTS],
+                                       double *restrict cur, double *restrict rates, int *restrict active) {
     int n = net->n;
     const double *restrict bias_m1 = net->bias_m1 + (size_t)k * n;
     const double *restrict e0 = net->scaled_t + (size_t)FIRST_INPUT[k] * n;
     const double *restrict e1 = e0 + n;
     double x0 = x[FIRST_INPUT[k]], x1 = x[FIRST_INPUT[k] + 1];
     if (DIMS[k] == 2) {
-        for (int i = 0; i < n; ++i) s[i] = x0 * e0[i] + x1 * e1[i] + bias_m1[i];
+        for (int i = 0; i < n; ++i) cur[i] = x0 * e0[i] + x1 * e1[i] + bias_m1[i];
     } else {
         const double *restrict e2 = e1 + n, *restrict e3 = e2 + n;
         double x2 = x[FIRST_INPUT[k] + 2], x3 = x[FIRST_INPUT[k] + 3];
-        for (int i = 0; i < n; ++i) s[i] = x0 * e0[i] + x1 * e1[i] + x2 * e2[i] + x3 * e3[i] + bias_m1[i];
+        for (int i = 0; i < n; ++i) cur[i] = x0 * e0[i] + x1 * e1[i] + x2 * e2[i] + x3 * e3[i] + bias_m1[i];
     }
-    /* s[i] holds j = J - 1; the rate is 0 where j <= 0.  Active neurons (j > 0, about half)
-     * are packed into `packed` (branch-free), their rates computed in one straight loop
-     * that the compiler vectorizes, and written back: no unpredictable branch per neuron,
-     * no work for silent ones. */
-    double *restrict packed = scratch;
-    int *restrict where = (int *)(scratch + n);
     int m = 0;
-    for (int i = 0; i < n; ++i) {
-        packed[m] = s[i];
-        where[m] = i;
-        m += s[i] > 0.0;
-        s[i] = 0.0;
+    for (int i = 0; i < n; ++i) { /* j = J - 1 > 0: active */
+        rates[m] = cur[i];
+        active[m] = i;
+        m += cur[i] > 0.0;
     }
     for (int i = 0; i < m; ++i) {
-        double j = packed[i] > 1e-300 ? packed[i] : 1e-300;
-        packed[i] = 1.0 / (TAU_RATIO + log1p_positive(1.0 / j));
+        double j = rates[i] > 1e-300 ? rates[i] : 1e-300;
+        rates[i] = 1.0 / (TAU_RATIO + log1p_positive(1.0 / j));
     }
-    for (int i = 0; i < m; ++i) s[where[i]] = packed[i];
+    return m;
 }
 
-/* Learning with anti-windup (the PES block of avr_core.step): raw = unsaturated outputs. */
-VECTOR_CLONES static void learn(AvrCore *core, const double *values, double dt, const double raw[AVR_N_ROWS]) {
+static const int NET_OF_ROW[AVR_N_ROWS] = {0, 1, 2, 2};
+
+/* sum over the active neurons of network k of w[i] * rate[i], in increasing i: the dense
+ * sum without its zero terms. */
+static double sparse_dot(const AvrCore *core, int k, const double *restrict w) {
+    const double *restrict rates = core->rates + (size_t)k * core->n;
+    const int *restrict active = core->active + (size_t)k * core->n;
+    double sum = 0.0;
+    for (int i = 0; i < core->n_active[k]; ++i) sum += w[active[i]] * rates[i];
+    return sum;
+}
+
+/* Learning with anti-windup (the PES block of avr_core.step): raw = unsaturated outputs.
+ * A silent neuron's weight would change by coef * 0: it is left as it is. */
+static void learn(AvrCore *core, const double *values, double dt, const double raw[AVR_N_ROWS]) {
     int n = core->n;
     double alpha = -V(learning_rate) * dt / (double)n * INV_TAU_RC;
     double lim = V(psi_limit);
     double err[AVR_N_ROWS] = {V(vx_des) - V(vx), V(vy_des) - V(vy), V(pitch_des) - V(pitch), V(roll_des) - V(roll)};
-    static const int NET_OF_ROW[AVR_N_ROWS] = {0, 1, 2, 2};
     for (int r = 0; r < AVR_N_ROWS; ++r) {
         int saturated_outward = (raw[r] >= lim || raw[r] <= -lim) && raw[r] * err[r] < 0.0;
         double coef = saturated_outward ? 0.0 : alpha * err[r];
         if (coef == 0.0) continue;
+        int k = NET_OF_ROW[r];
         double *restrict w = core->weights + (size_t)r * n;
-        const double *restrict s = core->rates + (size_t)NET_OF_ROW[r] * n;
-        for (int i = 0; i < n; ++i) w[i] = coef * s[i] + w[i];
+        const double *restrict rates = core->rates + (size_t)k * n;
+        const int *restrict active = core->active + (size_t)k * n;
+        for (int i = 0; i < core->n_active[k]; ++i) w[active[i]] = coef * rates[i] + w[active[i]];
     }
 }
 
@@ -255,17 +269,12 @@ static void network_outputs(AvrCore *core, const AvrNetworks *net, double *value
     double x[AVR_N_INPUTS];
     int n = net->n;
     network_inputs(values, x);
-    for (int k = 0; k < AVR_N_NETS; ++k) network_rates(net, k, x, core->rates + (size_t)k * n, core->scratch);
-    const double *restrict w0 = core->weights, *restrict w1 = w0 + n, *restrict w2 = w1 + n, *restrict w3 = w2 + n;
-    const double *restrict s0 = core->rates, *restrict s1 = s0 + n, *restrict s2 = s1 + n;
-    double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
-    for (int i = 0; i < n; ++i) {
-        a0 += w0[i] * s0[i];
-        a1 += w1[i] * s1[i];
-        a2 += w2[i] * s2[i];
-        a3 += w3[i] * s2[i];
-    }
-    double raw[AVR_N_ROWS] = {a0 * INV_TAU_RC, a1 * INV_TAU_RC, a2 * INV_TAU_RC, a3 * INV_TAU_RC};
+    for (int k = 0; k < AVR_N_NETS; ++k)
+        core->n_active[k] = network_rates(net, k, x, core->currents, core->rates + (size_t)k * n,
+                                          core->active + (size_t)k * n);
+    double raw[AVR_N_ROWS];
+    for (int r = 0; r < AVR_N_ROWS; ++r)
+        raw[r] = sparse_dot(core, NET_OF_ROW[r], core->weights + (size_t)r * n) * INV_TAU_RC;
     double lim = V(psi_limit);
     for (int r = 0; r < AVR_N_ROWS; ++r) psi[r] = raw[r] > lim ? lim : (raw[r] < -lim ? -lim : raw[r]);
     if (V(learning_rate) != 0.0 && si >= (int64_t)V(learn_from_step)) learn(core, values, dt, raw);

@@ -36,8 +36,14 @@ typedef struct {
 typedef struct {
     int n;
     double *weights; /* (4, n) row-major, rad/Hz */
-    double *rates;   /* scratch, 3 rows of n: tau_rc * rate of each neuron in the current call */
-    double *scratch; /* scratch, 2n doubles: the active neurons' currents and indices */
+    /* Scratch of the current call.  Only active neurons (current above threshold) have a
+     * rate; network k's are listed at offset k n: their indices (increasing) in `active`,
+     * tau_rc * rate in `rates`, n_active[k] of them.  Silent neurons contribute exactly 0 to
+     * every output and weight update, so they are skipped. */
+    double *rates;
+    int *active;
+    int n_active[AVR_N_NETS];
+    double *currents; /* n: one network's currents J - 1 */
     int64_t last_step_index; /* -1 before the first call */
     int64_t n_calls;
     double vx_at_step, vy_at_step, pd_x, pd_y, time_s;
