@@ -118,12 +118,15 @@ def test_no_python_in_any_binary(native_fmus, fmi, tmp_path):
             assert dlls <= {"kernel32.dll", "msvcrt.dll"}, dlls
 
 
-def test_fmus_json_lists_every_fmu_built(build_module, tmp_path, native_fmus):
-    entries = [build_module.fmu_entry(native_fmus[v], "native") for v in (2, 3)]
-    assert [(e["fmiVersion"], e["modelIdentifier"], e["platforms"]) for e in entries] == [
-        ("2.0", "AdaptiveVelocityRegulatorNative", ["linux64", "win64"]),
-        ("3.0", "AdaptiveVelocityRegulatorNative", ["x86_64-linux", "x86_64-windows"])]
-    assert entries[0]["sha256"] == hashlib.sha256(native_fmus[2].read_bytes()).hexdigest()
+def test_build_all_writes_fmus_json_listing_every_fmu_built(build_module, tmp_path):
+    paths = build_module.build_all(tmp_path)
+    listing = json.loads((tmp_path / "fmus.json").read_text())["fmus"]
+    assert [e["file"] for e in listing] == [p.name for p in paths] and all(p.is_file() for p in paths)
+    assert [(e["fmiVersion"], e["modelIdentifier"], e["implementation"], e["platforms"]) for e in listing] == [
+        ("2.0", "AdaptiveVelocityRegulator", "python", ["linux64", "win64"]),
+        ("2.0", "AdaptiveVelocityRegulatorNative", "native", ["linux64", "win64"]),
+        ("3.0", "AdaptiveVelocityRegulatorNative", "native", ["x86_64-linux", "x86_64-windows"])]
+    assert all(e["sha256"] == hashlib.sha256(p.read_bytes()).hexdigest() for e, p in zip(listing, paths))
 
 
 # ---- the calling sequence ---------------------------------------------------------------------
