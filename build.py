@@ -382,7 +382,7 @@ def _native_metadata(fmi_version: int, guid: str) -> dict[str, bytes]:
     return {
         "modelDescription.xml": describe.model_description(fmi_version, NATIVE_MODEL_IDENTIFIER, guid,
                                                            native_sources(fmi_version), UNITS, DEFAULT_EXPERIMENT),
-        "documentation/index.html": describe.documentation(fmi_version, NATIVE_MODEL_IDENTIFIER, UNITS).encode(),
+        "documentation/index.html": describe.documentation(fmi_version, NATIVE_MODEL_IDENTIFIER).encode(),
     }
 
 

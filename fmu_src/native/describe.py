@@ -62,7 +62,7 @@ def _variable_attributes(spec, vr: int) -> dict:
     return attrs
 
 
-def _header(root: ET.Element, fmi_version: int, model_identifier: str, guid: str, source_files) -> None:
+def _interface(root: ET.Element, fmi_version: int, model_identifier: str, source_files) -> None:
     common = {"modelIdentifier": model_identifier, "canHandleVariableCommunicationStepSize": "true",
               "canBeInstantiatedOnlyOncePerProcess": "false"}
     if fmi_version == 2:
@@ -85,7 +85,7 @@ def model_description(fmi_version: int, model_identifier: str, guid: str, source
         "fmiVersion": f"{fmi_version}.0", "modelName": model_identifier, **token, "description": DESCRIPTION,
         "author": AUTHOR, "version": VERSION, "license": LICENSE, "generationTool": "cassie-avr build.py",
         "variableNamingConvention": "flat"})
-    _header(root, fmi_version, model_identifier, guid, source_files)
+    _interface(root, fmi_version, model_identifier, source_files)
     _units(root, units)
     categories = ET.SubElement(root, "LogCategories")
     for name, text in _LOG_CATEGORIES:
@@ -129,7 +129,7 @@ def build_description(model_identifier: str, source_files) -> bytes:
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def documentation(fmi_version: int, model_identifier: str, units: dict) -> str:
+def documentation(fmi_version: int, model_identifier: str) -> str:
     """``documentation/index.html``: the method (the core's own description) and the variables."""
     specs = all_specs()
     rows = "\n".join(
