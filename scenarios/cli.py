@@ -248,6 +248,10 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--duration", type=float, default=None, help="override every scenario's duration_s (quick runs)")
     sp.set_defaults(func=cmd_run)
 
+    from scenarios.campaign.cli import add_parser as add_campaign_parser
+
+    add_campaign_parser(sub)
+
     sp = sub.add_parser("report", help="write DIR/report.md over the results in DIR")
     sp.add_argument("dir")
     sp.set_defaults(func=cmd_report)

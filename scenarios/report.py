@@ -173,6 +173,10 @@ def write_report(out_dir: Path) -> Path:
     out_dir = Path(out_dir)
     if not out_dir.is_dir():
         raise FileNotFoundError(f"no such results folder: {out_dir}")
+    from scenarios.campaign.report import campaigns_section, is_campaign_dir, write_report as write_campaign
+
+    if is_campaign_dir(out_dir):  # a campaign folder: its own campaign.md
+        return write_campaign(out_dir)
     path = out_dir / "report.md"
-    path.write_text(render(out_dir))
+    path.write_text(render(out_dir) + campaigns_section(out_dir))
     return path
