@@ -384,6 +384,6 @@ def test_arm_stats_and_paired_comparison():
     assert s["converged"] == 2
     p = analysis.paired(rows, "adaptive", "pd_only")
     assert p["n"] == 4 and p["only_a_fell"] == ["b"] and p["only_b_fell"] == ["c"]
-    assert p["both_walked"] == 2 and p["a_lower_vx"] == 1
+    assert p["both_walked"] == 2 and p["a_lower_vx"] == 1 and p["a_lower_vy"] == 0 and p["median_diff_vy"] == 0.0
     assert [x[0] for x in p["not_better"]] == ["b", "d"]
     assert [w["sample"] for w in analysis.worst(rows, "adaptive", 2)] == ["b", "d"]

@@ -113,8 +113,8 @@ def paired(rows: Sequence[dict[str, Any]], a: str, b: str) -> dict[str, Any]:
     by = {(r["sample"], r["arm"]): r for r in rows if r["status"] == COMPLETE}
     samples = sorted({s for s, arm in by if arm == a and (s, b) in by})
     out = {"a": a, "b": b, "n": len(samples), "both_fell": 0, "only_a_fell": [], "only_b_fell": [],
-           "both_walked": 0, "a_lower_vx": 0, "not_better": []}
-    diffs = []
+           "both_walked": 0, "a_lower_vx": 0, "a_lower_vy": 0, "not_better": []}
+    diffs, diffs_vy = [], []
     for s in samples:
         ra, rb = by[(s, a)], by[(s, b)]
         if ra["fell"] and rb["fell"]:
@@ -131,8 +131,13 @@ def paired(rows: Sequence[dict[str, Any]], a: str, b: str) -> dict[str, Any]:
             if d < 0:
                 out["a_lower_vx"] += 1
             else:
-                out["not_better"].append((s, f"sse_vx {d:+.3f} m/s", ra, rb))
+                out["not_better"].append((s, f"sse_vx {d:+.4f} m/s", ra, rb))
+            if ra["steady_state_error_vy"] is not None and rb["steady_state_error_vy"] is not None:
+                diffs_vy.append(ra["steady_state_error_vy"] - rb["steady_state_error_vy"])
+                out["a_lower_vy"] += diffs_vy[-1] < 0
     out["median_diff_vx"] = quantile(diffs, 0.5)
+    out["median_diff_vy"] = quantile(diffs_vy, 0.5)
+    out["max_diff_vy"] = max(diffs_vy, default=None)
     return out
 
 

@@ -70,7 +70,9 @@ def _paired_lines(data: analysis.CampaignData) -> list[str]:
              f"{p['n']} samples with both arms complete (same plant, command and seed). Both fell: "
              f"{p['both_fell']}; only {a} fell: {len(p['only_a_fell'])}; only {b} fell: {len(p['only_b_fell'])}. "
              f"Both kept walking: {p['both_walked']}; {a} had the lower sse_vx in {p['a_lower_vx']} of them "
-             f"(median difference {a} - {b}: {_f(p['median_diff_vx'])} m/s).", ""]
+             f"(median difference {a} - {b}: {_f(p['median_diff_vx'], 4)} m/s) and the lower sse_vy in "
+             f"{p['a_lower_vy']} (median difference {_f(p['median_diff_vy'], 4)} m/s, largest "
+             f"{_f(p['max_diff_vy'], 4)} m/s).", ""]
     if p["not_better"]:
         lines += [f"Samples where {a} is not better ({len(p['not_better'])}):", ""]
         rows = [[f"[{s}](samples/{s}.toml)", why, _f(ra["steady_state_error_vx"]), _f(rb["steady_state_error_vx"]),
@@ -95,6 +97,18 @@ def _worst_lines(data: analysis.CampaignData) -> list[str]:
     return lines
 
 
+def _unconverged_lines(data: analysis.CampaignData) -> list[str]:
+    """Per arm, the runs that kept walking but never settled within the convergence band."""
+    lines = []
+    for arm in data.arms:
+        ids = [r["sample"] for r in data.rows if r["arm"] == arm and r["status"] == "complete"
+               and r["fell"] is False and r["convergence_time_s"] is None]
+        if ids:
+            shown = ", ".join(f"[{i}](samples/{i}.toml)" for i in ids[:20]) + (" ..." if len(ids) > 20 else "")
+            lines.append(f"- {arm}: kept walking but did not converge in {len(ids)} run(s): {shown}")
+    return lines + [""] if lines else []
+
+
 def render(data: analysis.CampaignData, plots: Sequence[str]) -> str:
     m = data.manifest
     failed = [r for r in data.rows if r["status"] != "complete"]
@@ -114,6 +128,7 @@ def render(data: analysis.CampaignData, plots: Sequence[str]) -> str:
     for r in failed[:20]:
         lines.append(f"- failed: {r['sample']} / {r['arm']}: `{str(r.get('error') or '')[:200]}`")
     lines += [""] if failed else []
+    lines += _unconverged_lines(data)
     lines += [f"![{p}]({p})" for p in plots] + [""]
     return "\n".join(lines + _paired_lines(data) + _worst_lines(data)) + "\n"
 
