@@ -138,6 +138,11 @@ def test_smoke_campaign_local_cluster(smoke_run):
         assert (out / f).is_file(), f
     assert "| adaptive | 4 | 0 | 0/4 = 0 %" in (out / "campaign.md").read_text()
     assert_clean(tmp, out)
+    # `scenarios report` over the folder holding the campaign lists it with its table
+    r = subprocess.run([sys.executable, "-m", "scenarios", "report", str(tmp)], capture_output=True, text=True,
+                       timeout=120, env=_env(tmp))
+    assert r.returncode == 0, r.stderr
+    assert "## Campaigns\n\n### [out](out/campaign.md)" in (tmp / "report.md").read_text()
 
 
 def test_same_seed_same_csv_apart_from_timings(smoke_run, tmp_path, built_fmu):
