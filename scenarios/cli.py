@@ -359,6 +359,10 @@ def build_parser() -> argparse.ArgumentParser:
                        help="keep the complete results already in --out (same set-up) and run the other scenarios")
     sp.set_defaults(func=cmd_run)
 
+    from scenarios.campaign.cli import add_parser as add_campaign_parser
+
+    add_campaign_parser(sub)
+
     sp = sub.add_parser("report", help="write DIR/report.md over the results in DIR")
     sp.add_argument("dir")
     sp.set_defaults(func=cmd_report)
