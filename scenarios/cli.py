@@ -4,7 +4,7 @@
     python -m scenarios validate FILE [FILE ...]
     python -m scenarios run NAME|FILE|all|paper [...] [--model M] [--out DIR]
                             [--regulator fmu|inprocess] [--jobs N] [--fmu PATH]
-                            [--duration S] [--rebuild-fmu]
+                            [--duration S] [--rebuild-fmu] [--plant inprocess|fmu] [--plant-fmu PATH]
     python -m scenarios report DIR
 
 ``run`` validates every target first (all problems at once), builds the FMU at
@@ -73,13 +73,22 @@ def ensure_fmu(fmu: Path | None, *, rebuild: bool = False) -> Path:
     return DEFAULT_FMU
 
 
-def _run_task(scenario, arm_name: str, regulator: str, fmu_path: str | None):
+def _plant(plant_fmu: str | None):
+    """The ``plant`` argument of run_arm: None (in-process walker) or the CassiePlant FMU's factory."""
+    if plant_fmu is None:
+        return None
+    from scenarios.plant_fmu import plant_factory
+
+    return plant_factory(plant_fmu)
+
+
+def _run_task(scenario, arm_name: str, regulator: str, fmu_path: str | None, plant_fmu: str | None = None):
     """One scenario x arm in a worker process (its own plant model and FMU instance)."""
     _setup_env()
     from scenarios.master import make_regulator, run_arm
 
     try:
-        return run_arm(scenario, arm_name, make_regulator(regulator, fmu_path)), None
+        return run_arm(scenario, arm_name, make_regulator(regulator, fmu_path), plant=_plant(plant_fmu)), None
     except Exception as exc:  # report, don't kill the pool
         return None, f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"
 
@@ -144,6 +153,15 @@ def cmd_run(args) -> int:
         except Exception as exc:
             print(f"cannot get the FMU: {exc}", file=sys.stderr)
             return 1
+    plant_fmu = None
+    if args.plant == "fmu":
+        from scenarios.plant_fmu import ensure_plant_fmu
+
+        try:
+            plant_fmu = str(ensure_plant_fmu(args.plant_fmu, rebuild=args.rebuild_fmu))
+        except Exception as exc:
+            print(f"cannot get the plant FMU: {exc}", file=sys.stderr)
+            return 1
     out_root = Path(args.out)
     out_root.mkdir(parents=True, exist_ok=True)
 
@@ -177,7 +195,8 @@ def cmd_run(args) -> int:
                 from scenarios.master import make_regulator, run_arm
 
                 try:
-                    res = run_arm(s, arm_name, make_regulator(args.regulator, fmu_path), progress=bar.update)
+                    res = run_arm(s, arm_name, make_regulator(args.regulator, fmu_path), progress=bar.update,
+                                  plant=_plant(plant_fmu))
                     err = None
                 except Exception as exc:
                     res, err = None, f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"
@@ -188,7 +207,7 @@ def cmd_run(args) -> int:
         ctx = multiprocessing.get_context("spawn")
         with cf.ProcessPoolExecutor(max_workers=args.jobs, mp_context=ctx) as pool, \
                 tqdm(total=len(tasks), unit="arm", desc="co-simulation", disable=None, leave=False) as bar:
-            futures = {pool.submit(_run_task, s, a, args.regulator, fmu_path): (s, a) for s, a in tasks}
+            futures = {pool.submit(_run_task, s, a, args.regulator, fmu_path, plant_fmu): (s, a) for s, a in tasks}
             for fut in cf.as_completed(futures):
                 s, a = futures[fut]
                 try:
@@ -246,6 +265,10 @@ def build_parser() -> argparse.ArgumentParser:
                                                           "built if missing)")
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--duration", type=float, default=None, help="override every scenario's duration_s (quick runs)")
+    sp.add_argument("--plant", choices=("inprocess", "fmu"), default="inprocess",
+                    help="the MuJoCo plant in-process (default) or the CassiePlant FMU through fmpy")
+    sp.add_argument("--plant-fmu", type=Path, default=None,
+                    help="CassiePlant FMU file (default dist/CassiePlant.fmu, built if missing or stale)")
     sp.set_defaults(func=cmd_run)
 
     sp = sub.add_parser("report", help="write DIR/report.md over the results in DIR")
