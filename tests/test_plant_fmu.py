@@ -196,6 +196,34 @@ def test_guard_has_no_memory_or_undefined_behaviour_errors(plant_fmu, build_modu
     assert "AddressSanitizer" not in log and "runtime error" not in log, log
     assert statuses == [OK, ERROR, OK, OK, OK, ERROR, OK, OK, ERROR, OK, ERROR] + [OK] * 5 + [ERROR, OK, ERROR] + \
         [OK] * 6, log
+    # libcosim steps FMUs in worker threads Python did not create: the guard's thread-state path
+    osp = tmp_path / "osp"
+    osp.mkdir()
+    sanitized.replace(osp / "CassiePlant.fmu")
+    (osp / "OspSystemStructure.xml").write_text(ONE_PLANT_OSP)
+    proc = subprocess.run([sys.executable, "-c", LIBCOSIM_STEPS, str(osp)], env=env, capture_output=True, text=True,
+                          timeout=300)
+    out = proc.stdout + proc.stderr
+    assert proc.returncode == 0 and "stepped" in out, out[-3000:]
+    assert "AddressSanitizer" not in out and "runtime error" not in out, out[-3000:]
+
+
+ONE_PLANT_OSP = """<?xml version="1.0" encoding="utf-8"?>
+<OspSystemStructure xmlns="http://opensimulationplatform.com/MSMI/OSPSystemStructure" version="0.1">
+  <StartTime>0.0</StartTime><BaseStepSize>0.005</BaseStepSize><Algorithm>fixedStep</Algorithm>
+  <Simulators><Simulator name="plant" source="CassiePlant.fmu" stepSize="0.005"/></Simulators>
+</OspSystemStructure>
+"""
+LIBCOSIM_STEPS = """
+import sys
+from libcosimpy.CosimExecution import CosimExecution
+from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+log_output_level(CosimLogLevel.ERROR)
+execution = CosimExecution.from_osp_config_file(sys.argv[1])
+assert execution.step(200)
+del execution
+print("stepped")
+"""
 
 
 # ---- behaviour ----------------------------------------------------------------------------------
