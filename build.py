@@ -448,6 +448,11 @@ def _plant_entries(tmp: Path, specs) -> tuple[dict, ET.ElementTree]:
                                canGetAndSetFMUstate=True, canSerializeFMUstate=True)
     with zipfile.ZipFile(raw) as archive:
         entries = {name: archive.read(name) for name in archive.namelist() if not name.endswith("/")}
+    if f"binaries/linux64/{PLANT_IDENTIFIER}.so" not in entries:
+        import pythonfmu
+
+        raise RuntimeError(f"pythonfmu came from {Path(pythonfmu.__file__).parent}, which has no binaries (an FMU's "
+                           "resources copy, imported after a pythonfmu FMU was loaded): build in a fresh process")
     for name in [n for n in entries if n.startswith("binaries/") and not n.startswith("binaries/linux64/")]:
         del entries[name]  # the guard is built for linux64 only: without it a refusal could only be fmi2Fatal
     tree = _plant_model_description(entries.pop("modelDescription.xml"), specs)

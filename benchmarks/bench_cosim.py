@@ -129,7 +129,17 @@ def ensure_fmu(path: str | None) -> Path:
     return Path(load_build_module().build_fmu(out))
 
 
-def system_loop(scenario: spec.Scenario, fmu: Path, repeat: int) -> dict[str, Any]:
+def build_system(fmu: Path, out: Path) -> tuple[Path, Path]:
+    """The plant FMU and CassieAVR.ssp in ``out`` (before any FMU is loaded: pythonfmu's builder must be
+    the installed package, not an FMU's copy of it)."""
+    from scenarios.cli import load_build_module
+
+    build = load_build_module()
+    plant_fmu = Path(build.build_plant_fmu(out))
+    return plant_fmu, build.build_ssp(out, plant_fmu, fmu)
+
+
+def system_loop(scenario: spec.Scenario, fmu: Path, plant_fmu: Path, ssp: Path, repeat: int) -> dict[str, Any]:
     """The loop with the plant as an FMU too (issue 10), best of ``repeat``, interleaved:
 
     - ``libcosim_ssp``: libcosim running ``CassieAVR.ssp`` (both FMUs, 5 ms Jacobi steps in
@@ -141,34 +151,29 @@ def system_loop(scenario: spec.Scenario, fmu: Path, repeat: int) -> dict[str, An
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
 
-    from scenarios.cli import load_build_module
     from scenarios.plant_fmu import plant_factory
     from scenarios.plantio import load_plant_model
 
     log_output_level(CosimLogLevel.ERROR)
-    build = load_build_module()
-    with tempfile.TemporaryDirectory(prefix="bench_system_") as tmp:
-        plant_fmu = Path(build.build_plant_fmu(Path(tmp)))
-        ssp = build.build_ssp(Path(tmp), plant_fmu, fmu)
-        model, summary = load_plant_model(scenario)
-        n = scenario.n_comm_steps
-        best: dict[str, dict[str, float]] = {}
-        for _ in range(repeat):
-            w0, c0 = time.perf_counter(), time.process_time()
-            execution = CosimExecution.from_ssp_file(str(ssp))
-            ok = execution.step(n)
-            wall, cpu = time.perf_counter() - w0, time.process_time() - c0
-            del execution
-            runs = {"libcosim_ssp": {"sim_s": n * scenario.comm_step_s, "wall_s": wall, "cpu_s": cpu, "ok": ok}}
-            c0 = time.process_time()
-            r = master.run_arm(scenario, "adaptive", master.FmuRegulator(fmu), model=model, model_summary=summary,
-                               plant=plant_factory(plant_fmu))
-            runs["master_plant_fmu"] = {"sim_s": r.sim_s, "wall_s": r.wall_s, "cpu_s": time.process_time() - c0,
-                                        "ok": not r.fell}
-            for key, m in runs.items():
-                m.update(rtf=m["sim_s"] / m["wall_s"], rtf_cpu=m["sim_s"] / m["cpu_s"])
-                if key not in best or m["rtf_cpu"] > best[key]["rtf_cpu"]:
-                    best[key] = m
+    model, summary = load_plant_model(scenario)
+    n = scenario.n_comm_steps
+    best: dict[str, dict[str, float]] = {}
+    for _ in range(repeat):
+        w0, c0 = time.perf_counter(), time.process_time()
+        execution = CosimExecution.from_ssp_file(str(ssp))
+        ok = execution.step(n)
+        wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        del execution
+        runs = {"libcosim_ssp": {"sim_s": n * scenario.comm_step_s, "wall_s": wall, "cpu_s": cpu, "ok": ok}}
+        c0 = time.process_time()
+        r = master.run_arm(scenario, "adaptive", master.FmuRegulator(fmu), model=model, model_summary=summary,
+                           plant=plant_factory(plant_fmu))
+        runs["master_plant_fmu"] = {"sim_s": r.sim_s, "wall_s": r.wall_s, "cpu_s": time.process_time() - c0,
+                                    "ok": not r.fell}
+        for key, m in runs.items():
+            m.update(rtf=m["sim_s"] / m["wall_s"], rtf_cpu=m["sim_s"] / m["cpu_s"])
+            if key not in best or m["rtf_cpu"] > best[key]["rtf_cpu"]:
+                best[key] = m
     return best
 
 
@@ -196,6 +201,8 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
 
     fmu = ensure_fmu(args.fmu)
+    system_dir = None if args.no_system else tempfile.TemporaryDirectory(prefix="bench_system_")
+    system_files = None if system_dir is None else build_system(fmu, Path(system_dir.name))
     scenario = spec.override(spec.resolve_targets(["nominal"])[0], duration_s=args.duration)
     res: dict[str, Any] = {"duration_s": args.duration, "repeat": args.repeat, "fmu": str(fmu)}
     bare = [bare_mj_step(min(args.duration, 5.0)) for _ in range(args.repeat)]
@@ -221,8 +228,9 @@ def main(argv=None) -> int:
         "plant_only_rate_over_bare_mj_step": res["plant_only"]["rtf_cpu"] / res["bare_mj_step"]["rtf_cpu"],
         "fmu_over_inprocess_wall": res["inprocess"]["rtf"] / res["fmu"]["rtf"],
     }
-    if not args.no_system:
-        res["system"] = system_loop(scenario, fmu, args.repeat)
+    if system_dir is not None:
+        with system_dir:
+            res["system"] = system_loop(scenario, fmu, *system_files, args.repeat)
     if args.suite:
         with tempfile.TemporaryDirectory(prefix="bench_suite_") as out:
             t0 = time.perf_counter()

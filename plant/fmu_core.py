@@ -202,7 +202,10 @@ def apply_inputs(walker: CassieWalker, inputs: Mapping) -> None:
     if (vx, vy) != (walker.vx_des_mps, walker.vy_des_mps):
         walker.set_command(vx, vy)
     walker.set_offsets({k: inputs[k] for k in OFFSET_KEYS})
-    walker.set_pelvis_force((inputs["push_fx"], inputs["push_fy"], inputs["push_fz"]))
+    force = [inputs["push_fx"], inputs["push_fy"], inputs["push_fz"]]
+    ph = walker.physics
+    if force != ph.data.xfrc_applied[ph.pelvis_body, :3].tolist():
+        walker.set_pelvis_force(force)
 
 
 def advance(walker: CassieWalker, inputs: Mapping, n_steps: int) -> dict:

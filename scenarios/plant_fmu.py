@@ -75,24 +75,30 @@ class FmuPlant(FmuRegulator):
         self._call("fmi2ExitInitializationMode", fmu.fmi2ExitInitializationMode, fmu.component)
         self._initialized = True
         self.time_s = float(t0)
-        self._in_vrs = [self.vars[n].valueReference for n in INPUT_NAMES]
-        self._out = {kind: [v.name for v in self.md.modelVariables if v.causality == "output" and v.type == kind]
-                     for kind in ("Real", "Integer", "Boolean")}
+        self._prepare_buffers()
         self._read_outputs()
 
-    def _read_outputs(self) -> None:
-        fmu, values = self._fmu, {}
-        for kind, names in self._out.items():
-            getter = {"Real": fmu.getReal, "Integer": fmu.getInteger, "Boolean": fmu.getBoolean}[kind]
-            got = self._get(f"fmi2Get{kind} (outputs)", getter, [self.vars[x].valueReference for x in names])
-            values.update(zip(names, got))
-        self.out = values
+    def _prepare_buffers(self) -> None:
+        """ctypes arrays for the per-step calls (value references from the model description)."""
+        from ctypes import c_double, c_int
 
-    def _get(self, what: str, fn, *args):
-        """A value-returning call under FmuRegulator's status check (fmpy raises on a bad status)."""
-        result = []
-        self._call(what, lambda: result.append(fn(*args)))
-        return result[0]
+        self._in_vrs = self._vr_array([self.vars[n].valueReference for n in INPUT_NAMES])
+        self._in_vals = (c_double * len(INPUT_NAMES))()
+        fmu = self._fmu
+        self._out = []
+        for kind, ctype, getter in (("Real", c_double, fmu.fmi2GetReal), ("Integer", c_int, fmu.fmi2GetInteger),
+                                    ("Boolean", c_int, fmu.fmi2GetBoolean)):
+            names = [v.name for v in self.md.modelVariables if v.causality == "output" and v.type == kind]
+            vrs = self._vr_array([self.vars[n].valueReference for n in names])
+            self._out.append((f"fmi2Get{kind} (outputs)", getter, names, vrs, (ctype * len(names))()))
+
+    def _read_outputs(self) -> None:
+        comp, values = self._fmu.component, {}
+        for what, getter, names, vrs, buffer in self._out:
+            self._call(what, getter, comp, vrs, len(names), buffer)
+            values.update(zip(names, buffer))
+        values["fell"] = bool(values["fell"])
+        self.out = values
 
     # ---- the walker's interface
     def set_command(self, vx_des_mps: float, vy_des_mps: float) -> None:
@@ -113,7 +119,10 @@ class FmuPlant(FmuRegulator):
         h = int(n_steps) * self.SIM_DT_S
         fmu = self._fmu
         self._t = self.time_s
-        self._call("fmi2SetReal (inputs)", fmu.setReal, self._in_vrs, [self._inputs[n] for n in INPUT_NAMES])
+        for i, name in enumerate(INPUT_NAMES):
+            self._in_vals[i] = self._inputs[name]
+        self._call("fmi2SetReal (inputs)", fmu.fmi2SetReal, fmu.component, self._in_vrs, len(INPUT_NAMES),
+                   self._in_vals)
         self._call("fmi2DoStep", fmu.fmi2DoStep, fmu.component, self.time_s, h, 1)
         self.time_s += h
         self._read_outputs()

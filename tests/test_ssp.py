@@ -19,6 +19,7 @@ What differs between the masters, and why:
 """
 import dataclasses
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -209,3 +210,17 @@ def test_the_system_structure_is_read_from_the_fmus(ssp, tmp_path):
         plant.write_bytes(z.read("resources/CassiePlant.fmu"))
         regulator.write_bytes(z.read("resources/AdaptiveVelocityRegulator.fmu"))
         assert system.ssp_entries(plant, regulator)["SystemStructure.ssd"] == z.read("SystemStructure.ssd")
+
+
+def test_the_readme_lines_run_the_ssp_in_libcosim_and_plot(ssp, tmp_path):
+    """The README's libcosimpy example, as printed there, on a built SSP (40 steps instead of 6000)."""
+    text = (REPO_ROOT / "README.md").read_text()
+    block = text.split("<!-- ssp-libcosim-example -->", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    line = 'SSP, STEPS, PLOT = "dist/CassieAVR.ssp", 6000, "docs/cassie_avr_ssp_libcosim.png"'
+    assert line in block
+    plot = tmp_path / "plot.png"
+    code = block.replace(line, f"SSP, STEPS, PLOT = {str(ssp)!r}, 40, {str(plot)!r}")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "MPLBACKEND": "Agg"})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert plot.stat().st_size > 10_000
