@@ -147,8 +147,8 @@ class FmuPlant(FmuRegulator):
     def fall_reason(self) -> str | None:
         if not self.fell():
             return None
-        said = [m for m in self.messages if "fell" in m]
-        return said[-1] if said else "fell (CassiePlant FMU output)"
+        said = [m for m in self.messages if "CassiePlant fell at t = " in m]  # the FMU logs the reason once
+        return said[-1].split(" s: ", 1)[-1] if said else "fell (CassiePlant FMU output)"
 
 
 def plant_factory(fmu_path: str | Path):
@@ -173,7 +173,8 @@ def ensure_plant_fmu(fmu: str | Path | None, *, rebuild: bool = False) -> Path:
             raise CosimError(f"--plant-fmu {fmu}: no such file")
         return Path(fmu)
     default = REPO_ROOT / "dist" / "CassiePlant.fmu"
-    sources = [REPO_ROOT / "build.py", *(REPO_ROOT / "plant").rglob("*.py"), *(REPO_ROOT / "fmu_src").rglob("*.[pc]*")]
+    sources = [REPO_ROOT / "build.py", *(REPO_ROOT / "plant").rglob("*.py"), *(REPO_ROOT / "plant" / "data").glob("*"),
+               *(REPO_ROOT / "fmu_src").rglob("*.py"), *(REPO_ROOT / "fmu_src").rglob("*.c")]
     stale = default.is_file() and max(p.stat().st_mtime for p in sources) > default.stat().st_mtime
     if rebuild or stale or not default.is_file():
         default.parent.mkdir(parents=True, exist_ok=True)

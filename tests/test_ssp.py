@@ -224,3 +224,14 @@ def test_the_readme_lines_run_the_ssp_in_libcosim_and_plot(ssp, tmp_path):
                           env={**os.environ, "MPLBACKEND": "Agg"})
     assert proc.returncode == 0, proc.stderr[-3000:]
     assert plot.stat().st_size > 10_000
+
+
+def test_a_fall_is_reported_the_same_with_the_plant_fmu(built_fmu, plant_fmu):
+    """A 4000 N sideways push topples Cassie: the same fall time and reason with either plant."""
+    base = spec.override(spec.resolve_targets(["nominal"])[0], duration_s=3.0)
+    s = dataclasses.replace(base, pushes=(spec.Push(1.0, (0.0, 4000.0, 0.0), 0.1),))
+    (with_fmu,) = master.run_scenario(s, "fmu", fmu_path=built_fmu, arms=("adaptive",), plant=plant_factory(plant_fmu))
+    (in_process,) = master.run_scenario(s, "fmu", fmu_path=built_fmu, arms=("adaptive",))
+    assert in_process.fell and with_fmu.fell
+    assert (with_fmu.t_fall_s, with_fmu.fall_reason) == (in_process.t_fall_s, in_process.fall_reason)
+    assert np.array_equal(with_fmu.rows, in_process.rows)
