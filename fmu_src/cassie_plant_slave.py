@@ -7,30 +7,30 @@ a module name derived from the resources folder: the host's own ``plant`` packag
 regulator FMU's modules and another copy of this FMU never mix with them (pythonfmu
 puts every FMU's ``resources/`` first on ``sys.path``; issue #228 of pythonfmu).
 
-Statuses: the FMU's linux64 library is the FMI guard (``fmu_src/guard/fmi2_guard.c``,
-built with this FMU's variable table and ``AVR_STEP_QUANTUM`` = 0.5 ms): calls the state
-machine forbids, sets of outputs or of fixed parameters after initialization, NaN/inf or
-out-of-range values and communication steps that are not whole multiples of 0.5 ms are
-``fmi2Error`` without reaching Python.  pythonfmu reports a Python exception as
-``fmi2Fatal`` only, so this slave never raises on bad input: it logs the problem with
-status Error and changes nothing, and the guard answers ``fmi2Error`` for any call that
-logged an error.  That covers what only Python can check: the ``model`` name and the
-plant's own parameter validation (``Perturbation.problems()``: every problem at once,
-each naming its field and range) in ``fmi2ExitInitializationMode``, which then stays in
-initialization mode, and foreign or corrupt FMU states.
+Statuses: the FMU's linux64 library is the FMI guard (``fmu_src/guard/``, built with this
+FMU's variable table and ``AVR_STEP_QUANTUM`` = 0.5 ms): calls the state machine forbids,
+sets of outputs or of fixed parameters after initialization, NaN/inf or out-of-range
+values, communication steps that are not whole multiples of 0.5 ms and corrupt or
+foreign serialized states are ``fmi2Error`` without reaching Python.  pythonfmu reports a
+Python exception as ``fmi2Fatal`` only, so this slave never raises on bad input: it logs
+the problem with status Error and changes nothing, and the guard answers ``fmi2Error``
+for any call that logged an error.  That covers what only Python can check: the
+``model`` name, the plant's own parameter validation (``Perturbation.problems()``: every
+problem at once, each naming its field and range) in ``fmi2ExitInitializationMode``,
+which then stays in initialization mode, and the contents of an FMU state.
 
-FMU state: one blob ("CPLS" header like the regulator's, so the guard checks its sizes)
-holding every variable value, the time and FMI phase, and the walker's exact state
-(MuJoCo's integration state, servo gains, controller memory).
+FMU state: the regulator's blob format (``fmu_src/avr_fmustate.py``: every variable
+value, the FMI phase and time, CRC-32) with the walker's exact state (MuJoCo's
+integration state, servo gains, controller memory) as its core.  As for the regulator,
+a state restores only into an instance with the same fixed parameters.
 """
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import importlib
 import importlib.util
-import json
 import math
-import struct
 import sys
 from pathlib import Path
 
@@ -41,9 +41,6 @@ from pythonfmu.enums import Fmi2Status
 LIB_DIR = "cassie_plant_lib"
 INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED = (
     "instantiated", "initializationMode", "stepComplete", "terminated")
-STATE_MAGIC = b"CPLS"
-STATE_VERSION = 1
-_HEADER = struct.Struct("<4sIII")  # magic, version, JSON bytes, walker bytes (the guard checks it)
 TIME_MATCH_RTOL = 1e-9
 _KINDS = {"Real": (Real, float), "Integer": (Integer, int), "Boolean": (Boolean, bool), "String": (String, str)}
 
@@ -91,8 +88,8 @@ class CassiePlant(Fmi2Slave):
         self._by_vr = [(v.name, self._specs[v.name].type) for v in self.vars.values()]
 
     def _error(self, message: str) -> None:
-        """Log an Error (the guard then answers fmi2Error); '%' escaped: hosts format it."""
-        self.log(message.replace("%", "%%"), Fmi2Status.error)
+        """Log an Error: the guard then answers fmi2Error for the call."""
+        self.log(message, Fmi2Status.error)
 
     # -- variables ---------------------------------------------------------------------
     def _names(self, vrs, kind: str) -> list[str]:
@@ -222,41 +219,31 @@ class CassiePlant(Fmi2Slave):
 
     # -- FMU state ---------------------------------------------------------------------
     def _get_fmu_state(self):
-        text = json.dumps({"fmu": "CassiePlant", "values": self._values, "phase": self._phase,
-                           "time_s": self._time_s}, sort_keys=True).encode("utf-8")
-        walker = b"" if self._walker is None else self._core.state_to_bytes(self._walker)
-        return _HEADER.pack(STATE_MAGIC, STATE_VERSION, len(text), len(walker)) + text + walker
+        return self._core.encode_fmu_state(self._values, self._phase, self._time_s, self._walker)
 
     def _set_fmu_state(self, state):
         try:
-            values, phase, time_s, walker = self._state_parts(bytes(state))
-        except Exception as exc:  # noqa: BLE001 - a corrupt state is refused, the instance unchanged
+            parts, walker = self._restore(bytes(state))
+        except Exception as exc:  # noqa: BLE001 - a bad state is refused (fmi2Error), the instance unchanged
             self._error(f"fmi2SetFMUstate refused: {exc}")
             return
-        self._values, self._phase, self._time_s, self._walker = values, phase, time_s, walker
+        self._values, self._phase, self._time_s, self._walker = parts.values, parts.phase, parts.time_s, walker
 
-    def _state_parts(self, blob: bytes):
-        """Decode and check a state completely; the walker is restored on a new or spare one."""
-        if len(blob) < _HEADER.size:
-            raise ValueError(f"{len(blob)} bytes is shorter than the header")
-        magic, version, n_text, n_walker = _HEADER.unpack_from(blob)
-        if magic != STATE_MAGIC or version != STATE_VERSION or len(blob) != _HEADER.size + n_text + n_walker:
-            raise ValueError(f"not a CassiePlant state (magic {magic!r}, version {version}, {len(blob)} bytes)")
-        scalars = json.loads(blob[_HEADER.size:_HEADER.size + n_text].decode("utf-8"))
-        values = {n: _KINDS[s.type][1](scalars["values"][n]) for n, s in self._specs.items()}
-        phase = scalars["phase"]
-        if phase not in (INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED):
-            raise ValueError(f"unknown phase {phase!r}")
-        if (n_walker > 0) != (phase in (STEP_COMPLETE, TERMINATED)):
-            raise ValueError(f"phase {phase} with {n_walker} bytes of walker state")
+    def _restore(self, blob: bytes):
+        """The state's parts, checked, and a walker in the saved state (the current one if the state
+        carries walker bytes and the instance has one; fixed parameters must equal the instance's)."""
+        parts = self._core.decode_fmu_state(blob)
+        values = {n: _KINDS[self._specs[n].type][1](v) for n, v in parts.values.items()}
+        differ = [f"{n} = {values[n]!r} (this instance: {self._values[n]!r})"
+                  for n in self._params() if values[n] != self._values[n]]
+        if differ:
+            raise ValueError("the state was saved with other fixed parameters: " + ", ".join(differ) +
+                             ". Set them to the state's values before restoring it")
         walker = None
-        if n_walker:
-            params = {s.name: values[s.name] for s in self._core.PARAM_SPECS}
-            walker = self._walker if self._walker is not None and params == self._params() else None
-            if walker is None:
-                walker = self._core.start(params, Path(self.resources) / LIB_DIR / "models")
-            self._core.state_from_bytes(walker, blob[_HEADER.size + n_text:])  # all or nothing
-        return values, phase, float(scalars["time_s"]), walker
+        if parts.core:
+            walker = self._walker or self._core.start(self._params(), Path(self.resources) / LIB_DIR / "models")
+            self._core.state_from_bytes(walker, parts.core)  # all or nothing
+        return dataclasses.replace(parts, values=values), walker
 
     @staticmethod
     def _fmu_state_to_bytes(state) -> bytes:
@@ -264,4 +251,6 @@ class CassiePlant(Fmi2Slave):
 
     @staticmethod
     def _fmu_state_from_bytes(state: bytes):
+        # The guard has checked the serialized state's CRC-64, GUID, fixed parameters and this blob's
+        # header; the contents are checked by _set_fmu_state, which refuses a bad one with fmi2Error.
         return bytes(state)

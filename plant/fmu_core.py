@@ -27,6 +27,7 @@ import struct
 from pathlib import Path
 from typing import Mapping
 
+from fmu_src import avr_fmustate
 from fmu_src.avr_core import VarSpec
 from fmu_src.avr_errors import PerturbationError, StateError
 from plant.controller import OFFSET_KEYS
@@ -229,6 +230,17 @@ def outputs(walker: CassieWalker) -> dict:
 
 
 # ------------------------------------------------------------------------------ state
+def encode_fmu_state(values: Mapping, phase: str, time_s: float, walker: CassieWalker | None) -> bytes:
+    """The FMU state blob (the regulator's format, ``fmu_src/avr_fmustate.py``: every variable, the FMI
+    phase, the time, then the walker's exact state, CRC-32)."""
+    return avr_fmustate.encode(dict(values), phase, time_s, b"" if walker is None else state_to_bytes(walker))
+
+
+def decode_fmu_state(blob) -> avr_fmustate.FmuStateParts:
+    """:func:`encode_fmu_state`'s parts, every value checked against :data:`SPECS` (StateError names why)."""
+    return avr_fmustate.decode(blob, SPECS)
+
+
 #: Walker state blob: magic, version, JSON length.
 _STATE_HEADER = struct.Struct("<4sII")
 _STATE_MAGIC = b"CPWS"

@@ -16,6 +16,8 @@ go into the FMU (its models travel inside it) and is refused.
 """
 from __future__ import annotations
 
+import os
+import tempfile
 from pathlib import Path
 from typing import Any, Mapping
 
@@ -43,8 +45,10 @@ class FmuPlant(FmuRegulator):
     kind = "fmu-plant"
     SIM_DT_S = PLANT_STEP_S
 
-    def __init__(self, fmu_path: str | Path, parameters: Mapping[str, Any], instance_name: str = "plant"):
-        super().__init__(fmu_path, instance_name)
+    def __init__(self, fmu_path: str | Path, parameters: Mapping[str, Any], instance_name: str = "plant", *,
+                 unpack_dir: str | Path | None = None):
+        """``unpack_dir``: where the FMU is extracted (a fresh subfolder, removed by ``close``)."""
+        super().__init__(fmu_path, instance_name, unpack_dir=unpack_dir)
         self._inputs = {n: 0.0 for n in INPUT_NAMES}
         self.vx_des_mps = self.vy_des_mps = 0.0
         self.time_s = 0.0
@@ -58,11 +62,16 @@ class FmuPlant(FmuRegulator):
         unknown = sorted(n for n in parameters if n not in self.vars or self.vars[n].causality != "parameter")
         if unknown:
             raise CosimError(f"CassiePlant has no parameter(s) {', '.join(unknown)}")
-        self._unzip = extract(str(self.fmu_path))
+        self._unzip = tempfile.mkdtemp(prefix="fmu-", dir=self._unpack_dir)  # close() removes it
+        extract(str(self.fmu_path), self._unzip)
         _LOG_ROUTES[self.instance_name] = self.messages
-        self._fmu = fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip,
-                                    modelIdentifier=self.md.coSimulation.modelIdentifier,
-                                    instanceName=self.instance_name)
+        cwd = os.getcwd()
+        try:
+            self._fmu = fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip,
+                                        modelIdentifier=self.md.coSimulation.modelIdentifier,
+                                        instanceName=self.instance_name)
+        finally:  # fmpy 0.3 changes into binaries/<platform> to load the library (see FmuRegulator.start)
+            os.chdir(cwd)
         self._call("fmi2Instantiate", lambda: fmu.instantiate(callbacks=_shared_callbacks(), loggingOn=True))
         self._instantiated = True
         for name, value in parameters.items():
@@ -151,15 +160,16 @@ class FmuPlant(FmuRegulator):
         return said[-1].split(" s: ", 1)[-1] if said else "fell (CassiePlant FMU output)"
 
 
-def plant_factory(fmu_path: str | Path):
-    """A ``plant(scenario, model)`` for :func:`scenarios.master.run_arm` that runs the FMU."""
+def plant_factory(fmu_path: str | Path, unpack_dir: str | Path | None = None):
+    """A ``plant(scenario, model)`` for :func:`scenarios.master.run_arm` that runs the FMU
+    (extracted under ``unpack_dir``, the system temp folder if None)."""
     def make(scenario, model) -> FmuPlant:
         nominal = None
         if scenario.torso_added_mass_kg is not None:
             from plant.model import load_model, model_summary
 
             nominal = model_summary(load_model(scenario.model))["pelvis_mass_kg"]
-        return FmuPlant(fmu_path, fmu_parameters(scenario, nominal))
+        return FmuPlant(fmu_path, fmu_parameters(scenario, nominal), unpack_dir=unpack_dir)
     return make
 
 

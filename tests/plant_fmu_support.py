@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 
@@ -32,10 +32,11 @@ def built_system(tmp_path_factory, build_module, regulator_fmu) -> Path:
 class Plant:
     """fmpy's FMU2Slave on the plant FMU, by variable name."""
 
-    def __init__(self, fmu_path, name="plant", unzip=None):
-        self.md = read_model_description(str(fmu_path))
+    def __init__(self, fmu_dir, name="plant"):
+        """``fmu_dir``: the extracted FMU (the tests extract it under their tmp_path)."""
+        self.md = read_model_description(str(fmu_dir))
         self.vars = {v.name: v for v in self.md.modelVariables}
-        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=unzip or extract(str(fmu_path)),
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=str(fmu_dir),
                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
         self.fmu.instantiate(loggingOn=False)
         self.t = 0.0

@@ -33,9 +33,15 @@ def plant_fmu(tmp_path_factory, build_module):
     return built_plant_fmu(tmp_path_factory, build_module)
 
 
-def run_calls(fmu, calls, env=None):
+@pytest.fixture(scope="module")
+def plant_dir(plant_fmu, unzip, tmp_path_factory):
+    """The plant FMU extracted (once per module)."""
+    return unzip(plant_fmu, tmp_path_factory.mktemp("plant_unzipped"))
+
+
+def run_calls(fmu_dir, calls, env=None):
     """(statuses, the FMU's log) of `calls` in a fresh process; the process must not die."""
-    proc = subprocess.run([sys.executable, str(DRIVER), str(fmu), json.dumps(calls)], capture_output=True,
+    proc = subprocess.run([sys.executable, str(DRIVER), str(fmu_dir), json.dumps(calls)], capture_output=True,
                           text=True, timeout=300, env=env)
     assert proc.returncode == 0, f"driver died (exit {proc.returncode}):\n{proc.stderr[-3000:]}"
     lines = proc.stdout.strip().splitlines()
@@ -123,26 +129,26 @@ def test_two_builds_have_the_same_sha256(plant_fmu, build_module, tmp_path):
     ("torso mass above 100 kg", [["instantiate"], ["set", "torso_mass_kg", 150.0]]),
     ("garbage serialized state", INIT + [["deserialize", -1]]),
 ])
-def test_illegal_call_is_refused_with_an_error_and_the_instance_survives(plant_fmu, case, calls):
-    statuses, _ = run_calls(plant_fmu, calls + [["free"]])
+def test_illegal_call_is_refused_with_an_error_and_the_instance_survives(plant_dir, case, calls):
+    statuses, _ = run_calls(plant_dir, calls + [["free"]])
     assert statuses[:-2] == [OK] * (len(calls) - 1), case
     assert statuses[-2] == ERROR, case
     assert statuses[-1] == OK
 
 
-def test_a_wrong_step_is_named_and_changes_nothing(plant_fmu):
-    statuses, log = run_calls(plant_fmu, INIT + [["step", 0.0, 0.0012], ["get", "plant_time"], ["step", 0.0, 0.001],
+def test_a_wrong_step_is_named_and_changes_nothing(plant_dir):
+    statuses, log = run_calls(plant_dir, INIT + [["step", 0.0, 0.0012], ["get", "plant_time"], ["step", 0.0, 0.001],
                                                   ["get", "plant_time"]])
     assert statuses == [OK] * 4 + [ERROR, OK, OK, OK], log
     assert "communicationStepSize = 0.0011999999999999999 s: must be a whole multiple of the plant step 0.0005 s" in log
 
 
-def test_bad_parameters_are_refused_naming_field_and_range_all_at_once(plant_fmu):
+def test_bad_parameters_are_refused_naming_field_and_range_all_at_once(plant_dir):
     bad = {"torso_mass_kg": 0.0, "terrain_max_height_m": 0.2, "terrain_max_slope_deg": 0.0, "terrain_size_m": 80.0}
     calls = [["instantiate"], *[["set", k, v] for k, v in bad.items()], ["setup", 0.0], ["enter"], ["exit"],
              ["set", "torso_mass_kg", 20.0], ["set", "terrain_max_slope_deg", 15.0], ["set", "terrain_size_m", 10.0],
              ["exit"], ["step", 0.0, H]]
-    statuses, log = run_calls(plant_fmu, calls)
+    statuses, log = run_calls(plant_dir, calls)
     assert statuses == [OK] * 7 + [ERROR] + [OK] * 5, log
     # the very messages of the plant's own validation (the scenario files run the same one)
     expected = Perturbation(torso_mass_kg=0.0, terrain=TerrainSpec(max_height_m=0.2, max_slope_deg=0.0, seed=0,
@@ -152,8 +158,8 @@ def test_bad_parameters_are_refused_naming_field_and_range_all_at_once(plant_fmu
         assert f"fmi2ExitInitializationMode refused: {problem}" in log, (problem, log)
 
 
-def test_model_name_is_checked(plant_fmu):
-    p = Plant(plant_fmu)
+def test_model_name_is_checked(plant_dir):
+    p = Plant(plant_dir)
     assert status_of(p.set, "model", "cassie3") == ERROR
     p.fmu.setupExperiment(startTime=0.0)
     p.fmu.enterInitializationMode()
@@ -164,48 +170,36 @@ def test_model_name_is_checked(plant_fmu):
     p.free()
 
 
-def test_guard_has_no_memory_or_undefined_behaviour_errors(plant_fmu, build_module, tmp_path):
-    """The FMI guard (C) built with AddressSanitizer + UBSan, driven through legal and illegal calls."""
-    import fmpy
+def test_guard_has_no_memory_or_undefined_behaviour_errors(build_module, unzip, tmp_path):
+    """The plant's FMI guard built with AddressSanitizer + UBSan (build.py's sanitize build), driven
+    through legal and illegal calls by fmpy and by libcosim's worker threads: no finding."""
+    from test_fmu_sanitize import _preload
 
-    gcc = Path("/usr/bin/gcc")
-    libasan = subprocess.run([str(gcc), "-print-file-name=libasan.so"], capture_output=True, text=True).stdout.strip()
-    if not gcc.is_file() or not Path(libasan).is_file():
-        pytest.skip("needs gcc with libasan")
-    with zipfile.ZipFile(plant_fmu) as z:
-        entries = {n: z.read(n) for n in z.namelist()}
-    root = ET.fromstring(entries["modelDescription.xml"])
-    (tmp_path / "avr_guard_vars.h").write_text(build_module._plant_guard_header(root, root.get("guid"), 0.0005))
-    so = tmp_path / "guard.so"
-    subprocess.run([str(gcc), "-shared", "-fPIC", "-g", "-O1", "-std=c11", "-fsanitize=address,undefined",
-                    "-fno-omit-frame-pointer", "-fno-sanitize-recover=undefined", f"-I{tmp_path}",
-                    f"-I{Path(fmpy.__file__).parent / 'c-code'}", str(build_module.GUARD_SOURCE), "-o", str(so),
-                    "-ldl", "-lpthread", "-lm"], check=True)
-    entries["binaries/linux64/CassiePlant.so"] = so.read_bytes()
-    sanitized = tmp_path / "CassiePlant.fmu"
-    with zipfile.ZipFile(sanitized, "w") as z:
-        for name, data in entries.items():
-            z.writestr(name, data)
+    sanitized = build_module.build_plant_fmu(tmp_path, sanitize=True)
+    reports = tmp_path / "reports"
+    reports.mkdir()
+    env = dict(os.environ, LD_PRELOAD=_preload(),
+               ASAN_OPTIONS=f"detect_leaks=0:halt_on_error=1:log_path={reports}/asan",
+               UBSAN_OPTIONS=f"print_stacktrace=1:halt_on_error=1:log_path={reports}/ubsan")
     calls = [["instantiate"], ["step", 0.0, H], ["set", "torso_mass_kg", 0.0], ["setup", 0.0], ["enter"], ["exit"],
              ["set", "torso_mass_kg", 20.0], ["exit"], ["step", 0.0, 0.0007], ["step", 0.0, H], ["set", "vx", 1.0],
              ["get_state"], ["step", H, H], ["serialize", 0], ["deserialize", 0], ["set_state", 1],
              ["deserialize", -1], ["terminate"], ["step", 2 * H, H], ["reset"], ["setup", 0.0], ["enter"], ["exit"],
              ["step", 0.0, 2 * H], ["free"]]
-    env = dict(os.environ, LD_PRELOAD=libasan, ASAN_OPTIONS="detect_leaks=0", UBSAN_OPTIONS="print_stacktrace=1")
-    statuses, log = run_calls(sanitized, calls, env=env)
-    assert "AddressSanitizer" not in log and "runtime error" not in log, log
+    statuses, log = run_calls(unzip(sanitized, tmp_path / "fmu"), calls, env=env)
+    assert sorted(reports.iterdir()) == [], log
     assert statuses == [OK, ERROR, OK, OK, OK, ERROR, OK, OK, ERROR, OK, ERROR] + [OK] * 5 + [ERROR, OK, ERROR] + \
         [OK] * 6, log
     # libcosim steps FMUs in worker threads Python did not create: the guard's thread-state path
     osp = tmp_path / "osp"
     osp.mkdir()
-    sanitized.replace(osp / "CassiePlant.fmu")
+    Path(sanitized).replace(osp / "CassiePlant.fmu")
     (osp / "OspSystemStructure.xml").write_text(ONE_PLANT_OSP)
     proc = subprocess.run([sys.executable, "-c", LIBCOSIM_STEPS, str(osp)], env=env, capture_output=True, text=True,
                           timeout=300)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0 and "stepped" in out, out[-3000:]
-    assert "AddressSanitizer" not in out and "runtime error" not in out, out[-3000:]
+    assert sorted(reports.iterdir()) == [], out[-3000:]
 
 
 ONE_PLANT_OSP = """<?xml version="1.0" encoding="utf-8"?>
@@ -233,8 +227,8 @@ def _inputs(k):
             "push_fx": 40.0 if 150 <= k < 170 else 0.0}
 
 
-def test_state_round_trip_is_bit_exact(plant_fmu):
-    p = Plant(plant_fmu).init(torso_mass_kg=20.0)
+def test_state_round_trip_is_bit_exact(plant_dir):
+    p = Plant(plant_dir).init(torso_mass_kg=20.0)
     for k in range(300):
         p.step(**_inputs(k))
     state = p.fmu.getFMUstate()
@@ -244,7 +238,9 @@ def test_state_round_trip_is_bit_exact(plant_fmu):
     p.fmu.setFMUstate(state)
     p.t = t_saved
     again = [p.step(**_inputs(k)) for k in range(300, 500)]
-    fresh = Plant(plant_fmu, name="fresh")  # not even initialized: the state brings its parameters
+    fresh = Plant(plant_dir, name="fresh")  # not initialized; its fixed parameters must be the state's
+    assert status_of(fresh.fmu.deSerializeFMUstate, blob) == ERROR  # saved with 20 kg, this one has 10.33 kg
+    fresh.set("torso_mass_kg", 20.0)
     fresh.fmu.setFMUstate(fresh.fmu.deSerializeFMUstate(blob))
     fresh.t = t_saved
     restored = [fresh.step(**_inputs(k)) for k in range(300, 500)]
@@ -254,9 +250,23 @@ def test_state_round_trip_is_bit_exact(plant_fmu):
     fresh.free()
 
 
-def test_walks_10s_at_half_a_metre_per_second_through_fmpy(plant_fmu):
+def test_a_state_of_the_other_model_is_refused_and_changes_nothing(plant_dir):
+    """The guard compares numeric fixed parameters; the String ``model`` is the slave's to check."""
+    osu = Plant(plant_dir, name="osu").init(model="osu")
+    osu.step(vx_des=0.5)
+    blob = bytes(osu.fmu.serializeFMUstate(osu.fmu.getFMUstate()))
+    menagerie = Plant(plant_dir, name="menagerie").init()
+    before = menagerie.step()
+    state = menagerie.fmu.deSerializeFMUstate(blob)  # the numeric fixed parameters match: accepted so far
+    assert status_of(menagerie.fmu.setFMUstate, state) == ERROR
+    assert menagerie.get("model") == b"menagerie" and menagerie.outputs() == before
+    for p in (osu, menagerie):
+        p.free()
+
+
+def test_walks_10s_at_half_a_metre_per_second_through_fmpy(plant_dir):
     names = ["vx", "pelvis_x", "fell", "step_index"]
-    r = simulate_fmu(str(plant_fmu), stop_time=10.0, output_interval=H, start_values={"vx_des": 0.5}, output=names)
+    r = simulate_fmu(str(plant_dir), stop_time=10.0, output_interval=H, start_values={"vx_des": 0.5}, output=names)
     assert not r["fell"].any()
     last = r["time"] >= 5.0
     # No regulator here: the calibrated gait alone settles about 0.015 m/s slow; 0.05 m/s is the
@@ -265,8 +275,8 @@ def test_walks_10s_at_half_a_metre_per_second_through_fmpy(plant_fmu):
     assert r["pelvis_x"][-1] > 3.0 and r["step_index"][-1] > 20
 
 
-def test_a_fall_is_an_output_and_the_simulation_goes_on(plant_fmu):
-    p = Plant(plant_fmu).init(vx_des=0.5)
+def test_a_fall_is_an_output_and_the_simulation_goes_on(plant_dir):
+    p = Plant(plant_dir).init(vx_des=0.5)
     fell_at = None
     for k in range(600):
         out = dict(zip([v.name for v in p.md.modelVariables if v.causality == "output"],
@@ -287,16 +297,16 @@ from plant.fmu_core import advance, start
 from fmu_src.avr_core import Regulator, RegulatorInputs, RegulatorParams
 sys.path.insert(0, {tests!r})
 from plant_fmu_support import Plant
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 
-plant_fmu, regulator_fmu = sys.argv[1], sys.argv[2]
-md = read_model_description(regulator_fmu)
+plant_dir, regulator_dir = sys.argv[1], sys.argv[2]
+md = read_model_description(regulator_dir)
 vr = {{v.name: v.valueReference for v in md.modelVariables}}
-reg = FMU2Slave(guid=md.guid, unzipDirectory=extract(regulator_fmu), modelIdentifier=md.coSimulation.modelIdentifier,
+reg = FMU2Slave(guid=md.guid, unzipDirectory=regulator_dir, modelIdentifier=md.coSimulation.modelIdentifier,
                 instanceName="avr")
 reg.instantiate(); reg.setupExperiment(startTime=0.0); reg.enterInitializationMode(); reg.exitInitializationMode()
-fmu = Plant(plant_fmu).init(vx_des=0.5)
+fmu = Plant(plant_dir).init(vx_des=0.5)
 walker = start(dict(model="menagerie", torso_mass_kg=10.33, torso_com_offset_x_m=0.0, torso_com_offset_y_m=0.0,
                     torso_com_offset_z_m=0.0, joint_damping_scale=1.0, terrain_max_height_m=0.0,
                     terrain_max_slope_deg=10.0, terrain_seed=0, terrain_size_m=20.0))
@@ -325,10 +335,10 @@ print("same", out_fmu[0], private[0])
 """
 
 
-def test_plant_fmu_regulator_fmu_and_the_hosts_plant_in_one_process(plant_fmu, built_fmu):
+def test_plant_fmu_regulator_fmu_and_the_hosts_plant_in_one_process(plant_dir, fmu_dir):
     """Both FMUs and the repository's plant package in one process: each uses its own code and
     the FMU pair gives bit for bit what the in-process pair gives."""
     script = FMUS_AND_HOST_PLANT.format(tests=str(Path(__file__).parent), repo=str(REPO_ROOT))
-    proc = subprocess.run([sys.executable, "-c", script, str(plant_fmu), str(built_fmu)], capture_output=True,
+    proc = subprocess.run([sys.executable, "-c", script, str(plant_dir), str(fmu_dir)], capture_output=True,
                           text=True, timeout=300, cwd=REPO_ROOT)
     assert proc.returncode == 0 and "same" in proc.stdout, proc.stdout[-2000:] + proc.stderr[-3000:]
