@@ -164,13 +164,13 @@ def _guard_header(root: ET.Element, guid: str, slave_module: str) -> str:
     for var in root.find("ModelVariables"):
         typed = var[0]
         lo, hi, start = typed.get("min"), typed.get("max"), typed.get("start", "0")
-        start = {"true": "1", "false": "0"}.get(start, start)
+        start = "0" if typed.tag == "String" else {"true": "1", "false": "0"}.get(start, start)
         causality, variability = var.get("causality", "local"), var.get("variability", "continuous")
         rows.append('    {"%s", \'%s\', \'%s\', \'%s\', %d, %s, %d, %s, %s},  /* vr %s */' % (
             var.get("name"), codes[typed.tag], causality[0], variability[0], lo is not None, lo or "0",
             hi is not None, hi or "0", start, var.get("valueReference")))
         assert int(var.get("valueReference")) == len(rows) - 1, "value references must be 0..n-1 in order"
-        if causality == "parameter" and variability == "fixed":
+        if causality == "parameter" and variability == "fixed" and typed.tag != "String":  # the slave checks strings
             fixed.append(var.get("valueReference"))
     categories = [c.get("name") for c in root.find("LogCategories")]
     return "\n".join([
@@ -321,6 +321,254 @@ def sha256_of(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
+# =====================================================================================
+# CassiePlant FMU and the CassieAVR system (SSP and OSP) -- issue 10
+# =====================================================================================
+PLANT_SLAVE_SCRIPT = FMU_SRC / "cassie_plant_slave.py"
+PLANT_IDENTIFIER = "CassiePlant"
+#: The plant package and its project imports travel in resources/<PLANT_LIB>/ (see the slave).
+PLANT_LIB = "cassie_plant_lib"
+PLANT_CORE = Path("plant") / "fmu_core.py"
+PLANT_DATA = (Path("plant") / "data" / "gait_library.json",)
+PROJECT_PACKAGES = ("plant", "fmu_src")
+PLANT_UNITS = {"1": {}, "m": {"m": "1"}, "N": {"kg": "1", "m": "1", "s": "-2"}, "kg": {"kg": "1"},
+               "deg": {"rad": "1", "factor": repr(3.141592653589793 / 180)}}
+PLANT_REQUIREMENTS = "numpy>=1.24\nmujoco>=3.2\n"
+MODEL_LICENSES = REPO_ROOT / "plant" / "model_licenses"  # menagerie.txt, osu.txt (texts, not models)
+
+
+def _repo_module(name: str):
+    """A module of this repository (imported with the repository on sys.path for the call)."""
+    import importlib
+
+    sys.path.insert(0, str(REPO_ROOT))
+    try:
+        return importlib.import_module(name)
+    finally:
+        sys.path.remove(str(REPO_ROOT))
+
+
+def _plant_core():
+    return _repo_module("plant.fmu_core")
+
+
+def _project_import(node, package: str) -> str | None:
+    """The package-relative module an absolute ``from plant|fmu_src... import`` names, else None."""
+    import ast
+
+    if not isinstance(node, ast.ImportFrom) or node.level or not node.module:
+        return None
+    top, _, rest = node.module.partition(".")
+    if top not in PROJECT_PACKAGES:
+        return None
+    return ("." if top == package else ".." + top + ("." if rest else "")) + rest
+
+
+def _vendored_source(path: Path) -> tuple[str, list[Path]]:
+    """The module's text with its project imports made package-relative, and the files it imports."""
+    import ast
+
+    rel = path.relative_to(REPO_ROOT)
+    lines = path.read_text().splitlines(keepends=True)
+    needed = []
+    for node in ast.walk(ast.parse("".join(lines))):
+        if isinstance(node, ast.Import) and any(a.name.split(".")[0] in PROJECT_PACKAGES for a in node.names):
+            raise RuntimeError(f"{rel}:{node.lineno}: use 'from ... import' for project modules (vendoring)")
+        target = _project_import(node, rel.parts[0])
+        if target is None:
+            continue
+        line = lines[node.lineno - 1]
+        if f"from {node.module} import" not in line:
+            raise RuntimeError(f"{rel}:{node.lineno}: cannot rewrite the import of {node.module}")
+        lines[node.lineno - 1] = line.replace(f"from {node.module} import", f"from {target} import", 1)
+        module = REPO_ROOT.joinpath(*node.module.split("."))
+        if module.with_suffix(".py").is_file():
+            needed.append(module.with_suffix(".py"))
+        else:  # a package: the modules imported from it by name
+            needed += [module / f"{a.name}.py" for a in node.names if (module / f"{a.name}.py").is_file()]
+    return "".join(lines), needed
+
+
+def _vendor_plant(lib: Path) -> None:
+    """Copy plant/fmu_core.py and every project module it needs (imports made relative) to ``lib``."""
+    todo, done = [REPO_ROOT / PLANT_CORE], set()
+    while todo:
+        path = todo.pop()
+        if path in done:
+            continue
+        done.add(path)
+        text, needed = _vendored_source(path)
+        (lib / path.relative_to(REPO_ROOT)).parent.mkdir(parents=True, exist_ok=True)
+        (lib / path.relative_to(REPO_ROOT)).write_text(text)
+        todo.extend(needed)
+    for package in PROJECT_PACKAGES:
+        (lib / package / "__init__.py").write_text(f'"""The {package} modules the CassiePlant FMU needs."""\n')
+    (lib / "__init__.py").write_text('"""CassiePlant FMU: the plant package, loaded by cassie_plant_slave."""\n')
+    for data in PLANT_DATA:
+        (lib / data).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(REPO_ROOT / data, lib / data)
+
+
+def _copy_models(models: Path) -> None:
+    """Menagerie's agility_cassie (mujoco-menagerie / MENAGERIE_ROOT) and OSU's model, with licenses."""
+    import mujoco_menagerie
+
+    model = _repo_module("plant.model")
+    menagerie = Path(mujoco_menagerie.get(model.MENAGERIE_ROBOT).xml(model.MENAGERIE_ENTRY)).parent
+    shutil.copytree(menagerie, models / "menagerie" / menagerie.name)
+    shutil.copyfile(MODEL_LICENSES / "menagerie.txt", models / "menagerie" / "LICENSE")
+    osu = model.osu_model_path()
+    if not osu.is_file():
+        log.warning("OSU model not found at %s (set CASSIE_OSU_XML): the FMU's model='osu' will be refused", osu)
+        return
+    (models / "osu").mkdir(parents=True)
+    shutil.copyfile(osu, models / "osu" / "cassie.xml")
+    shutil.copytree(osu.parent / "cassie-stl-meshes", models / "osu" / "cassie-stl-meshes")
+    shutil.copyfile(MODEL_LICENSES / "osu.txt", models / "osu" / "LICENSE")
+
+
+def _plant_model_description(xml_bytes: bytes, specs) -> ET.ElementTree:
+    """The regulator's post-processing plus the plant's units."""
+    tree = _postprocess_model_description(xml_bytes, specs)
+    root = tree.getroot()
+    units = root.find("UnitDefinitions")
+    for name, exponents in PLANT_UNITS.items():
+        ET.SubElement(ET.SubElement(units, "Unit", name=name), "BaseUnit", exponents)
+    by_name = {spec.name: spec for spec in specs}
+    for var in root.find("ModelVariables"):
+        spec = by_name[var.get("name")]
+        if spec.type == "Real" and spec.unit in PLANT_UNITS:
+            var[0].set("unit", spec.unit)
+    ET.indent(root)
+    return tree
+
+
+def _plant_documentation(specs) -> str:
+    table = _documentation(specs)
+    table = table[table.index("<h2>Variables</h2>"):]
+    return f"""<!DOCTYPE html>
+<html><head><meta charset="utf-8"><title>{PLANT_IDENTIFIER}</title></head><body>
+<h1>{PLANT_IDENTIFIER}</h1>
+<p>MuJoCo Cassie biped (Menagerie's agility_cassie or Oregon State's model, both in
+<code>resources/{PLANT_LIB}/models</code> with their licenses) with a nominal HZD-style walking controller:
+0.5 ms plant step, joint PD servos inside MuJoCo, starts from rest in the standing pose, stands, shifts its
+weight and walks at the commanded speed. Connect the AdaptiveVelocityRegulator FMU name to name: this FMU's
+outputs vx, vy, pitch, roll, pitch_rate, roll_rate, step_index are its inputs, its six delta_* outputs are
+this FMU's inputs.</p>
+<h2>FMI behaviour</h2>
+<p>Co-simulation; communication steps must be whole multiples of 0.5 ms (else fmi2Error naming the step).
+A fall sets the output <code>fell</code>; the simulation goes on. Calls the state machine forbids, sets of
+outputs or of fixed parameters after initialization, NaN/inf or out-of-range values: fmi2Error, logged,
+no effect. Invalid parameter combinations (the plant's own validation, every problem named with its range)
+make fmi2ExitInitializationMode return fmi2Error and stay in initialization mode. FMU state: MuJoCo's full
+integration state and the controller's memory; restore-then-continue is bit-identical. Needs Python 3 with
+numpy and mujoco in the host (<code>resources/requirements.txt</code>); linux64.</p>
+{table}"""
+
+
+def _plant_guard_header(root: ET.Element, guid: str, plant_step_s: float) -> str:
+    """The regulator's table generator for the plant: its inner library, its slave, the 0.5 ms step quantum."""
+    header = _guard_header(root, guid, PLANT_SLAVE_SCRIPT.stem)
+    header = header.replace(f'"{MODEL_IDENTIFIER}_pythonfmu.so"', f'"{PLANT_IDENTIFIER}_pythonfmu.so"')
+    return header + f"#define AVR_STEP_QUANTUM {plant_step_s!r}\n"
+
+
+def _plant_entries(tmp: Path, specs) -> tuple[dict, ET.ElementTree]:
+    from pythonfmu.builder import FmuBuilder
+
+    lib = tmp / "stage" / PLANT_LIB
+    _vendor_plant(lib)
+    _copy_models(lib / "models")
+    raw = FmuBuilder.build_FMU(PLANT_SLAVE_SCRIPT, dest=tmp / "raw", project_files=[lib],
+                               canGetAndSetFMUstate=True, canSerializeFMUstate=True)
+    with zipfile.ZipFile(raw) as archive:
+        entries = {name: archive.read(name) for name in archive.namelist() if not name.endswith("/")}
+    if f"binaries/linux64/{PLANT_IDENTIFIER}.so" not in entries:
+        import pythonfmu
+
+        raise RuntimeError(f"pythonfmu came from {Path(pythonfmu.__file__).parent}, which has no binaries (an FMU's "
+                           "resources copy, imported after a pythonfmu FMU was loaded): build in a fresh process")
+    for name in [n for n in entries if n.startswith("binaries/") and not n.startswith("binaries/linux64/")]:
+        del entries[name]  # the guard is built for linux64 only: without it a refusal could only be fmi2Fatal
+    tree = _plant_model_description(entries.pop("modelDescription.xml"), specs)
+    entries["documentation/index.html"] = _plant_documentation(specs).encode("utf-8")
+    entries["resources/requirements.txt"] = PLANT_REQUIREMENTS.encode("utf-8")
+    inner = entries.pop(f"binaries/linux64/{PLANT_IDENTIFIER}.so")
+    entries[f"binaries/linux64/{PLANT_IDENTIFIER}_pythonfmu.so"] = patch_pythonfmu_exit_bug(inner)
+    return entries, tree
+
+
+def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path:
+    """Build ``<out_dir>/CassiePlant.fmu`` (FMI 2.0 co-simulation, linux64) and return its path.
+
+    ``sanitize``: the guard with AddressSanitizer and UBSan, as for ``build_fmu`` (tests only).
+    """
+    core = _plant_core()
+    with tempfile.TemporaryDirectory(prefix="cassie_plant_fmu_") as tmp:
+        entries, tree = _plant_entries(Path(tmp), core.SPECS)
+    digest = hashlib.sha256(ET.tostring(tree.getroot()))
+    for source in (*GUARD_SOURCES, GUARD_DIR / "guard.h"):
+        digest.update(source.read_bytes())
+    for name in sorted(entries):
+        digest.update(name.encode() + b"\0" + entries[name])
+    guid = "{" + str(uuid.uuid5(GUID_NAMESPACE, "CassiePlant:" + digest.hexdigest())) + "}"
+    tree.getroot().set("guid", guid)
+    with tempfile.TemporaryDirectory(prefix="cassie_plant_guard_") as tmp:
+        guard_path = Path(tmp) / f"{PLANT_IDENTIFIER}.so"
+        _compile_guard(_plant_guard_header(tree.getroot(), guid, core.PLANT_STEP_S), guard_path, sanitize)
+        entries[f"binaries/linux64/{PLANT_IDENTIFIER}.so"] = guard_path.read_bytes()
+    xml_out = io.BytesIO()
+    tree.write(xml_out, encoding="UTF-8", xml_declaration=True)
+    entries["modelDescription.xml"] = xml_out.getvalue()
+    fmu_path = Path(out_dir) / f"{PLANT_IDENTIFIER}.fmu"
+    _write_zip(entries, fmu_path)
+    log.info("built %s", fmu_path)
+    return fmu_path
+
+
+def plant_fmu_entry(fmu_path: Path) -> dict:
+    """This FMU's entry of ``dist/fmus.json`` (name, file, sha256, FMI version, kind, platforms)."""
+    return {"name": PLANT_IDENTIFIER, "file": Path(fmu_path).name, "sha256": sha256_of(fmu_path),
+            "fmi_version": "2.0", "kind": "co-simulation", "platforms": ["linux64"],
+            "implementation": "pythonfmu + C guard", "needs": "Python 3 with numpy and mujoco"}
+
+
+def update_fmus_json(out_dir: Path, entries: list[dict]) -> Path:
+    """Write ``entries`` into ``<out_dir>/fmus.json``, replacing entries of the same name, keeping others."""
+    import json
+
+    path = Path(out_dir) / "fmus.json"
+    listed = json.loads(path.read_text())["fmus"] if path.is_file() else []
+    names = {e["name"] for e in entries}
+    listed = sorted([e for e in listed if e["name"] not in names] + entries, key=lambda e: e["name"])
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps({"fmus": listed}, indent=2) + "\n")
+    tmp.replace(path)
+    return path
+
+
+
+
+
+def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path) -> Path:
+    """Write ``<out_dir>/CassieAVR.ssp``: both FMUs wired name to name, the nominal parameter sets and a
+    30 s, 5 ms default experiment (the structure is ``scenarios/system.py``'s); reproducible zip."""
+    system = _repo_module("scenarios.system")
+    path = Path(out_dir) / f"{system.SYSTEM_NAME}.ssp"
+    _write_zip(system.ssp_entries(Path(plant_fmu), Path(regulator_fmu)), path)
+    return path
+
+
+def build_osp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path) -> Path:
+    """Write the folder ``<out_dir>/CassieAVR_osp/``: OspSystemStructure.xml beside copies of both FMUs."""
+    system = _repo_module("scenarios.system")
+    folder = Path(out_dir) / f"{system.SYSTEM_NAME}_osp"
+    folder.mkdir(parents=True, exist_ok=True)
+    for fmu in (plant_fmu, regulator_fmu):
+        shutil.copyfile(fmu, folder / Path(fmu).name)
+    (folder / "OspSystemStructure.xml").write_bytes(system.osp_system_structure(Path(plant_fmu), Path(regulator_fmu)))
+    return folder
+
 def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output folder (default: dist/)")
@@ -332,6 +580,12 @@ def main(argv=None) -> int:
     path = build_fmu(args.out, sanitize=args.sanitize)
     print(path)
     print(f"sha256 {sha256_of(path)}")
+    plant = build_plant_fmu(args.out)  # issue 10: the plant FMU and the closed loop as a system
+    update_fmus_json(args.out, [plant_fmu_entry(plant)])
+    print(plant)
+    print(f"sha256 {sha256_of(plant)}")
+    print(build_ssp(args.out, plant, path))
+    print(build_osp(args.out, plant, path))
     return 0
 
 

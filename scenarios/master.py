@@ -428,7 +428,8 @@ def _row_dtype(outputs: tuple[str, ...], sensed: Mapping[str, Any], telemetry: M
 
 def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
             progress: Callable[[int], None] | None = None, model=None, model_summary: dict | None = None,
-            stop: Callable[[], bool] | None = None) -> ArmResult:
+            stop: Callable[[], bool] | None = None,
+            plant: Callable[[Scenario, Any], Any] | None = None) -> ArmResult:
     """Run one arm of ``scenario`` closed-loop; return its trajectory (nothing printed).
 
     ``progress(n)`` is called with the number of communication steps done since the
@@ -436,7 +437,9 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     (it is only read: a fresh walker is built on it). ``stop()`` is asked before every
     communication step; when it answers true the run ends with ``KeyboardInterrupt``
     (a cooperative Ctrl-C: raised here, never inside the FMU). The regulator is closed
-    whatever happens.
+    whatever happens. ``plant(scenario, model)`` makes the walker instead of
+    ``CassieWalker(model)`` (``scenarios.plant_fmu``: the plant FMU); its ``close()``, if
+    any, is called at the end.
     """
     from plant.sim import CassieWalker
 
@@ -449,7 +452,7 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     t0 = 0.0
     if model is None:
         model, model_summary = load_plant_model(scenario)
-    walker = CassieWalker(model)  # the walker works on its own copy of the model
+    walker = CassieWalker(model) if plant is None else plant(scenario, model)  # its own copy of the model
     n_plant = plant_steps_per_comm(h, float(walker.SIM_DT_S))
     outputs = regulator.output_names()
     missing = [n for n in DELTA_NAMES if n not in outputs]
@@ -498,6 +501,8 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
                 break
     finally:
         regulator.close()
+        if hasattr(walker, "close"):
+            walker.close()
     if progress is not None and done % 200:
         progress(done % 200)
     wall = time.perf_counter() - wall0
@@ -508,8 +513,8 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
 
 
 def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | Path | None = None,
-                 arms: tuple[str, ...] | None = None,
-                 progress: Callable[[int], None] | None = None) -> list[ArmResult]:
+                 arms: tuple[str, ...] | None = None, progress: Callable[[int], None] | None = None,
+                 plant: Callable[[Scenario, Any], Any] | None = None) -> list[ArmResult]:
     """Every arm of ``scenario`` (or those named in ``arms``), each on a fresh plant and regulator."""
     from scenarios.plantio import load_plant_model
 
@@ -519,5 +524,5 @@ def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | 
         if arms is not None and arm.name not in arms:
             continue
         results.append(run_arm(scenario, arm, make_regulator(regulator, fmu_path), progress=progress,
-                               model=model, model_summary=summary))
+                               model=model, model_summary=summary, plant=plant))
     return results

@@ -46,15 +46,23 @@ class StopFlag:
 
 
 def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None, unpack_dir: str | None,
-             stop: Callable[[], bool], progress: Callable[[int], None] | None = None) -> ArmOutcome:
-    """One scenario x arm (its own plant model and regulator instance) as an outcome."""
+             stop: Callable[[], bool], progress: Callable[[int], None] | None = None,
+             plant_fmu: str | None = None) -> ArmOutcome:
+    """One scenario x arm (its own plant model and regulator instance) as an outcome; the plant
+    in-process, or the CassiePlant FMU at ``plant_fmu`` (``--plant fmu``)."""
     from scenarios.master import make_regulator, run_arm
 
     if stop():
         return ArmOutcome(arm, "interrupted", started=False)
     try:
         reg = make_regulator(regulator, fmu_path, unpack_dir=unpack_dir)
-        return ArmOutcome(arm, "complete", result=run_arm(scenario, arm, reg, progress=progress, stop=stop))
+        plant = None
+        if plant_fmu is not None:
+            from scenarios.plant_fmu import plant_factory
+
+            plant = plant_factory(plant_fmu, unpack_dir=unpack_dir)
+        return ArmOutcome(arm, "complete", result=run_arm(scenario, arm, reg, progress=progress, stop=stop,
+                                                          plant=plant))
     except KeyboardInterrupt:
         return ArmOutcome(arm, "interrupted")
     except Exception as exc:  # one arm's failure is reported, the run goes on
@@ -69,13 +77,13 @@ def _init_worker(event: Any) -> None:
 
 
 def _worker_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
-                 unpack_dir: str | None) -> ArmOutcome:
-    return run_task(scenario, arm, regulator, fmu_path, unpack_dir, _WORKER_STOP.is_set)
+                 unpack_dir: str | None, plant_fmu: str | None = None) -> ArmOutcome:
+    return run_task(scenario, arm, regulator, fmu_path, unpack_dir, _WORKER_STOP.is_set, plant_fmu=plant_fmu)
 
 
 def run_tasks(tasks: Sequence[Task], *, regulator: str, fmu_path: str | None, unpack_dir: Path | None, jobs: int,
               stop: StopFlag, on_outcome: Callable[[Scenario, ArmOutcome], None],
-              progress: Callable[[int], None] | None = None) -> None:
+              progress: Callable[[int], None] | None = None, plant_fmu: str | None = None) -> None:
     """Run every task (``jobs`` > 1: in that many spawned processes) and hand each outcome
     to ``on_outcome`` in the calling thread; after a stop, the tasks not run are
     reported interrupted (not started). ``progress(n)``: communication steps done
@@ -83,22 +91,22 @@ def run_tasks(tasks: Sequence[Task], *, regulator: str, fmu_path: str | None, un
     unpack = None if unpack_dir is None else str(unpack_dir)
     if jobs == 1:
         for s, arm in tasks:
-            out = run_task(s, arm, regulator, fmu_path, unpack, stop, progress)
+            out = run_task(s, arm, regulator, fmu_path, unpack, stop, progress, plant_fmu=plant_fmu)
             if progress is not None and out.status == "complete":
                 progress(s.n_comm_steps - len(out.result.rows))  # the steps a fall skipped
             on_outcome(s, _first_line(s, out))
         return
-    _run_pool(tasks, regulator, fmu_path, unpack, jobs, stop, on_outcome, progress)
+    _run_pool(tasks, regulator, fmu_path, unpack, jobs, stop, on_outcome, progress, plant_fmu)
 
 
-def _run_pool(tasks, regulator, fmu_path, unpack, jobs, stop, on_outcome, progress) -> None:
+def _run_pool(tasks, regulator, fmu_path, unpack, jobs, stop, on_outcome, progress, plant_fmu=None) -> None:
     ctx = multiprocessing.get_context("spawn")
     stop.event = ctx.Event()
     if stop.requested:
         stop.event.set()
     pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker,
                                   initargs=(stop.event,))
-    futures = {pool.submit(_worker_task, s, a, regulator, fmu_path, unpack): (s, a) for s, a in tasks}
+    futures = {pool.submit(_worker_task, s, a, regulator, fmu_path, unpack, plant_fmu): (s, a) for s, a in tasks}
     pending = set(futures)
     try:
         while pending and not stop.requested:
