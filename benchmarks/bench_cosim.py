@@ -1,6 +1,6 @@
 """Closed-loop co-simulation speed: simulated seconds per wall second, in one run.
 
-    python benchmarks/bench_cosim.py [--duration 10] [--repeat 3] [--fmu PATH] [--suite] [--json FILE]
+    python benchmarks/bench_cosim.py [--duration 10] [--repeat 3] [--fmu PATH] [--suite] [--json FILE] [--no-system]
 
 Measured on the same machine in the same process, one after the other:
 
@@ -16,6 +16,8 @@ Measured on the same machine in the same process, one after the other:
 - ``lean loop``: ``plant.sim.CassieWalker`` stepped directly with zero offsets and with the
   native FMU called through its raw C functions (``LeanNativeFmu``): what the FMU itself
   adds to a closed loop, without the master's per-step Python bookkeeping.
+- with the plant as an FMU too (:func:`system_loop`): libcosim running ``CassieAVR.ssp``
+  and our master with ``--plant fmu`` (target: libcosim >= 0.5 x bare mj_step).
 
 Each closed-loop figure is the best of ``--repeat`` runs of ``--duration`` simulated
 seconds of the ``nominal`` scenario (``adaptive`` arm), start-up (FMU extraction and
@@ -224,6 +226,67 @@ def ensure_fmu(path: str | None, native: bool = False) -> Path:
     return Path(build.build_native_fmu(2, out) if native else build.build_fmu(out))
 
 
+def build_system(fmu: Path, out: Path) -> tuple[Path, Path]:
+    """The plant FMU and CassieAVR.ssp in ``out`` (before any FMU is loaded: pythonfmu's builder must be
+    the installed package, not an FMU's copy of it)."""
+    from scenarios.cli import load_build_module
+
+    build = load_build_module()
+    plant_fmu = Path(build.build_plant_fmu(out))
+    return plant_fmu, build.build_ssp(out, plant_fmu, fmu)
+
+
+def system_loop(scenario: spec.Scenario, fmu: Path, plant_fmu: Path, ssp: Path, repeat: int) -> dict[str, Any]:
+    """The loop with the plant as an FMU too (issue 10), best of ``repeat``, interleaved:
+
+    - ``libcosim_ssp``: libcosim running ``CassieAVR.ssp`` (both FMUs, 5 ms Jacobi steps in
+      its worker threads), ``execution.step(n)`` in one call, nothing observed;
+    - ``master_plant_fmu``: our master with ``--plant fmu`` (Gauss-Seidel, fmpy).
+    Rates per CPU second of the process (all threads) and per wall second; the command is
+    the scenario's first (0.5 m/s for ``nominal``), the plant nominal.
+    """
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+
+    from scenarios.plant_fmu import plant_factory
+    from scenarios.plantio import load_plant_model
+
+    log_output_level(CosimLogLevel.ERROR)
+    model, summary = load_plant_model(scenario)
+    n = scenario.n_comm_steps
+    best: dict[str, dict[str, float]] = {}
+    for _ in range(repeat):
+        w0, c0 = time.perf_counter(), time.process_time()
+        execution = CosimExecution.from_ssp_file(str(ssp))
+        ok = execution.step(n)
+        wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+        del execution
+        runs = {"libcosim_ssp": {"sim_s": n * scenario.comm_step_s, "wall_s": wall, "cpu_s": cpu, "ok": ok}}
+        c0 = time.process_time()
+        r = master.run_arm(scenario, "adaptive", master.FmuRegulator(fmu), model=model, model_summary=summary,
+                           plant=plant_factory(plant_fmu))
+        runs["master_plant_fmu"] = {"sim_s": r.sim_s, "wall_s": r.wall_s, "cpu_s": time.process_time() - c0,
+                                    "ok": not r.fell}
+        for key, m in runs.items():
+            m.update(rtf=m["sim_s"] / m["wall_s"], rtf_cpu=m["sim_s"] / m["cpu_s"])
+            if key not in best or m["rtf_cpu"] > best[key]["rtf_cpu"]:
+                best[key] = m
+    return best
+
+
+def print_system_loop(res: dict[str, Any]) -> None:
+    bare = res["bare_mj_step"]
+    print("closed loop with the plant as an FMU (CassiePlant + AdaptiveVelocityRegulator)")
+    for key, label, target in (("libcosim_ssp", "libcosim, CassieAVR.ssp", 0.5),
+                               ("master_plant_fmu", "our master, --plant fmu", None)):
+        m = res["system"][key]
+        ratio = m["rtf_cpu"] / bare["rtf_cpu"]
+        res["ratios"][f"{key}_rate_over_bare_mj_step"] = ratio
+        verdict = "" if target is None else f"  (target >= {target:.2f}: {'met' if ratio >= target else 'MISSED'})"
+        print(f"  {label:25s} {m['rtf_cpu']:8.2f} sim s/CPU s {m['rtf']:8.2f} sim s/wall s   "
+              f"{ratio:.3f} x bare mj_step (CPU){verdict}{'' if m['ok'] else '  [run failed or fell]'}")
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--duration", type=float, default=10.0, help="simulated seconds per closed-loop run")
@@ -232,10 +295,13 @@ def main(argv=None) -> int:
     ap.add_argument("--native-fmu", default=None, help="native FMI 2.0 FMU file (default: build one)")
     ap.add_argument("--suite", action="store_true", help="also time `run all --jobs 2` (minutes)")
     ap.add_argument("--json", default=None, help="write the numbers to this file")
+    ap.add_argument("--no-system", action="store_true", help="skip the plant-FMU rows (libcosim SSP, --plant fmu)")
     args = ap.parse_args(argv)
 
     fmu = ensure_fmu(args.fmu)
     native_fmu = ensure_fmu(args.native_fmu, native=True)
+    system_dir = None if args.no_system else tempfile.TemporaryDirectory(prefix="bench_system_")
+    system_files = None if system_dir is None else build_system(fmu, Path(system_dir.name))
     scenario = spec.override(spec.resolve_targets(["nominal"])[0], duration_s=args.duration)
     res: dict[str, Any] = {"duration_s": args.duration, "repeat": args.repeat, "fmu": str(fmu)}
     bare = [bare_mj_step(min(args.duration, 5.0)) for _ in range(args.repeat)]
@@ -268,6 +334,9 @@ def main(argv=None) -> int:
                                  args.duration, args.repeat)
     r_lean = res["lean_loop"]["native_fmu"]["rtf_cpu"] / res["lean_loop"]["plant_only"]["rtf_cpu"]
     res["ratios"]["lean_native_fmu_rate_over_plant_only"] = r_lean
+    if system_dir is not None:
+        with system_dir:
+            res["system"] = system_loop(scenario, fmu, *system_files, args.repeat)
     if args.suite:
         with tempfile.TemporaryDirectory(prefix="bench_suite_") as out:
             t0 = time.perf_counter()
@@ -306,6 +375,8 @@ def main(argv=None) -> int:
           f"{'met' if r['lean_native_fmu_rate_over_plant_only'] >= 0.9 else 'MISSED'})")
     print(f"plant-only rate / bare mj_step rate   {r['plant_only_rate_over_bare_mj_step']:.3f}; "
           f"in-process / plant-only CPU per simulated s {r['inprocess_over_plant_only']:.3f}")
+    if "system" in res:
+        print_system_loop(res)
     if "suite_jobs2_wall_s" in res:
         print(f"suite `run all --jobs 2`: {res['suite_jobs2_wall_s']:.1f} s wall (exit {res['suite_returncode']})")
     if args.json:

@@ -24,7 +24,10 @@ Regulators and outputs (all offsets in rad, added by the plant to its nominal ga
     delta_stance_hip_pitch = PD_pitch + g_thp * Psi_torso[0]
     delta_stance_knee      =            g_tk  * Psi_torso[1]
 
-where ``g_*`` are the ``psi_gain_<joint>`` parameters, applied at output time only
+each then clipped to ``[-delta_limit_rad, delta_limit_rad]`` (a safety bound that the
+default 1 rad keeps out of normal operation; inputs are also refused outside their
+declared physical ranges, ``INPUT_SPECS``), where ``g_*`` are the ``psi_gain_<joint>``
+parameters, applied at output time only
 (learning does not depend on them, so a gain of 0 switches an output off while its
 network keeps learning).  ``vx[k-1]`` is vx at the previous change of the integer input
 ``step_index`` (any change, also a decrease); PD_x and PD_y are recomputed only when
@@ -105,6 +108,7 @@ except ImportError:  # inside the FMU the modules are top-level
 
 __all__ = [
     "OUTPUT_JOINTS", "VarSpec", "PARAM_SPECS", "INPUT_SPECS", "OUTPUT_SPECS",
+    "VELOCITY_LIMIT_MPS", "ANGLE_LIMIT_RAD", "RATE_LIMIT_RADPS",
     "FIXED_PARAMS", "TAU_RC", "TAU_REF", "MAX_RATE_RANGE_HZ", "INTERCEPT_RANGE",
     "RegulatorParams", "validate_params", "RegulatorInputs", "validate_inputs",
     "NetworkSpec", "Networks", "SplitMix64", "sphere_encoders", "build_networks",
@@ -235,6 +239,13 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
     _p("seed", 0, 0, _INT32_MAX, "1",
        "Seed of the random encoders, max rates and intercepts, in [0, 2147483647]; "
        "same seed -> identical networks", type="Integer", variability="fixed"),
+    _p("delta_limit_rad", 1.0, 0.0, math.pi, "rad",
+       "Bound on each of the six joint offsets delta_*, rad, in [0, 3.14159]: an offset "
+       "beyond +-delta_limit_rad is clipped to it (a safety net against a runaway "
+       "regulator, not part of the method). The default 1 rad never engages in the "
+       "paper's suite (largest |delta| there 0.152 rad) nor with default gains inside "
+       "the declared input ranges of a walking robot (the networks add at most "
+       "2 psi_limit = 0.6 rad); 0 makes every offset 0"),
 )
 
 
@@ -243,15 +254,27 @@ def _i(name, unit, description, type="Real", variability="continuous", default=0
     return VarSpec(name, type, default, lo, hi, unit, "input", variability, description)
 
 
+#: Declared physical ranges of the inputs (the FMU refuses values outside them, naming the
+#: range).  Generous on purpose: Cassie's record speed is about 4 m/s and the walking
+#: envelope is below 1.5 m/s, so +-10 m/s only excludes nonsense (a master bug, a sensor
+#: fault, 1e308); +-pi rad is the range of the plant's Euler angles; +-100 rad/s is
+#: about three times a typical IMU gyro's full scale (2000 deg/s).
+VELOCITY_LIMIT_MPS = 10.0
+ANGLE_LIMIT_RAD = math.pi
+RATE_LIMIT_RADPS = 100.0
+_V, _A, _W = (-VELOCITY_LIMIT_MPS, VELOCITY_LIMIT_MPS), (-ANGLE_LIMIT_RAD, ANGLE_LIMIT_RAD), \
+    (-RATE_LIMIT_RADPS, RATE_LIMIT_RADPS)
+
 INPUT_SPECS: tuple[VarSpec, ...] = (
-    _i("vx", "m/s", "Measured forward (longitudinal) velocity of the pelvis, m/s"),
-    _i("vy", "m/s", "Measured lateral velocity of the pelvis, m/s"),
-    _i("vx_des", "m/s", "Desired forward velocity, m/s"),
-    _i("vy_des", "m/s", "Desired lateral velocity, m/s"),
-    _i("pitch", "rad", "Measured torso pitch, rad"),
-    _i("roll", "rad", "Measured torso roll, rad"),
-    _i("pitch_rate", "rad/s", "Measured torso pitch rate, rad/s"),
-    _i("roll_rate", "rad/s", "Measured torso roll rate, rad/s"),
+    _i("vx", "m/s", "Measured forward (longitudinal) velocity of the pelvis, m/s, in [-10, 10]",
+       lo=_V[0], hi=_V[1]),
+    _i("vy", "m/s", "Measured lateral velocity of the pelvis, m/s, in [-10, 10]", lo=_V[0], hi=_V[1]),
+    _i("vx_des", "m/s", "Desired forward velocity, m/s, in [-10, 10]", lo=_V[0], hi=_V[1]),
+    _i("vy_des", "m/s", "Desired lateral velocity, m/s, in [-10, 10]", lo=_V[0], hi=_V[1]),
+    _i("pitch", "rad", "Measured torso pitch, rad, in [-pi, pi]", lo=_A[0], hi=_A[1]),
+    _i("roll", "rad", "Measured torso roll, rad, in [-pi, pi]", lo=_A[0], hi=_A[1]),
+    _i("pitch_rate", "rad/s", "Measured torso pitch rate, rad/s, in [-100, 100]", lo=_W[0], hi=_W[1]),
+    _i("roll_rate", "rad/s", "Measured torso roll rate, rad/s, in [-100, 100]", lo=_W[0], hi=_W[1]),
     _i("step_index", "1",
        "Walking step counter from the plant, >= 0; the longitudinal and lateral PD "
        "terms are recomputed whenever it changes and held otherwise",
@@ -259,19 +282,20 @@ INPUT_SPECS: tuple[VarSpec, ...] = (
 )
 
 
-def _o(name, unit, description):
-    return VarSpec(name, "Real", 0.0, None, None, unit, "output", "continuous", description)
+def _o(name, unit, description, lo=None, hi=None):
+    return VarSpec(name, "Real", 0.0, lo, hi, unit, "output", "continuous", description)
 
 
+_DELTA = " clipped to +-delta_limit_rad, rad"
 OUTPUT_SPECS: tuple[VarSpec, ...] = (
-    _o("delta_swing_hip_pitch", "rad", "Swing hip pitch offset: PD_x + g Psi_x[0], rad"),
-    _o("delta_swing_knee", "rad", "Swing knee offset: g Psi_x[1], rad"),
-    _o("delta_swing_hip_roll", "rad", "Swing hip roll offset: PD_y + g Psi_y[0], rad"),
+    _o("delta_swing_hip_pitch", "rad", "Swing hip pitch offset: PD_x + g Psi_x[0]," + _DELTA, *_A),
+    _o("delta_swing_knee", "rad", "Swing knee offset: g Psi_x[1]," + _DELTA, *_A),
+    _o("delta_swing_hip_roll", "rad", "Swing hip roll offset: PD_y + g Psi_y[0]," + _DELTA, *_A),
     _o("delta_stance_hip_roll", "rad",
-       "Stance hip roll offset: PD_roll + g Psi_y[1] + g Psi_torso[2], rad"),
+       "Stance hip roll offset: PD_roll + g Psi_y[1] + g Psi_torso[2]," + _DELTA, *_A),
     _o("delta_stance_hip_pitch", "rad",
-       "Stance hip pitch offset: PD_pitch + g Psi_torso[0], rad"),
-    _o("delta_stance_knee", "rad", "Stance knee offset: g Psi_torso[1], rad"),
+       "Stance hip pitch offset: PD_pitch + g Psi_torso[0]," + _DELTA, *_A),
+    _o("delta_stance_knee", "rad", "Stance knee offset: g Psi_torso[1]," + _DELTA, *_A),
     _o("psi_x", "rad", "Diagnostic: saturated network output Psi_x[0] (before gain), rad"),
     _o("psi_y", "rad", "Diagnostic: saturated network output Psi_y[0] (before gain), rad"),
     _o("psi_pitch", "rad",
@@ -288,7 +312,7 @@ _PARAM_BY_NAME = {s.name: s for s in PARAM_SPECS}
 #: Parameters that define the networks and cannot change once a regulator exists.
 FIXED_PARAMS = tuple(s.name for s in PARAM_SPECS if s.variability == "fixed")
 _OUTPUT_NAMES = tuple(s.name for s in OUTPUT_SPECS)
-_REAL_INPUTS = tuple(s.name for s in INPUT_SPECS if s.type == "Real")
+_REAL_INPUT_SPECS = tuple(s for s in INPUT_SPECS if s.type == "Real")
 
 
 def _fmt_range(spec: VarSpec) -> str:
@@ -357,6 +381,7 @@ class RegulatorParams:
     rate_scale_radps: float = _d("rate_scale_radps")  # rad/s
     n_neurons: int = _d("n_neurons")
     seed: int = _d("seed")
+    delta_limit_rad: float = _d("delta_limit_rad")  # rad
 
     def __post_init__(self):
         problems = []
@@ -423,20 +448,18 @@ class RegulatorInputs:
 
 
 def validate_inputs(inputs: RegulatorInputs) -> None:
-    """Raise :class:`InputError` naming the first bad input.
+    """Raise :class:`InputError` naming the first bad input and its allowed range.
 
-    Real inputs must be finite numbers; ``step_index`` an integer in [0, 2**31-1].
+    Real inputs must be finite numbers in their declared range (``INPUT_SPECS``);
+    ``step_index`` an integer in [0, 2**31-1].
     """
-    for name in _REAL_INPUTS:
-        v = getattr(inputs, name)
-        if type(v) is float:  # fast path
-            if v - v == 0.0:  # false for nan and +-inf
-                continue
-        elif (isinstance(v, Real) and not isinstance(v, (bool, np.bool_))
-              and math.isfinite(v)):
+    for spec in _REAL_INPUT_SPECS:
+        v = getattr(inputs, spec.name)
+        if (isinstance(v, Real) and not isinstance(v, (bool, np.bool_))
+                and spec.min <= v <= spec.max):  # false for nan
             continue
-        unit = next(s.unit for s in INPUT_SPECS if s.name == name)
-        raise InputError(f"{name} = {v!r}: must be a finite number ({unit})")
+        raise InputError(f"{spec.name} = {v!r}: must be a finite number in {_fmt_range(spec)} "
+                         f"({spec.unit})")
     s = inputs.step_index
     if not (isinstance(s, Integral) and not isinstance(s, (bool, np.bool_))
             and 0 <= s <= _INT32_MAX):
@@ -830,14 +853,17 @@ def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
     pitch, roll, pitch_rate, roll_rate = (inputs.pitch, inputs.roll, inputs.pitch_rate,
                                           inputs.roll_rate)
     si = inputs.step_index
-    # Fast path for the usual all-python-float inputs (a non-finite value makes the sum
-    # non-finite); anything else goes through the full check and is converted to float.
+    # Fast path for the usual all-python-float inputs inside their declared ranges (the
+    # comparisons are false for nan); anything else goes through the full check (which
+    # raises naming the input and its range) and is converted to float.
+    V, A, W = VELOCITY_LIMIT_MPS, ANGLE_LIMIT_RAD, RATE_LIMIT_RADPS
     if not (type(vx) is float and type(vy) is float and type(vx_des) is float
             and type(vy_des) is float and type(pitch) is float and type(roll) is float
             and type(pitch_rate) is float and type(roll_rate) is float
             and type(si) is int and 0 <= si <= _INT32_MAX
-            and math.isfinite(vx + vy + vx_des + vy_des + pitch + roll + pitch_rate
-                              + roll_rate)):
+            and -V <= vx <= V and -V <= vy <= V and -V <= vx_des <= V and -V <= vy_des <= V
+            and -A <= pitch <= A and -A <= roll <= A
+            and -W <= pitch_rate <= W and -W <= roll_rate <= W):
         validate_inputs(inputs)
         vx, vy, vx_des, vy_des = float(vx), float(vy), float(vx_des), float(vy_des)
         pitch, roll = float(pitch), float(roll)
@@ -915,6 +941,14 @@ def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
             "delta_stance_knee": 0.0,
             "psi_x": 0.0, "psi_y": 0.0, "psi_pitch": 0.0, "psi_roll": 0.0,
         }
+    hi = P.delta_limit_rad
+    lo = 0.0 - hi  # (not -hi: a limit of 0 gives +0.0, never -0.0)
+    for name in _DELTA_NAMES:  # the safety bound; values inside it pass unchanged, bit for bit
+        v = out[name]
+        if v > hi:
+            out[name] = hi
+        elif v < lo:
+            out[name] = lo
     out["error_vx"] = vx - vx_des
     out["error_vy"] = vy - vy_des
     out["error_pitch"] = pitch - P.pitch_des
@@ -930,6 +964,7 @@ def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
 
 
 _new_state = object.__new__
+_DELTA_NAMES = tuple(f"delta_{joint}" for joint in OUTPUT_JOINTS)
 
 
 # --------------------------------------------------------------------------------------

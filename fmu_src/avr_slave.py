@@ -14,52 +14,55 @@ What this class adds is FMI behaviour that pythonfmu 0.7.0 does not give:
   ``False``, which pythonfmu reports as ``fmi2Discard``; the regulator's state is
   left exactly as it was, and the reason is logged.
 * A refused ``set`` raises :class:`FmiCallError`.  pythonfmu can only report
-  that as ``fmi2Fatal``; the FMU's binary guard (``guard/fmi2_guard.c``, the
-  library the host actually loads on linux64) checks the same rules first and
-  answers ``fmi2Error`` without calling Python, so on linux64 this path is a
-  second line of defence only.
+  that as ``fmi2Fatal``; the FMU's binary guard (``guard/*.c``, the library the
+  host actually loads on linux64) checks the same rules first and answers
+  ``fmi2Error`` without calling Python, so on linux64 this path is a second line
+  of defence only.
 * FMU state: ``_get_fmu_state`` returns one self-describing ``bytes`` blob
-  (variable values, time, FMI phase and the core's weights and memories); the
-  same blob is the serialized form, so get/set/serialize/deserialize round
-  trips are bit-exact.
+  (:mod:`avr_fmustate`: variable values, time, FMI phase and the core's weights
+  and memories, with a CRC-32); the same blob is the serialized form, so
+  get/set/serialize/deserialize round trips are bit-exact.  Deserializing checks
+  the whole blob (checksum, every value's type and range, the core's weights)
+  and never raises: a refused blob deserializes to ``REFUSED_STATE`` + the
+  reason, which the guard reads back and answers with ``fmi2Error``.  Restoring
+  a state whose fixed parameters (``n_neurons``, ``seed``, input scales) differ
+  from the instance's current values is refused.
 
-Statuses (host sees; linux64 with the guard / Python-only):
+Statuses (host sees; linux64 with the guard / pythonfmu's library alone):
     doStep in a wrong phase, non-finite or non-positive step, current time not
-    the end of the last step, NaN/inf input, negative step_index:
-        fmi2Error (guard) / fmi2Discard (slave returns False);
+    the end of the last step: fmi2Error (guard) / fmi2Discard (slave returns False);
     set of an output, of a fixed parameter after initialization, of anything
-    after terminate, parameter out of its [min, max] or NaN:
+    after terminate, a value NaN or outside its declared [min, max] (inputs too):
         fmi2Error (guard) / fmi2Fatal (pythonfmu);
-    corrupt state blob: fmi2Error (guard) / fmi2Fatal.
+    corrupt, truncated, foreign or non-finite state blob, or one saved with other
+    fixed parameters: fmi2Error (the guard checks its CRC-64, GUID, time and fixed
+    parameters in C, then the slave's verdict) / deserialize OK, then fmi2Fatal
+    on fmi2SetFMUstate (pythonfmu).
 """
 from __future__ import annotations
 
-import json
 import math
-import struct
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real
 from pythonfmu.enums import Fmi2Status
 
 try:  # inside the FMU these are top-level modules in resources/
-    from .avr_core import (INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, RegulatorInputs, RegulatorParams, build_networks,
-                           initial_state, state_from_bytes, state_to_bytes, step)
+    from . import avr_fmustate as fmustate
+    from .avr_core import (FIXED_PARAMS, INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, RegulatorInputs, RegulatorParams,
+                           build_networks, initial_state, state_from_bytes, state_to_bytes, step)
     from .avr_errors import AvrError, StateError
 except ImportError:  # pragma: no cover - exercised inside the built FMU
-    from avr_core import (INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, RegulatorInputs, RegulatorParams, build_networks,
-                          initial_state, state_from_bytes, state_to_bytes, step)
+    import avr_fmustate as fmustate
+    from avr_core import (FIXED_PARAMS, INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, RegulatorInputs, RegulatorParams,
+                          build_networks, initial_state, state_from_bytes, state_to_bytes, step)
     from avr_errors import AvrError, StateError
 
 # FMI phases tracked by the slave (FMI 2.0 section 4.2.4)
-INSTANTIATED = "instantiated"
-INITIALIZATION_MODE = "initializationMode"
-STEP_COMPLETE = "stepComplete"
-TERMINATED = "terminated"
-
-#: Header of the FMU state blob: magic, format version, JSON length, core blob length.
-STATE_MAGIC = b"AVRS"
-STATE_VERSION = 1
-_HEADER = struct.Struct("<4sIII")
+INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED = fmustate.PHASES
+_ALL_SPECS = (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)
+#: What deserializing a refused blob yields (then the reason, UTF-8); the guard reads it back
+#: and answers fmi2Error with the reason (see _fmu_state_from_bytes).
+REFUSED_STATE = b"\0AVR-REFUSED\0"
 
 #: Relative tolerance on "doStep starts where the last step ended": a master that
 #: computes t = t0 + k*h differs from (t_prev + h) by a few ulp, far below 1e-9 s.
@@ -86,14 +89,14 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._specs = {spec.name: spec for spec in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)}
+        self._specs = {spec.name: spec for spec in _ALL_SPECS}
         self._values = {spec.name: spec.default for spec in self._specs.values()}
         self._phase = INSTANTIATED
         self._time_s = 0.0
         self._params = None
         self._networks = None
         self._state = None
-        for spec in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS):
+        for spec in _ALL_SPECS:
             self.register_variable(self._declare(spec))
         #: value reference -> (name, type) for the fast get/set paths below
         self._by_vr = [(var.name, self._specs[var.name].type) for var in self.vars.values()]
@@ -169,12 +172,7 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
             return f"cannot set {name} after fmi2Terminate"
         if self._phase == STEP_COMPLETE and spec.causality == "parameter" and spec.variability == "fixed":
             return f"{name} is a fixed parameter: it can only be set before fmi2ExitInitializationMode"
-        if spec.type == "Real":
-            if not math.isfinite(value):
-                return f"{name} = {value!r}: must be a finite number" + _range_text(spec)
-        if spec.min is not None and value < spec.min or spec.max is not None and value > spec.max:
-            return f"{name} = {value!r}: out of range" + _range_text(spec)
-        return None
+        return fmustate.value_problem(spec, value)
 
     def _make_params(self) -> RegulatorParams:
         return RegulatorParams(**{spec.name: self._values[spec.name] for spec in PARAM_SPECS})  # validates
@@ -237,48 +235,30 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
 
     # -- FMU state ----------------------------------------------------------------------
     def _get_fmu_state(self):
-        scalars = {"values": self._values, "phase": self._phase, "time_s": self._time_s}
-        text = json.dumps(scalars, sort_keys=True).encode("utf-8")
         core = b"" if self._state is None else state_to_bytes(self._state)
-        return _HEADER.pack(STATE_MAGIC, STATE_VERSION, len(text), len(core)) + text + core
+        return fmustate.encode(self._values, self._phase, self._time_s, core)
 
     def _set_fmu_state(self, state):
-        values, phase, time_s, core = self._fmu_state_parts(state)
-        # construction validates every parameter (ParameterError lists all problems)
-        params = RegulatorParams(**{spec.name: _CASTS[spec.type](values[spec.name]) for spec in PARAM_SPECS})
-        if core:
+        parts, params, core_state = _parse_state(state)  # raises StateError naming the problem
+        values = parts.values
+        differ = [f"{name} = {values[name]!r} (this instance: {self._values[name]!r})"
+                  for name in FIXED_PARAMS if values[name] != self._values[name]]
+        if differ:
+            raise StateError("the state was saved with other fixed parameters: " + ", ".join(differ) +
+                             ". Set them to the state's values before restoring it")
+        if core_state is not None:
             networks = build_networks(params) if self._networks_stale(params) else self._networks
-            core_state = state_from_bytes(core, params)
         else:
-            networks, core_state = None, None
+            networks = None
         # everything checked: commit at once
         self._values = {name: _CASTS[self._specs[name].type](values[name]) for name in self._specs}
-        self._phase, self._time_s = phase, time_s
-        self._params = params if core else None
+        self._phase, self._time_s = parts.phase, parts.time_s
+        self._params = params if core_state is not None else None
         self._networks, self._state = networks, core_state
 
     def _networks_stale(self, params) -> bool:
-        current = self._params
-        return (self._networks is None or current is None
-                or (current.n_neurons, current.seed) != (params.n_neurons, params.seed))
-
-    def _fmu_state_parts(self, state):
-        blob = bytes(state)
-        if len(blob) < _HEADER.size:
-            raise StateError(f"FMU state of {len(blob)} bytes is shorter than its header ({_HEADER.size} bytes)")
-        magic, version, n_text, n_core = _HEADER.unpack_from(blob)
-        if magic != STATE_MAGIC or version != STATE_VERSION:
-            raise StateError(f"not an AdaptiveVelocityRegulator state (magic {magic!r}, version {version})")
-        if len(blob) != _HEADER.size + n_text + n_core:
-            raise StateError(f"FMU state has {len(blob)} bytes, its header says {_HEADER.size + n_text + n_core}")
-        scalars = json.loads(blob[_HEADER.size:_HEADER.size + n_text].decode("utf-8"))
-        values = scalars["values"]
-        missing = sorted(set(self._specs) - set(values))
-        if missing:
-            raise StateError(f"FMU state lacks variables: {', '.join(missing)}")
-        if scalars["phase"] not in (INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED):
-            raise StateError(f"FMU state has an unknown phase {scalars['phase']!r}")
-        return values, scalars["phase"], float(scalars["time_s"]), blob[_HEADER.size + n_text:]
+        net = self._networks
+        return net is None or (net.n_neurons, net.seed) != (params.n_neurons, params.seed)
 
     @staticmethod
     def _fmu_state_to_bytes(state) -> bytes:
@@ -286,10 +266,23 @@ class AdaptiveVelocityRegulator(Fmi2Slave):
 
     @staticmethod
     def _fmu_state_from_bytes(state: bytes):
+        """The blob itself if it is a complete, valid state; else ``REFUSED_STATE`` + the reason.
+
+        pythonfmu turns any exception raised here into fmi2Fatal; a refusal returned as data
+        lets the guard answer fmi2Error with the reason and leave the instance untouched.
+        """
+        try:
+            _parse_state(state)
+        except Exception as exc:  # noqa: BLE001 - nothing may escape to pythonfmu (it would mean fmi2Fatal)
+            return REFUSED_STATE + f"{type(exc).__name__}: {exc}".encode("utf-8", "replace")
         return bytes(state)
 
 
-def _range_text(spec) -> str:
-    low = "-inf" if spec.min is None else repr(spec.min)
-    high = "inf" if spec.max is None else repr(spec.max)
-    return f" in [{low}, {high}]"
+def _parse_state(blob):
+    """Everything in a state blob, checked: (parts, parameters, core state or None)."""
+    if bytes(blob[:len(REFUSED_STATE)]) == REFUSED_STATE:  # without the guard, a refused blob can come back
+        raise StateError(bytes(blob[len(REFUSED_STATE):]).decode("utf-8", "replace"))
+    parts = fmustate.decode(blob, _ALL_SPECS)
+    params = RegulatorParams(**{spec.name: parts.values[spec.name] for spec in PARAM_SPECS})  # validates
+    core_state = state_from_bytes(parts.core, params) if parts.core else None
+    return parts, params, core_state

@@ -4,27 +4,38 @@
     python -m scenarios validate FILE [FILE ...]
     python -m scenarios run NAME|FILE|all|paper [...] [--model M] [--out DIR]
                             [--regulator fmu|inprocess] [--jobs N] [--fmu PATH]
-                            [--duration S] [--rebuild-fmu]
+                            [--duration S] [--rebuild-fmu] [--overwrite | --resume]
+                            [--plant inprocess|fmu] [--plant-fmu PATH]
     python -m scenarios report DIR
 
-``run`` validates every target first (all problems at once), builds the FMU at
-``dist/AdaptiveVelocityRegulator.fmu`` if it is missing (fmu path), runs each
-scenario x arm (``--jobs N``: in N spawned processes, each with its own FMU copy),
-writes ``DIR/<name>/{timeseries.csv,summary.json,*.png}`` and prints one table row per
-scenario x arm. Exit status: 0 when every run finished (whatever the verdicts),
-1 when a run failed, 2 on invalid scenarios or arguments.
+``run`` checks everything before it simulates and names every problem at once: the
+scenarios (each model compiled and checked to be a Cassie), the arguments, and the
+results folder (:mod:`scenarios.store`: results of this run's scenarios already in DIR
+are refused unless ``--overwrite`` or ``--resume``; a second run on DIR is refused).
+It builds the FMU at ``dist/AdaptiveVelocityRegulator.fmu`` if it is missing or stale
+(fmu path), runs each scenario x arm (``--jobs N``: in N spawned processes, each with
+its own FMU copy under DIR's scratch folder), writes each scenario's
+``DIR/<name>/{timeseries.csv,summary.json,*.png}`` complete and then renames it into
+place, and prints one table row per scenario x arm. Ctrl-C stops the run between two
+steps: complete scenarios are kept, started ones are marked ``interrupted`` (or, where
+earlier results existed, left as they were), one line is printed.
+
+Exit status: 0 when every arm completed (whatever the verdicts), 1 when an arm failed
+(it is still written and reported), 2 on invalid scenarios, arguments or results
+folder (nothing simulated), 130 after Ctrl-C.
 """
 from __future__ import annotations
 
 import argparse
-import concurrent.futures as cf
 import importlib.util
 import logging
-import multiprocessing
 import os
+import signal
 import sys
+import threading
 import time
-import traceback
+from contextlib import contextmanager
+from functools import partial
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -73,17 +84,6 @@ def ensure_fmu(fmu: Path | None, *, rebuild: bool = False) -> Path:
     return DEFAULT_FMU
 
 
-def _run_task(scenario, arm_name: str, regulator: str, fmu_path: str | None):
-    """One scenario x arm in a worker process (its own plant model and FMU instance)."""
-    _setup_env()
-    from scenarios.master import make_regulator, run_arm
-
-    try:
-        return run_arm(scenario, arm_name, make_regulator(regulator, fmu_path)), None
-    except Exception as exc:  # report, don't kill the pool
-        return None, f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"
-
-
 # --------------------------------------------------------------------------- commands
 def cmd_list(args) -> int:
     from scenarios import spec
@@ -111,31 +111,65 @@ def cmd_list(args) -> int:
 def cmd_validate(args) -> int:
     from scenarios import spec
 
-    status = 0
+    loaded, problems = [], []
     for f in args.files:
         try:
-            s = spec.load_scenario(f)
-            print(f"{f}: ok ({s.name}, {s.duration_s:g} s, arms {', '.join(a.name for a in s.arms)})")
+            loaded.append(spec.load_scenario(f))
         except ScenarioError as exc:
-            print(str(exc), file=sys.stderr)
-            status = 2
-    return status
+            problems.append(str(exc))
+    unique, clashes = spec.distinct(loaded)
+    for s in unique:
+        print(f"{s.source}: ok ({s.name}, {s.duration_s:g} s, arms {', '.join(a.name for a in s.arms)})")
+    problems += clashes
+    for p in problems:
+        print(p, file=sys.stderr)
+    return 2 if problems else 0
 
 
-def cmd_run(args) -> int:
-    from tqdm import tqdm
-
-    from scenarios import output, spec
+def _run_targets(args) -> tuple[list, list[str]]:
+    """The validated scenarios of ``run`` (with --model/--duration) and every problem of them."""
+    from scenarios import spec
 
     try:
         scenarios = spec.resolve_targets(args.targets)
-        if args.model is not None or args.duration is not None:
-            scenarios = [spec.override(s, model=args.model, duration_s=args.duration) for s in scenarios]
     except ScenarioError as exc:
-        print(str(exc), file=sys.stderr)
-        return 2
+        return [], [str(exc)]
+    if args.model is None and args.duration is None:
+        return scenarios, []
+    out, problems = [], []
+    for s in scenarios:
+        try:
+            out.append(spec.override(s, model=args.model, duration_s=args.duration))
+        except ScenarioError as exc:
+            problems.append(str(exc))
+    return out, problems
+
+
+def _run_problems(args, scenarios: list, mode: str) -> list[str]:
+    """Everything ``run`` would fail on before simulating, beyond the scenarios themselves."""
+    from scenarios import store
+
+    problems = []
     if args.jobs < 1:
-        print(f"--jobs {args.jobs}: must be >= 1", file=sys.stderr)
+        problems.append(f"--jobs {args.jobs}: must be >= 1")
+    if args.fmu is not None and not Path(args.fmu).is_file():
+        problems.append(f"--fmu {args.fmu}: no such file")
+    out_root = Path(args.out)
+    out = store.out_problems(out_root)
+    if not out and out_root.is_dir():
+        out = store.plan(out_root, scenarios, args.regulator, mode).problems
+    return problems + out
+
+
+def cmd_run(args) -> int:
+    from scenarios import store
+
+    mode = "overwrite" if args.overwrite else "resume" if args.resume else "new"
+    scenarios, problems = _run_targets(args)
+    problems += _run_problems(args, scenarios, mode)
+    if problems:
+        for p in problems:
+            print(p, file=sys.stderr)
         return 2
     fmu_path = None
     if args.regulator == "fmu":
@@ -144,80 +178,163 @@ def cmd_run(args) -> int:
         except Exception as exc:
             print(f"cannot get the FMU: {exc}", file=sys.stderr)
             return 1
-    out_root = Path(args.out)
-    out_root.mkdir(parents=True, exist_ok=True)
+    if args.plant == "fmu":
+        from scenarios.plant_fmu import ensure_plant_fmu
 
-    tasks = [(s, a.name) for s in scenarios for a in s.arms]
-    results: dict[str, dict[str, Any]] = {s.name: {} for s in scenarios}
-    errors: dict[str, list[str]] = {s.name: [] for s in scenarios}
-    summaries: dict[str, dict[str, Any]] = {}
-    by_name = {s.name: s for s in scenarios}
-    wall0 = time.perf_counter()
-
-    def finish(name: str) -> None:
-        s = by_name[name]
-        done = [results[name][a.name] for a in s.arms if a.name in results[name]]
-        err = "; ".join(errors[name]) or None
-        summaries[name] = output.write_results(out_root, s, args.regulator, done, error=err)
-
-    def record(scenario, arm_name, res, err) -> None:
-        if err is not None:
-            errors[scenario.name].append(f"arm {arm_name}: {err.strip().splitlines()[0]}")
-            log.error("%s/%s failed:\n%s", scenario.name, arm_name, err)
-        else:
-            results[scenario.name][arm_name] = res
-        if len(results[scenario.name]) + len(errors[scenario.name]) == len(scenario.arms):
-            finish(scenario.name)
-
-    if args.jobs == 1:
-        total = sum(s.n_comm_steps * len(s.arms) for s in scenarios)
-        with tqdm(total=total, unit="step", desc="co-simulation", disable=None, leave=False) as bar:
-            for s, arm_name in tasks:
-                bar.set_postfix_str(f"{s.name}/{arm_name}")
-                from scenarios.master import make_regulator, run_arm
-
-                try:
-                    res = run_arm(s, arm_name, make_regulator(args.regulator, fmu_path), progress=bar.update)
-                    err = None
-                except Exception as exc:
-                    res, err = None, f"{type(exc).__name__}: {exc}\n{traceback.format_exc(limit=3)}"
-                if res is not None:  # the steps a fall skipped
-                    bar.update(s.n_comm_steps - len(res.rows))
-                record(s, arm_name, res, err)
+        try:
+            args.plant_fmu = str(ensure_plant_fmu(args.plant_fmu, rebuild=args.rebuild_fmu))
+        except Exception as exc:
+            print(f"cannot get the plant FMU: {exc}", file=sys.stderr)
+            return 1
     else:
-        ctx = multiprocessing.get_context("spawn")
-        with cf.ProcessPoolExecutor(max_workers=args.jobs, mp_context=ctx) as pool, \
-                tqdm(total=len(tasks), unit="arm", desc="co-simulation", disable=None, leave=False) as bar:
-            futures = {pool.submit(_run_task, s, a, args.regulator, fmu_path): (s, a) for s, a in tasks}
-            for fut in cf.as_completed(futures):
-                s, a = futures[fut]
-                try:
-                    res, err = fut.result()
-                except Exception as exc:  # the worker process died
-                    res, err = None, f"{type(exc).__name__}: {exc}"
-                record(s, a, res, err)
-                bar.update(1)
+        args.plant_fmu = None
+    out_root = Path(args.out)
+    try:
+        with store.ResultsDir(out_root) as results_dir:
+            plan = store.plan(out_root, scenarios, args.regulator, mode)  # again, now that the folder is ours
+            if plan.problems:
+                for p in plan.problems:
+                    print(p, file=sys.stderr)
+                return 2
+            session = _RunSession(args, results_dir, plan, fmu_path)
+            session.run()
+    except AvrError as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    return session.report(scenarios, out_root)
 
-    wall = time.perf_counter() - wall0
-    ordered = [summaries[s.name] for s in scenarios if s.name in summaries]
-    print(output.format_table(ordered))
-    sim = sum((m.get("sim_s") or 0.0) for su in ordered for m in (su.get("arms") or {}).values())
-    print(f"\n{len(scenarios)} scenario(s), {len(tasks)} arm run(s), {sim:.1f} simulated s in {wall:.1f} s wall "
-          f"(--jobs {args.jobs}, regulator {args.regulator}); results in {out_root}/ "
-          f"(python -m scenarios report {out_root})")
-    return 1 if any(errors.values()) else 0
+
+class _RunSession:
+    """One ``run``: the tasks, their outcomes, each scenario published once all its arms end."""
+
+    def __init__(self, args, results_dir, plan, fmu_path: str | None) -> None:
+        from scenarios.runner import StopFlag
+
+        self.args, self.results_dir, self.plan, self.fmu_path = args, results_dir, plan, fmu_path
+        self.stop = StopFlag()
+        self.outcomes: dict[str, dict[str, Any]] = {s.name: {} for s in plan.run}
+        self.summaries: dict[str, dict[str, Any]] = {s["scenario"]: s for s in plan.kept}
+        self.left_as_were: list[str] = []
+        self.write_errors: list[str] = []
+        self.wall_s = 0.0
+
+    def run(self) -> None:
+        from tqdm import tqdm
+
+        from scenarios import runner
+
+        tasks = [(s, a.name) for s in self.plan.run for a in s.arms]
+        jobs = min(self.args.jobs, max(1, len(tasks)))
+        if jobs == 1:
+            bar = tqdm(total=sum(s.n_comm_steps for s, _ in tasks), unit="step", desc="co-simulation",
+                       disable=None, leave=False)
+        else:
+            bar = tqdm(total=len(tasks), unit="arm", desc="co-simulation", disable=None, leave=False)
+        wall0 = time.perf_counter()
+        with bar, _sigint_sets(self.stop):
+            runner.run_tasks(tasks, regulator=self.args.regulator, fmu_path=self.fmu_path,
+                             unpack_dir=self.results_dir.fmu_dir, jobs=jobs, stop=self.stop,
+                             on_outcome=self.on_outcome, progress=bar.update, plant_fmu=self.args.plant_fmu)
+        self.wall_s = time.perf_counter() - wall0
+
+    def on_outcome(self, scenario, outcome) -> None:
+        got = self.outcomes[scenario.name]
+        got[outcome.arm] = outcome
+        if len(got) == len(scenario.arms):
+            self.finish(scenario, list(got.values()))
+
+    def finish(self, scenario, outcomes: list) -> None:
+        """Publish the scenario's folder. Only complete results replace earlier ones: a
+        failed or interrupted scenario leaves an existing folder as it was."""
+        from scenarios import output
+
+        if not any(o.started for o in outcomes):
+            return  # an interrupt kept every arm from starting: nothing to say on disk
+        replace = scenario.name in self.plan.replace
+        if replace and any(o.status != "complete" for o in outcomes):
+            self.left_as_were.append(scenario.name)
+            if not self.stop.requested:  # for the table and the exit status
+                self.summaries[scenario.name] = output.build_summary(scenario, self.args.regulator, outcomes)
+            return
+        write = partial(output.write_results, scenario=scenario, regulator=self.args.regulator, outcomes=outcomes)
+        try:
+            self.summaries[scenario.name] = self.results_dir.publish(scenario.name, write, replace=replace)
+        except (OSError, AvrError) as exc:  # e.g. the disk is full: the other scenarios go on
+            self.write_errors.append(f"{scenario.name}: results not written: {exc}")
+
+    def report(self, scenarios: list, out_root: Path) -> int:
+        """Print the table (or, after Ctrl-C, one line); the exit status."""
+        from scenarios import output
+
+        ordered = [self.summaries[s.name] for s in scenarios if s.name in self.summaries]
+        if self.stop.requested:
+            line = _interrupted_line(scenarios, self.summaries, self.left_as_were, out_root)
+            print(line + "".join(f"; {e}" for e in self.write_errors), file=sys.stderr)
+            return 130
+        print(output.format_table(ordered))
+        for name in self.left_as_were:
+            print(f"{name}: this run's results are {self.summaries[name]['status']}; the earlier results in "
+                  f"{out_root / name} were kept", file=sys.stderr)
+        for err in self.write_errors:
+            print(err, file=sys.stderr)
+        n_arms = sum(len(s.arms) for s in self.plan.run)
+        sim = sum((m.get("sim_s") or 0.0) for s in self.plan.run if s.name in self.summaries
+                  for m in self.summaries[s.name]["arms"].values())
+        kept = f"{len(self.plan.kept)} kept as complete (--resume), " if self.plan.kept else ""
+        print(f"\n{len(scenarios)} scenario(s), {kept}{n_arms} arm run(s), {sim:.1f} simulated s in "
+              f"{self.wall_s:.1f} s wall (--jobs {self.args.jobs}, regulator {self.args.regulator}); results in "
+              f"{out_root}/ (python -m scenarios report {out_root})")
+        failed = self.write_errors or any(su["status"] != "complete" for su in ordered)
+        return 1 if failed else 0
+
+
+def _interrupted_line(scenarios: list, summaries: dict, left_as_were: list[str], out_root: Path) -> str:
+    status = {n: s["status"] for n, s in summaries.items()}
+    complete = sum(1 for s in scenarios if status.get(s.name) == "complete")
+    flagged = sorted(n for n, st in status.items() if st != "complete")
+    parts = [f"{complete} of {len(scenarios)} scenario(s) complete in {out_root}/"]
+    if flagged:
+        parts.append(f"{', '.join(flagged)} marked incomplete")
+    if left_as_were:
+        parts.append(f"{', '.join(left_as_were)} left as before")
+    return f"interrupted: {'; '.join(parts)}; run again with --resume to finish"
+
+
+@contextmanager
+def _sigint_sets(stop):
+    """While inside: the first SIGINT sets ``stop`` (the run ends cleanly between steps),
+    a second one raises KeyboardInterrupt (stop at once)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def handler(signum, frame):
+        if stop.requested:
+            raise KeyboardInterrupt
+        stop.set()
+
+    previous = signal.signal(signal.SIGINT, handler)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
 
 
 def cmd_report(args) -> int:
     from scenarios.report import write_report
 
     try:
-        path = write_report(Path(args.dir))
-    except FileNotFoundError as exc:
+        path, problems = write_report(Path(args.dir))
+    except AvrError as exc:
         print(str(exc), file=sys.stderr)
         return 2
+    except OSError as exc:
+        print(f"{args.dir}: cannot write report.md: {exc.strerror or exc}", file=sys.stderr)
+        return 2
     print(path)
-    return 0
+    for p in problems:
+        print(p, file=sys.stderr)
+    return 2 if problems else 0
 
 
 # --------------------------------------------------------------------------- parser
@@ -246,7 +363,20 @@ def build_parser() -> argparse.ArgumentParser:
                                                           "built if missing)")
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--duration", type=float, default=None, help="override every scenario's duration_s (quick runs)")
+    sp.add_argument("--plant", choices=("inprocess", "fmu"), default="inprocess",
+                    help="the MuJoCo plant in-process (default) or the CassiePlant FMU through fmpy")
+    sp.add_argument("--plant-fmu", type=Path, default=None,
+                    help="CassiePlant FMU file (default dist/CassiePlant.fmu, built if missing or stale)")
+    again = sp.add_mutually_exclusive_group()
+    again.add_argument("--overwrite", action="store_true",
+                       help="replace the results of this run's scenarios already in --out")
+    again.add_argument("--resume", action="store_true",
+                       help="keep the complete results already in --out (same set-up) and run the other scenarios")
     sp.set_defaults(func=cmd_run)
+
+    from scenarios.campaign.cli import add_parser as add_campaign_parser
+
+    add_campaign_parser(sub)
 
     sp = sub.add_parser("report", help="write DIR/report.md over the results in DIR")
     sp.add_argument("dir")
@@ -259,4 +389,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(levelname)s %(name)s: %(message)s")
     _setup_env()
-    return args.func(args)
+    try:
+        return args.func(args)
+    except KeyboardInterrupt:  # Ctrl-C outside the run loop, or a second one inside it
+        print("interrupted: stopped at once; results of scenarios in progress were not written", file=sys.stderr)
+        return 130

@@ -31,7 +31,9 @@ import abc
 import itertools
 import logging
 import math
+import os
 import shutil
+import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -187,7 +189,9 @@ class FmuRegulator(RegulatorPath):
 
     kind = "fmu"
 
-    def __init__(self, fmu_path: str | Path, instance_name: str = "avr") -> None:
+    def __init__(self, fmu_path: str | Path, instance_name: str = "avr", *, unpack_dir: str | Path | None = None) -> None:
+        """``unpack_dir``: the folder under which :meth:`start` extracts the FMU (a fresh
+        subfolder, removed by :meth:`close`); None: the system temp folder."""
         from fmpy import read_model_description
 
         self.fmu_path = Path(fmu_path)
@@ -201,6 +205,7 @@ class FmuRegulator(RegulatorPath):
         self._outputs = tuple(v.name for v in self.md.modelVariables if v.causality == "output")
         self.messages: list[str] = []
         self._fmu = None
+        self._unpack_dir = unpack_dir
         self._unzip: str | None = None
         self._instantiated = False
         self._initialized = False
@@ -251,12 +256,18 @@ class FmuRegulator(RegulatorPath):
         if problems:
             raise CosimError("cannot set FMU parameters: " + "; ".join(problems))
 
-        self._unzip = extract(str(self.fmu_path))
+        # the folder is ours before anything is extracted: close() removes it whatever fails next
+        self._unzip = tempfile.mkdtemp(prefix="fmu-", dir=self._unpack_dir)
+        extract(str(self.fmu_path), self._unzip)
         self._callbacks = _shared_callbacks()
         _LOG_ROUTES[self.instance_name] = self.messages
-        self._fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip,
-                              modelIdentifier=self.md.coSimulation.modelIdentifier,
-                              instanceName=self.instance_name)
+        cwd = os.getcwd()
+        try:
+            self._fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip,
+                                  modelIdentifier=self.md.coSimulation.modelIdentifier,
+                                  instanceName=self.instance_name)
+        finally:  # fmpy 0.3 changes into binaries/<platform> to load the library and stays there if that fails
+            os.chdir(cwd)
         self._call("fmi2Instantiate", lambda: self._fmu.instantiate(callbacks=self._callbacks, loggingOn=True))
         self._instantiated = True
         comp = self._fmu.component
@@ -359,11 +370,13 @@ class FmuRegulator(RegulatorPath):
                 self._unzip = None
 
 
-def make_regulator(kind: str, fmu_path: str | Path | None = None) -> RegulatorPath:
+def make_regulator(kind: str, fmu_path: str | Path | None = None, *,
+                   unpack_dir: str | Path | None = None) -> RegulatorPath:
+    """``unpack_dir``: where an FMU is extracted (see :class:`FmuRegulator`)."""
     if kind == "fmu":
         if fmu_path is None:
             raise CosimError("the fmu regulator path needs an FMU file (fmu_path)")
-        return FmuRegulator(fmu_path)
+        return FmuRegulator(fmu_path, unpack_dir=unpack_dir)
     if kind == "inprocess":
         return InProcessRegulator()
     raise CosimError(f"regulator = {kind!r}: must be one of {', '.join(REGULATORS)}")
@@ -414,12 +427,19 @@ def _row_dtype(outputs: tuple[str, ...], sensed: Mapping[str, Any], telemetry: M
 
 
 def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
-            progress: Callable[[int], None] | None = None, model=None, model_summary: dict | None = None) -> ArmResult:
+            progress: Callable[[int], None] | None = None, model=None, model_summary: dict | None = None,
+            stop: Callable[[], bool] | None = None,
+            plant: Callable[[Scenario, Any], Any] | None = None) -> ArmResult:
     """Run one arm of ``scenario`` closed-loop; return its trajectory (nothing printed).
 
     ``progress(n)`` is called with the number of communication steps done since the
     last call (for a progress bar). ``model`` may pass an already compiled plant model
-    (it is only read: a fresh walker is built on it).
+    (it is only read: a fresh walker is built on it). ``stop()`` is asked before every
+    communication step; when it answers true the run ends with ``KeyboardInterrupt``
+    (a cooperative Ctrl-C: raised here, never inside the FMU). The regulator is closed
+    whatever happens. ``plant(scenario, model)`` makes the walker instead of
+    ``CassieWalker(model)`` (``scenarios.plant_fmu``: the plant FMU); its ``close()``, if
+    any, is called at the end.
     """
     from plant.sim import CassieWalker
 
@@ -432,7 +452,7 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     t0 = 0.0
     if model is None:
         model, model_summary = load_plant_model(scenario)
-    walker = CassieWalker(model)  # the walker works on its own copy of the model
+    walker = CassieWalker(model) if plant is None else plant(scenario, model)  # its own copy of the model
     n_plant = plant_steps_per_comm(h, float(walker.SIM_DT_S))
     outputs = regulator.output_names()
     missing = [n for n in DELTA_NAMES if n not in outputs]
@@ -445,9 +465,11 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     force = (0.0, 0.0, 0.0)
     done = 0
     wall0 = time.perf_counter()
-    regulator.start(arm.overrides_dict(), t0, t0 + n_steps * h)
     try:
+        regulator.start(arm.overrides_dict(), t0, t0 + n_steps * h)
         for k in range(n_steps):
+            if stop is not None and stop():
+                raise KeyboardInterrupt(f"{scenario.name}/{arm.name} stopped at t = {t0 + k * h:g} s")
             t = t0 + k * h
             cmd = scenario.command_at_step(k)
             if cmd != command:
@@ -479,6 +501,8 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
                 break
     finally:
         regulator.close()
+        if hasattr(walker, "close"):
+            walker.close()
     if progress is not None and done % 200:
         progress(done % 200)
     wall = time.perf_counter() - wall0
@@ -489,8 +513,8 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
 
 
 def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | Path | None = None,
-                 arms: tuple[str, ...] | None = None,
-                 progress: Callable[[int], None] | None = None) -> list[ArmResult]:
+                 arms: tuple[str, ...] | None = None, progress: Callable[[int], None] | None = None,
+                 plant: Callable[[Scenario, Any], Any] | None = None) -> list[ArmResult]:
     """Every arm of ``scenario`` (or those named in ``arms``), each on a fresh plant and regulator."""
     from scenarios.plantio import load_plant_model
 
@@ -500,5 +524,5 @@ def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | 
         if arms is not None and arm.name not in arms:
             continue
         results.append(run_arm(scenario, arm, make_regulator(regulator, fmu_path), progress=progress,
-                               model=model, model_summary=summary))
+                               model=model, model_summary=summary, plant=plant))
     return results

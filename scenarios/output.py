@@ -1,29 +1,55 @@
-"""Writing one scenario's results: ``timeseries.csv``, ``summary.json`` and PNG plots.
+"""One scenario's results: ``timeseries.csv``, ``summary.json`` and the plots.
 
-``DIR/<name>/timeseries.csv``: every arm's rows, the ``arm`` column first.
-``DIR/<name>/summary.json``: ``scenario``, ``model``, ``regulator``, the claim and its
-evaluated checks, and per arm the metrics of :mod:`scenarios.metrics`.
-``DIR/<name>/velocity.png``, ``psi.png``, ``torso.png``: matplotlib (Agg) plots.
-A failed run writes ``summary.json`` with ``status = "error"`` and the message (and the
-arms that did finish), so the report lists it instead of hiding it.
+``<dir>/timeseries.csv``: the rows of every complete arm, the ``arm`` column first
+(no file when no arm completed).
+``<dir>/summary.json``: ``scenario``, ``model``, ``regulator``, the claim, ``status``,
+per arm its ``status`` and, when complete, the metrics of :mod:`scenarios.metrics`, and
+the verdict of the claim's checks.
+``<dir>/velocity.png``, ``psi.png``, ``torso.png``: :mod:`scenarios.plots`.
+
+Statuses: an arm is ``complete`` (it ran to the end or to a fall), ``failed`` (it
+raised; ``error`` says why) or ``interrupted`` (stopped by Ctrl-C, or never started
+because of it). A scenario is ``complete`` when every arm is, else ``failed`` when an
+arm failed, else ``interrupted``. A verdict other than ``n/a`` needs every arm
+complete (:func:`verdict`): an incomplete run is never a pass.
 """
 from __future__ import annotations
 
 import io
 import json
 import logging
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from scenarios import metrics
-from scenarios.spec import Scenario
+from scenarios.plots import PLOTS, write_plots
+from scenarios.spec import CHECK_OPS, CHECKABLE_METRICS, Scenario
 
 log = logging.getLogger(__name__)
 
-PLOTS = ("velocity.png", "psi.png", "torso.png")
-PSI_NAMES = ("psi_x", "psi_y", "psi_pitch", "psi_roll")
+ARM_STATUSES = ("complete", "failed", "interrupted")
+#: Every file a scenario's results folder may hold (nothing else is ever written there).
+RESULT_FILES = ("timeseries.csv", "summary.json", *PLOTS)
+
+
+@dataclass(frozen=True)
+class ArmOutcome:
+    """How one arm ended: ``result`` (a ``master.ArmResult``) when ``complete``;
+    ``error`` (one line) when ``failed``; ``started`` is false for an arm that an
+    interrupt kept from starting."""
+
+    arm: str
+    status: str
+    result: Any = None
+    error: str | None = None
+    started: bool = True
+
+    def __post_init__(self) -> None:
+        if self.status not in ARM_STATUSES or (self.status == "complete") != (self.result is not None):
+            raise ValueError(f"ArmOutcome({self.arm!r}): status {self.status!r} with result {self.result!r}")
 
 
 def claim_dict(scenario: Scenario) -> dict[str, Any] | None:
@@ -68,27 +94,58 @@ def scenario_header(scenario: Scenario, regulator: str) -> dict[str, Any]:
     }
 
 
-def build_summary(scenario: Scenario, regulator: str, results: Sequence[Any]) -> dict[str, Any]:
-    """summary.json content for the results (``master.ArmResult``) of one scenario."""
+def build_summary(scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome]) -> dict[str, Any]:
+    """summary.json content: every arm of ``scenario`` with its status (an arm without an
+    outcome is ``interrupted``, not started), metrics for the complete ones."""
     out = scenario_header(scenario, regulator)
+    by_arm = {o.arm: o for o in outcomes}
     arms: dict[str, Any] = {}
-    for r in results:
-        m = metrics.summarize_arm(r.rows, fell=r.fell, t_fall_s=r.t_fall_s,
-                                  perturbation_t_s=scenario.perturbation_t_s, wall_s=r.wall_s)
-        arm = scenario.arm(r.arm)
-        m["fall_reason"] = r.fall_reason
-        m["description"] = arm.description
-        m["overrides"] = {k: v for k, v in arm.overrides}
-        arms[r.arm] = m
-    out["status"] = "ok"
-    out["error"] = None
+    for arm in scenario.arms:
+        o = by_arm.get(arm.name) or ArmOutcome(arm.name, "interrupted", started=False)
+        entry: dict[str, Any] = {"status": o.status}
+        if o.status == "complete":
+            r = o.result
+            entry.update(metrics.summarize_arm(r.rows, fell=r.fell, t_fall_s=r.t_fall_s,
+                                               perturbation_t_s=scenario.perturbation_t_s, wall_s=r.wall_s))
+            entry["fall_reason"] = r.fall_reason
+        else:
+            entry["error"] = o.error
+        entry["description"] = arm.description
+        entry["overrides"] = {k: v for k, v in arm.overrides}
+        arms[arm.name] = entry
+    statuses = {a["status"] for a in arms.values()}
+    out["status"] = "complete" if statuses == {"complete"} else "failed" if "failed" in statuses else "interrupted"
+    errors = [f"arm {n}: {a['error']}" for n, a in arms.items() if a["status"] == "failed"]
+    out["error"] = "; ".join(errors) or None
     out["arms"] = arms
-    out["model_summary"] = results[0].model_summary if results else {}
-    out["verdict"] = evaluate_claim(out["claim"], arms)
+    complete = [o.result for o in outcomes if o.status == "complete"]
+    out["model_summary"] = complete[0].model_summary if complete else {}
+    out["verdict"] = verdict(out)
     return out
 
 
-def evaluate_claim(claim: dict[str, Any] | None, arms: dict[str, Any]) -> dict[str, Any]:
+def incomplete_arms(summary: Mapping[str, Any]) -> list[str]:
+    """``"<arm> <status>"`` for every arm of the scenario that is not complete (or missing)."""
+    arms = summary.get("arms") or {}
+    names = list(summary.get("arm_names") or arms)
+    out = []
+    for n in names:
+        status = (arms.get(n) or {}).get("status", "missing")
+        if status != "complete":
+            out.append(f"{n} {status}")
+    return out if names else ["no arms"]
+
+
+def verdict(summary: Mapping[str, Any]) -> dict[str, Any]:
+    """The claim's verdict from the arms' metrics; ``n/a`` unless every arm is complete."""
+    missing = incomplete_arms(summary)
+    if missing:
+        return {"overall": "n/a", "why": "incomplete run: " + ", ".join(missing), "checks": []}
+    return evaluate_claim(summary.get("claim"), summary.get("arms") or {})
+
+
+def evaluate_claim(claim: Mapping[str, Any] | None, arms: Mapping[str, Any]) -> dict[str, Any]:
+    """Every check of ``claim`` against the arms' metrics; ``pass`` only if every one passes."""
     if not claim or not claim.get("checks"):
         return {"overall": "n/a", "checks": []}
     checks = [metrics.evaluate_check(c, arms) for c in claim["checks"]]
@@ -130,123 +187,37 @@ def write_timeseries(path: Path, results: Sequence[Any]) -> None:
             fh.writelines(prefix + line + "\n" for line in buf.getvalue().splitlines())
 
 
-def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> list[str]:
-    """velocity.png (velocity vs command per arm), psi.png (Psi and joint offsets), torso.png."""
-    import matplotlib
+def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome]) -> dict[str, Any]:
+    """Write csv, plots and summary (last) into the folder ``dest``; return the summary.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    results = [r for r in results if len(r.rows)]
-    if not results:
-        return []
-    written = []
-
-    def save(name: str, fig) -> str:
-        fig.tight_layout()
-        fig.savefig(out_dir / name, dpi=90)
-        plt.close(fig)
-        return name
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
-
-    # -- velocity vs command
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
-    for ax, axis in zip(axes, ("vx", "vy")):
-        ex, ey = None, None
-        for i, r in enumerate(results):
-            c = colors[i % len(colors)]
-            t = r.rows["t"]
-            raw = f"tel_{axis}" if f"tel_{axis}" in r.rows.dtype.names else f"in_{axis}"
-            ax.plot(t, r.rows[raw], color=c, alpha=0.25, lw=0.6)
-            e = metrics.velocity_errors(r.rows)[0 if axis == "vx" else 1]
-            ax.plot(t, e + r.rows[f"cmd_{axis}_des"], color=c, lw=1.4, label=f"{r.arm}: step average")
-            if r.fell:
-                ax.axvline(r.t_fall_s, color=c, ls=":", lw=1)
-        ax.plot(results[0].rows["t"], results[0].rows[f"cmd_{axis}_des"], "k--", lw=1.2, label="command")
-        ax.set_ylabel(f"{axis} (m/s)")
-        ax.grid(alpha=0.3)
-    if scenario.perturbation_t_s > 0:
-        for ax in axes:
-            ax.axvline(scenario.perturbation_t_s, color="grey", ls="-.", lw=0.8)
-    axes[0].legend(loc="best", fontsize=8)
-    axes[0].set_title(f"{scenario.name}: velocity vs command (faint: instantaneous)")
-    axes[-1].set_xlabel("t (s)")
-    written.append(save("velocity.png", fig))
-
-    # -- Psi (network outputs) and the joint offsets they produce
-    deltas = [n[4:] for n in results[0].rows.dtype.names if n.startswith("out_delta_")]
-    psis = [n for n in PSI_NAMES if f"out_{n}" in results[0].rows.dtype.names]
-    panels = psis + deltas
-    ncols = 2
-    nrows = max(1, (len(panels) + ncols - 1) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(11, 2.0 * nrows + 0.8), sharex=True, squeeze=False)
-    for idx, name in enumerate(panels):
-        ax = axes[idx // ncols][idx % ncols]
-        for i, r in enumerate(results):
-            ax.plot(r.rows["t"], r.rows[f"out_{name}"], color=colors[i % len(colors)], lw=0.9, label=r.arm)
-        ax.set_title(name + (" (rad)" if name.startswith("delta_") else ""), fontsize=9)
-        ax.grid(alpha=0.3)
-    for idx in range(len(panels), nrows * ncols):
-        axes[idx // ncols][idx % ncols].axis("off")
-    for ax in axes[-1]:
-        ax.set_xlabel("t (s)")
-    if panels:
-        axes[0][0].legend(fontsize=8)
-    fig.suptitle(f"{scenario.name}: Psi outputs and joint offsets per arm")
-    written.append(save("psi.png", fig))
-
-    # -- torso angles
-    fig, axes = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
-    for ax, name in zip(axes, ("pitch", "roll")):
-        for i, r in enumerate(results):
-            ax.plot(r.rows["t"], np.degrees(r.rows[f"in_{name}"]), color=colors[i % len(colors)], lw=0.9, label=r.arm)
-        ax.set_ylabel(f"torso {name} (deg)")
-        ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=8)
-    axes[0].set_title(f"{scenario.name}: torso angles")
-    axes[-1].set_xlabel("t (s)")
-    written.append(save("torso.png", fig))
-    return written
-
-
-def write_results(out_root: Path, scenario: Scenario, regulator: str, results: Sequence[Any],
-                  error: str | None = None) -> dict[str, Any]:
-    """Write csv, summary and plots into ``out_root/<name>/``; return the summary.
-
-    ``error`` marks the run failed (an arm raised): the arms that finished are still
-    written, the others are listed as failed.
+    Only complete arms have rows; the folder is meant to be a fresh one that
+    :mod:`scenarios.store` renames into place once this returns.
     """
-    d = Path(out_root) / scenario.name
-    d.mkdir(parents=True, exist_ok=True)
-    summary = build_summary(scenario, regulator, results)
-    if error is not None:
-        summary["status"] = "error"
-        summary["error"] = error
-        summary["verdict"]["overall"] = "n/a"
-    write_timeseries(d / "timeseries.csv", results)
-    summary["plots"] = write_plots(d, scenario, results)
-    write_json(d / "summary.json", summary)
+    dest = Path(dest)
+    summary = build_summary(scenario, regulator, outcomes)
+    by_arm = {o.arm: o for o in outcomes}  # the scenario's arm order, not the order the arms ended in
+    ordered = [by_arm[a.name] for a in scenario.arms if a.name in by_arm]
+    results = [o.result for o in ordered if o.status == "complete" and len(o.result.rows)]
+    if results:
+        write_timeseries(dest / "timeseries.csv", results)
+    summary["plots"] = write_plots(dest, scenario, results)
+    write_json(dest / "summary.json", summary)
     return summary
 
 
-def table_rows(summary: dict[str, Any]) -> list[dict[str, Any]]:
-    """One row per arm for the CLI and report; an arm without results says why.
-
-    A scenario whose run failed before any arm finished gives one row (arm ``-``).
-    """
+def table_rows(summary: Mapping[str, Any]) -> list[dict[str, Any]]:
+    """One row per arm for the CLI and report, with the arm's status (``missing`` when
+    the summary lacks it); a scenario without arms gives one row (arm ``-``)."""
     arms = summary.get("arms") or {}
     names = list(summary.get("arm_names") or arms)
-    status = summary.get("status", "missing")
+    scenario = summary.get("scenario")
     if not names:
-        return [{"scenario": summary.get("scenario"), "arm": "-", "status": status, "error": summary.get("error")}]
+        return [{"scenario": scenario, "arm": "-", "status": summary.get("status", "missing"),
+                 "error": summary.get("error")}]
     rows = []
     for arm_name in names:
-        m = arms.get(arm_name)
-        if m is None:
-            rows.append({"scenario": summary.get("scenario"), "arm": arm_name,
-                         "status": "failed" if status == "error" else "missing", "error": summary.get("error")})
-        else:
-            rows.append({"scenario": summary.get("scenario"), "arm": arm_name, "status": "ok", **m})
+        m = arms.get(arm_name) or {"status": "missing"}
+        rows.append({**m, "scenario": scenario, "arm": arm_name, "status": m.get("status", "missing")})
     return rows
 
 
@@ -273,15 +244,111 @@ def format_table(summaries: Sequence[dict[str, Any]]) -> str:
     header = [h for _, h, _ in TABLE_COLUMNS] + ["verdict"]
     lines = []
     for s in summaries:
-        verdict = (s.get("verdict") or {}).get("overall", "n/a")
+        overall = verdict(s).get("overall", "n/a")
         for row in table_rows(s):
-            if row.get("status") != "ok":
+            if row.get("status") != "complete":
                 cells = [fmt(row.get("scenario")), fmt(row.get("arm"))] + [""] * (len(TABLE_COLUMNS) - 2)
                 cells[2] = f"{row.get('status')}: {str(row.get('error') or '')[:60]}"
-                lines.append(cells + [verdict])
+                lines.append(cells + [overall])
                 continue
-            lines.append([fmt(row.get(k), d) for k, _, d in TABLE_COLUMNS] + [verdict])
+            lines.append([fmt(row.get(k), d) for k, _, d in TABLE_COLUMNS] + [overall])
     widths = [max([len(header[i])] + [len(line[i]) for line in lines]) for i in range(len(header))]
     out = ["  ".join(h.ljust(w) for h, w in zip(header, widths)), "  ".join("-" * w for w in widths)]
     out += ["  ".join(c.ljust(w) for c, w in zip(line, widths)).rstrip() for line in lines]
     return "\n".join(out)
+
+
+# --------------------------------------------------------------------------- reading summary.json back
+class _Kind:
+    """One rule of :data:`SUMMARY_SCHEMA`: ``ok(value)`` and what is allowed, in words."""
+
+    def __init__(self, ok: Any, allowed: str, items: Any = None, keys: Mapping[str, Any] | None = None,
+                 required: tuple[str, ...] = ()) -> None:
+        self.ok, self.allowed, self.items, self.keys, self.required = ok, allowed, items, keys, required
+
+
+def _num(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+NUM = _Kind(_num, "a number")
+INT = _Kind(lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer")
+STR = _Kind(lambda v: isinstance(v, str), "a string")
+ANY_OBJECT = _Kind(lambda v: isinstance(v, dict), "an object")
+
+
+def _opt(kind: _Kind) -> _Kind:
+    return _Kind(lambda v: v is None or kind.ok(v), kind.allowed + " or null", kind.items, kind.keys, kind.required)
+
+
+def _one_of(*values: Any) -> _Kind:
+    return _Kind(lambda v: any(v == x and type(v) is type(x) for x in values),
+                 "one of " + ", ".join(json.dumps(x) for x in values))
+
+
+def _list(item: _Kind) -> _Kind:
+    return _Kind(lambda v: isinstance(v, list), "a list", items=item)
+
+
+def _obj(*required: str, **keys: _Kind) -> _Kind:
+    """An object: the ``required`` keys must be there, every key in ``keys`` of its kind."""
+    return _Kind(lambda v: isinstance(v, dict), "an object", keys=keys, required=required)
+
+
+def _map(item: _Kind) -> _Kind:
+    return _Kind(lambda v: isinstance(v, dict) and all(isinstance(k, str) for k in v), "an object", items=item)
+
+
+_METRIC = _Kind(lambda v: v is None or isinstance(v, bool) or _num(v), "a number, true/false or null")
+_VEC3 = _Kind(lambda v: isinstance(v, list) and len(v) == 3 and all(map(_num, v)), "a list of 3 numbers")
+_ARM = _obj("status", status=_one_of(*ARM_STATUSES), error=_opt(STR), fall_reason=_opt(STR),
+            **{k: _METRIC for k in (*CHECKABLE_METRICS, "wall_s", "realtime_factor", "sim_s")})
+#: What the CLI and the report read from a summary.json, key by key (the required ones
+#: first); any other key may be missing, but not wrong.
+SUMMARY_SCHEMA = _obj(
+    "scenario", "status", "arm_names", "arms",
+    scenario=STR, description=_opt(STR), source=_opt(STR), tags=_list(STR), model=STR, regulator=STR,
+    duration_s=NUM, comm_step_s=NUM, seed=INT, perturbation_t_s=NUM, arm_names=_list(STR),
+    commands=_list(_Kind(lambda v: isinstance(v, list) and len(v) == 3 and all(map(_num, v)),
+                         "a list [t_s, vx_des, vy_des] of numbers")),
+    perturbation=_obj(torso_mass_kg=_opt(NUM), torso_added_mass_kg=_opt(NUM), torso_com_offset_m=_VEC3,
+                      joint_damping_scale=NUM,
+                      pushes=_list(_obj("t_s", "force_n", "duration_s", t_s=NUM, force_n=_VEC3, duration_s=NUM)),
+                      terrain=_opt(_obj("max_height_m", "max_slope_deg", "seed", max_height_m=NUM, max_slope_deg=NUM,
+                                        seed=INT, size_m=NUM))),
+    claim=_opt(_obj(text=STR, source=_opt(STR), checks=_list(_obj("arm", "metric", "op",
+        arm=STR, metric=_one_of(*CHECKABLE_METRICS), op=_one_of(*CHECK_OPS),
+        value=_METRIC, other_arm=_opt(STR))))),
+    status=_one_of("complete", "failed", "interrupted"), error=_opt(STR), arms=_map(_ARM),
+    model_summary=_obj(pelvis_mass_kg=_opt(NUM), pelvis_com_m=_opt(_VEC3), total_mass_kg=NUM),
+    verdict=ANY_OBJECT, plots=_list(_one_of(*PLOTS)),
+)
+def _check(value: Any, kind: _Kind, where: str, problems: list[str]) -> None:
+    if not kind.ok(value):
+        problems.append(f"{where} = {json.dumps(value)[:60]}: must be {kind.allowed}")
+        return
+    if kind.keys is not None and isinstance(value, dict):
+        problems.extend(f"{where}.{k}: required" if where else f"{k}: required"
+                        for k in kind.required if k not in value)
+        for k, sub in kind.keys.items():
+            if k in value:
+                _check(value[k], sub, f"{where}.{k}" if where else k, problems)
+    if kind.items is not None and isinstance(value, (list, dict)):
+        pairs = value.items() if isinstance(value, dict) else enumerate(value)
+        for k, item in pairs:
+            _check(item, kind.items, f"{where}.{k}" if isinstance(value, dict) else f"{where}[{k}]", problems)
+
+
+def summary_problems(data: Any) -> list[str]:
+    """Every way ``data`` (a parsed summary.json) is not what this package writes and
+    reads, each naming its key; [] when it can be reported. Per-arm statuses must be
+    present: a summary without them (or written by an older version) is not a result."""
+    if not isinstance(data, dict):
+        return [f"the top level must be an object, not {type(data).__name__}"]
+    if data.get("status") == "ok":
+        return ['written by an older version of this tool (status "ok", no status per arm): run it again']
+    problems: list[str] = []
+    _check(data, SUMMARY_SCHEMA, "", problems)
+    if not problems and data["status"] == "complete" and incomplete_arms(data):
+        problems.append(f"status = \"complete\", but not every arm is: {', '.join(incomplete_arms(data))}")
+    return problems

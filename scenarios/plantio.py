@@ -5,7 +5,9 @@ off itself (``CassieWalker.set_pelvis_force``) on communication-step boundaries.
 """
 from __future__ import annotations
 
+import functools
 import logging
+import os
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -44,6 +46,44 @@ def build_perturbation(scenario: "Scenario", nominal_torso_mass_kg: float | None
         terrain=terrain,
     )
     return None if pert.is_nominal else pert
+
+
+def check_plant(scenario: "Scenario") -> list[tuple[str, str]]:
+    """``(field, problem)`` for everything loading the plant of ``scenario`` would fail on:
+    the model must parse safely, compile and be a Cassie (:func:`plant.model.load_model`),
+    and the perturbation must be valid on that model (its own pelvis mass for
+    ``torso_added_mass_kg``). The compiled model is cached per process."""
+    mass, problem = _base_model_check(scenario.model, _file_stamp(scenario.model))
+    if problem is not None:
+        return [("model", problem)]
+    pert = build_perturbation(scenario, mass)
+    return [("perturbation", p) for p in (pert.problems() if pert is not None else [])]
+
+
+def _file_stamp(model: str) -> tuple | None:
+    """What the cached check of ``model`` depends on besides its name: the file's mtime and
+    size (the OSU file's for ``osu``), or ``MENAGERIE_ROOT`` for ``menagerie``."""
+    from plant.model import osu_model_path
+
+    if model == "menagerie":
+        return ("MENAGERIE_ROOT", os.environ.get("MENAGERIE_ROOT"))
+    try:
+        st = os.stat(osu_model_path() if model == "osu" else model)
+    except OSError:
+        return None
+    return st.st_mtime_ns, st.st_size
+
+
+@functools.lru_cache(maxsize=16)
+def _base_model_check(model: str, stamp: tuple | None) -> tuple[float | None, str | None]:
+    """(pelvis mass, None) when ``model`` loads as a Cassie, else (None, the reason)."""
+    from fmu_src.avr_errors import ModelError
+    from plant.model import load_model, model_summary
+
+    try:
+        return model_summary(load_model(model))["pelvis_mass_kg"], None
+    except ModelError as exc:
+        return None, str(exc)
 
 
 def load_plant_model(scenario: "Scenario") -> tuple["mujoco.MjModel", dict]:

@@ -3,35 +3,41 @@
 For every scenario of the suite and every other result folder found in ``DIR``: the
 table rows (one per arm), the plots, the paper's claim beside the measured numbers
 and a pass/miss verdict per check with both sides' values. Nothing is hidden: a
-scenario of the suite without results is listed as "not run", a failed run with its
-error, an arm that fell with its fall time.
+scenario of the suite without results is listed as "not run", a failed or interrupted
+run with why, an arm that fell with its fall time. Nothing is taken on trust either:
+each summary.json is checked against the format this package writes
+(:func:`scenarios.output.summary_problems`; one of another shape is listed as invalid,
+naming the file and what is wrong) and every verdict is recomputed from the arms, a
+pass only when every arm is complete.
 """
 from __future__ import annotations
 
-import json
 import logging
 from pathlib import Path
 from typing import Any
 
-from fmu_src.avr_errors import ScenarioError
-from scenarios.output import TABLE_COLUMNS, evaluate_claim, fmt, table_rows
+from fmu_src.avr_errors import AvrError, ScenarioError
+from scenarios.output import TABLE_COLUMNS, fmt, incomplete_arms, table_rows
+from scenarios.output import verdict as output_verdict
 
 log = logging.getLogger(__name__)
 
 
 def collect(out_dir: Path) -> list[tuple[str, dict[str, Any] | None, str | None]]:
-    """(name, summary or None, problem) for the suite's scenarios and every result folder."""
+    """(name, summary or None, problem) for the suite's scenarios and every result folder
+    (a summary.json that is not what this package writes is a problem, never rendered)."""
     from scenarios import spec
+    from scenarios.store import read_summary
 
     found: dict[str, dict[str, Any] | None] = {}
     problems: dict[str, str] = {}
     for f in sorted(Path(out_dir).glob("*/summary.json")):
         name = f.parent.name
-        try:
-            found[name] = json.loads(f.read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            found[name] = None
-            problems[name] = f"unreadable summary.json: {exc}"
+        if name.startswith("."):  # a run's scratch folder or lock (scenarios.store)
+            continue
+        found[name], bad = read_summary(f)
+        if bad:
+            problems[name] = f"invalid {f}: " + "; ".join(bad)
     order: list[str] = []
     try:
         suite = [s.name for s in spec.load_suite(check_plant=False)]
@@ -47,6 +53,10 @@ def collect(out_dir: Path) -> list[tuple[str, dict[str, Any] | None, str | None]
         else:
             out.append((name, None, "not run (no results in this folder)"))
     return out
+
+
+def _why_incomplete(s: dict[str, Any]) -> str:
+    return s.get("error") or "arms " + ", ".join(incomplete_arms(s))
 
 
 def _md_escape(text: str) -> str:
@@ -91,8 +101,8 @@ def _plant_line(s: dict[str, Any]) -> str:
     return ("Setup: " + "; ".join(parts) + ".") if parts else ""
 
 
-def render(out_dir: Path) -> str:
-    entries = collect(out_dir)
+def render(out_dir: Path, entries: list | None = None) -> str:
+    entries = collect(out_dir) if entries is None else entries
     n_pass = n_miss = n_na = 0
     lines = ["# Scenario report", ""]
     lines.append(f"Results folder: `{Path(out_dir)}`. One section per scenario; every arm is listed. "
@@ -107,13 +117,13 @@ def render(out_dir: Path) -> str:
             lines.append(f"| {name} | {_md_escape(problem)} | - | - | n/a |")
             n_na += 1
             continue
-        verdict = (s.get("verdict") or evaluate_claim(s.get("claim"), s.get("arms") or {})).get("overall", "n/a")
+        verdict = output_verdict(s)["overall"]
         n_pass += verdict == "pass"
         n_miss += verdict == "miss"
         n_na += verdict == "n/a"
-        status = s.get("status", "?")
-        if status != "ok":
-            status = f"{status}: {_md_escape(str(s.get('error') or '')[:120])}"
+        status = s["status"]
+        if status != "complete":
+            status = f"{status}: {_md_escape(_why_incomplete(s)[:120])}"
         lines.append(f"| [{name}](#{name}) | {status} | {s.get('regulator', '-')} | "
                      f"{_md_escape(Path(str(s.get('model', '-'))).name)} | **{verdict}** |")
     lines += ["", f"Verdicts: {n_pass} pass, {n_miss} miss, {n_na} n/a (not run, failed or no checks).", ""]
@@ -133,14 +143,14 @@ def render(out_dir: Path) -> str:
         plant = _plant_line(s)
         if plant:
             lines += [plant, ""]
-        if s.get("status") != "ok":
-            lines += [f"**Run failed:** `{_md_escape(s.get('error'))}`", ""]
+        if s["status"] != "complete":
+            lines += [f"**Run {s['status']}:** `{_md_escape(_why_incomplete(s))}`", ""]
         if s.get("arm_names") or s.get("arms"):
             header = [h for _, h, _ in TABLE_COLUMNS[1:]]
             lines.append("| " + " | ".join(header) + " |")
             lines.append("|" + "---|" * len(header))
             for row in table_rows(s):
-                if row.get("status") != "ok":
+                if row.get("status") != "complete":
                     lines.append(f"| {row.get('arm')} | {row.get('status')} |" + " |" * (len(header) - 2))
                     continue
                 cells = [fmt(row.get(k), d) for k, _, d in TABLE_COLUMNS[1:]]
@@ -153,7 +163,9 @@ def render(out_dir: Path) -> str:
             lines += ["**Paper's claim:** " + _md_escape(claim.get("text", "")), ""]
             if claim.get("source"):
                 lines += [f"_Source: {_md_escape(claim['source'])}_", ""]
-            verdict = s.get("verdict") or evaluate_claim(claim, s.get("arms") or {})
+            verdict = output_verdict(s)
+            if verdict.get("why"):
+                lines += [f"_No verdict: {_md_escape(verdict['why'])}._", ""]
             if verdict.get("checks"):
                 lines += ["| check | measured | reference | verdict |", "|---|---|---|---|"]
                 for c in verdict["checks"]:
@@ -169,10 +181,17 @@ def render(out_dir: Path) -> str:
     return "\n".join(lines) + "\n"
 
 
-def write_report(out_dir: Path) -> Path:
+def write_report(out_dir: Path) -> tuple[Path, list[str]]:
+    """Write ``out_dir/report.md``; return its path and the invalid summaries (each
+    naming its file and what is wrong; they are listed in the report, not rendered)."""
     out_dir = Path(out_dir)
     if not out_dir.is_dir():
-        raise FileNotFoundError(f"no such results folder: {out_dir}")
+        raise AvrError(f"no such results folder: {out_dir}")
+    from scenarios.campaign.report import campaigns_section, is_campaign_dir, write_report as write_campaign
+
+    if is_campaign_dir(out_dir):  # a campaign folder: its own campaign.md
+        return write_campaign(out_dir), []
+    entries = collect(out_dir)
     path = out_dir / "report.md"
-    path.write_text(render(out_dir))
-    return path
+    path.write_text(render(out_dir, entries) + campaigns_section(out_dir))
+    return path, [p for name, s, p in entries if s is None and p and p.startswith("invalid ")]

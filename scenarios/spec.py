@@ -8,7 +8,9 @@ regulator parameter overrides (by FMU variable name), the arms to compare
 checks for the report.
 
 Every problem in a file is collected and reported at once (``ScenarioError.problems``),
-each naming its field, e.g. ``push[1].duration_s = -0.1: must be > 0``.
+each naming its field, e.g. ``push[1].duration_s = -0.1: must be > 0``; a file that
+cannot be read (missing, a directory, not UTF-8) is one problem naming it. Scenario
+names must be unique within a run (:func:`distinct`): the name is the output folder.
 
 Layout of a file (every key below is known; anything else is an error)::
 
@@ -458,7 +460,9 @@ def parse_scenario(doc: Mapping[str, Any], source: str | None = None, *, base_di
     """Validate a parsed TOML document; raise ScenarioError listing every problem.
 
     ``base_dir`` resolves a relative model path (the scenario file's folder).
-    ``check_plant`` also runs the plant's own ``Perturbation.validate()`` (needs mujoco).
+    ``check_plant`` also checks what loading the plant would fail on (needs mujoco): the
+    model parses safely, compiles and is a Cassie, and the perturbation is valid on it
+    (:func:`scenarios.plantio.check_plant`).
     """
     probs = _Problems()
     _unknown_keys(doc, TOP_KEYS, "", probs)
@@ -506,7 +510,7 @@ def parse_scenario(doc: Mapping[str, Any], source: str | None = None, *, base_di
     # ---- command schedule
     commands: list[CommandPoint] = []
     cmd_tables = _table_list(doc, "command", "command", probs)
-    if "command" not in doc:
+    if doc.get("command", []) == []:  # absent, or `command = []`
         probs.note("command", "required: at least one [[command]] with t_s = 0")
     for i, c in enumerate(cmd_tables):
         f = f"command[{i}]"
@@ -678,28 +682,19 @@ def parse_scenario(doc: Mapping[str, Any], source: str | None = None, *, base_di
             joint_damping_scale=damping, pushes=tuple(pushes), terrain=terrain, claim=claim, source=source,
         )
         if check_plant:
-            _check_plant_perturbation(scenario, probs)
+            _check_plant(scenario, probs)
     if probs.items:
         raise ScenarioError(probs.items, source=source)
     return scenario
 
 
-def _check_plant_perturbation(scenario: Scenario, probs: _Problems) -> None:
-    """Run the plant's own Perturbation.validate() (it lists every problem it finds)."""
-    try:
-        from fmu_src.avr_errors import PerturbationError
-        from scenarios.plantio import build_perturbation
-    except ImportError:  # the plant has not landed: its checks run at load time instead
-        return
-    try:
-        pert = build_perturbation(scenario, nominal_torso_mass_kg=None)
-        if pert is not None:
-            pert.validate()
-    except PerturbationError as exc:
-        for p in getattr(exc, "problems", None) or [str(exc)]:
-            probs.note("perturbation", str(p))
-    except ImportError:
-        return
+def _check_plant(scenario: Scenario, probs: _Problems) -> None:
+    """What loading the plant would fail on (the model compiles and is a Cassie, the
+    perturbation is valid on it): :func:`scenarios.plantio.check_plant`."""
+    from scenarios.plantio import check_plant
+
+    for field, problem in check_plant(scenario):
+        probs.note(field, problem)
 
 
 def resolve_model(model: str, base_dir: Path | None, probs: _Problems | None = None) -> str:
@@ -720,8 +715,9 @@ def resolve_model(model: str, base_dir: Path | None, probs: _Problems | None = N
 
 
 def override(scenario: Scenario, *, model: str | None = None, duration_s: float | None = None,
-             base_dir: Path | None = None) -> Scenario:
-    """The scenario with another model and/or duration (CLI flags), re-checked."""
+             base_dir: Path | None = None, check_plant: bool = True) -> Scenario:
+    """The scenario with another model and/or duration (CLI flags), re-checked (a new
+    model is compiled and checked as in :func:`parse_scenario` unless ``check_plant`` is false)."""
     probs = _Problems()
     changes: dict[str, Any] = {}
     if model is not None:
@@ -731,9 +727,13 @@ def override(scenario: Scenario, *, model: str | None = None, duration_s: float 
         if d is not None and not _on_grid(d, scenario.comm_step_s):
             probs.add("--duration", d, f"must be a whole number of communication steps ({scenario.comm_step_s:g} s)")
         changes["duration_s"] = d
+    if not probs.items and changes:
+        scenario = dataclasses.replace(scenario, **changes)
+        if check_plant and model is not None:
+            _check_plant(scenario, probs)
     if probs.items:
         raise ScenarioError(probs.items, source=scenario.source)
-    return dataclasses.replace(scenario, **changes) if changes else scenario
+    return scenario
 
 
 def load_scenario(path: str | Path, *, check_plant: bool = True) -> Scenario:
@@ -744,6 +744,13 @@ def load_scenario(path: str | Path, *, check_plant: bool = True) -> Scenario:
             doc = tomllib.load(fh)
     except FileNotFoundError:
         raise ScenarioError([f"file not found: {path}"], source=str(path)) from None
+    except IsADirectoryError:
+        raise ScenarioError(["is a directory, not a scenario file"], source=str(path)) from None
+    except OSError as exc:
+        raise ScenarioError([f"cannot read: {exc.strerror or exc}"], source=str(path)) from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError([f"not UTF-8 text (TOML files must be UTF-8): byte {exc.object[exc.start]:#04x} "
+                             f"at offset {exc.start}"], source=str(path)) from None
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError([f"TOML syntax error: {exc}"], source=str(path)) from None
     return parse_scenario(doc, source=str(path), base_dir=path.parent, check_plant=check_plant)
@@ -761,21 +768,44 @@ def load_suite(*, check_plant: bool = True) -> list[Scenario]:
             scenarios.append(load_scenario(f, check_plant=check_plant))
         except ScenarioError as exc:
             problems.extend(f"{f.name}: {p}" for p in exc.problems)
-    seen: dict[str, str] = {}
     for s in scenarios:
         stem = Path(s.source).stem
         if s.name != stem:
             problems.append(f"{Path(s.source).name}: name = {s.name!r}: must equal the file name ({stem!r})")
-        if s.name in seen:
-            problems.append(f"{Path(s.source).name}: name = {s.name!r}: duplicate of {seen[s.name]}")
-        seen[s.name] = Path(s.source).name
-    if problems:
-        raise ScenarioError(problems, source=str(SUITE_DIR))
+    scenarios, clashes = distinct(scenarios)
+    if problems or clashes:
+        raise ScenarioError(problems + clashes, source=str(SUITE_DIR))
     return scenarios
 
 
+def distinct(scenarios: list[Scenario]) -> tuple[list[Scenario], list[str]]:
+    """Each scenario once (one file named twice runs once), and a problem for every name
+    that two different files share (the name is the output folder: one would be lost)."""
+    first: dict[str, Scenario] = {}
+    unique, problems = [], []
+    for s in scenarios:
+        other = first.setdefault(s.name, s)
+        if other is s:
+            unique.append(s)
+        elif _same_file(other.source, s.source):
+            continue
+        else:
+            problems.append(f"name = {s.name!r}: in both {other.source} and {s.source}; scenario names must be "
+                            "unique (each names its output folder)")
+    return unique, problems
+
+
+def _same_file(a: str | None, b: str | None) -> bool:
+    try:
+        return a is not None and b is not None and Path(a).resolve() == Path(b).resolve()
+    except OSError:
+        return a == b
+
+
 def resolve_targets(targets: list[str], *, check_plant: bool = True) -> list[Scenario]:
-    """``all``, ``paper``, a suite scenario name, or a path to a scenario file."""
+    """``all``, ``paper``, a suite scenario name, or a path to a scenario file; every
+    scenario once. ScenarioError lists every problem (invalid files, unknown names, two
+    files with one name)."""
     out: list[Scenario] = []
     problems: list[str] = []
     suite: list[Scenario] | None = None
@@ -788,7 +818,11 @@ def resolve_targets(targets: list[str], *, check_plant: bool = True) -> list[Sce
                 problems.extend(f"{t}: {q}" for q in exc.problems)
             continue
         if suite is None:
-            suite = load_suite(check_plant=check_plant)
+            try:
+                suite = load_suite(check_plant=check_plant)
+            except ScenarioError as exc:
+                problems.extend(f"suite: {q}" for q in exc.problems)
+                suite = []
         if t == "all":
             out.extend(suite)
         elif t == "paper":
@@ -797,16 +831,12 @@ def resolve_targets(targets: list[str], *, check_plant: bool = True) -> list[Sce
             match = [s for s in suite if s.name == t]
             if match:
                 out.extend(match)
-            else:
+            elif suite or not problems:
                 names = [s.name for s in suite] + ["all", "paper"]
                 close = difflib.get_close_matches(t, names, n=1, cutoff=0.5)
                 hint = f"; did you mean {close[0]!r}?" if close else ""
                 problems.append(f"{t!r}: no such scenario in the suite or file{hint}")
-    if problems:
-        raise ScenarioError(problems)
-    seen, unique = set(), []
-    for s in out:
-        if s.name not in seen:
-            seen.add(s.name)
-            unique.append(s)
+    unique, clashes = distinct(out)
+    if problems or clashes:
+        raise ScenarioError(problems + clashes)
     return unique

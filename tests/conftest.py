@@ -1,5 +1,17 @@
-"""Shared pytest set-up: the offline Menagerie model from ../shared and the repo root."""
+"""Shared pytest set-up: the offline Menagerie model from ../shared, the FMU under test, tools.
+
+Tests never use the system temp folder directly: FMUs are built and extracted under
+pytest's ``tmp_path``/``tmp_path_factory``, and tools are found beside the running
+interpreter (``venv_tool``), never through ``PATH``.
+
+``AVR_TEST_FMU=/path/to/AdaptiveVelocityRegulator.fmu`` makes the FMU tests use that FMU
+instead of building one (the sanitizer run, tests/test_fmu_sanitize.py, points it at a
+guard built with AddressSanitizer).
+"""
+import json
 import os
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
@@ -23,4 +35,51 @@ def build_module():
 @pytest.fixture(scope="session")
 def built_fmu(tmp_path_factory, build_module):
     """The FMU exactly as build.py builds it, into a fresh temporary folder (once per session)."""
+    given = os.environ.get("AVR_TEST_FMU")
+    if given:
+        return Path(given)
     return build_module.build_fmu(tmp_path_factory.mktemp("fmu"))
+
+
+def _unzip(fmu, dest) -> str:
+    from fmpy import extract
+
+    return str(extract(str(fmu), unzipdir=str(dest)))
+
+
+@pytest.fixture(scope="session")
+def unzip():
+    """``unzip(fmu, dest)``: extract an FMU into ``dest`` (a folder under tmp_path; never fmpy's
+    default, a fresh folder in the system temp folder that nobody removes)."""
+    return _unzip
+
+
+@pytest.fixture(scope="session")
+def fmu_dir(tmp_path_factory, built_fmu):
+    """The built FMU, extracted once per session (a folder holding modelDescription.xml, binaries/, ...)."""
+    return _unzip(built_fmu, tmp_path_factory.mktemp("fmu_unzipped"))
+
+
+@pytest.fixture(scope="session")
+def venv_tool():
+    """``venv_tool("fmutool")``: the path of a console script installed with the running interpreter."""
+    def find(name: str) -> str:
+        path = Path(sys.executable).parent / name
+        assert path.is_file(), f"{name} is not installed beside {sys.executable}: pip install -e '.[test]'"
+        return str(path)
+    return find
+
+
+RAW_HOST = Path(__file__).parent / "fmi" / "raw_host.py"
+
+
+@pytest.fixture(scope="session")
+def raw_host():
+    """``raw_host(fmu_dir, case, args)``: run a case of tests/fmi/raw_host.py (direct ctypes calls
+    with hostile arguments) in a process of its own; the process must not die."""
+    def run(fmu_dir, case, args=None, timeout=600):
+        proc = subprocess.run([sys.executable, str(RAW_HOST), str(fmu_dir), case], input=json.dumps(args),
+                              capture_output=True, text=True, timeout=timeout)
+        assert proc.returncode == 0, f"the host process died (exit {proc.returncode}) in {case}:\n{proc.stderr[-3000:]}"
+        return json.loads(proc.stdout.strip().splitlines()[-1])
+    return run

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import tempfile
 from pathlib import Path
 
 import numpy as np
@@ -44,13 +45,19 @@ def native_fmus(tmp_path_factory, build_module):
     return {v: build_module.build_native_fmu(v, out) for v in (2, 3)}
 
 
+def unzipped(fmu_path) -> str:
+    """``fmu_path`` extracted into a new folder beside it (the FMUs are built under pytest's
+    tmp_path: nothing goes to the system temp folder)."""
+    return extract(str(fmu_path), unzipdir=tempfile.mkdtemp(prefix="unzip_", dir=Path(fmu_path).parent))
+
+
 class AnySlave:
     """fmpy's FMU2Slave or FMU3Slave (by the FMU's fmiVersion) addressed by variable name."""
 
     def __init__(self, fmu_path, name="avr", unzip=None):
         self.md = read_model_description(str(fmu_path))
         self.fmi3 = self.md.fmiVersion.startswith("3")
-        self.unzip = unzip or extract(str(fmu_path))
+        self.unzip = unzip or unzipped(fmu_path)
         self.vars = {v.name: v for v in self.md.modelVariables}
         cls = FMU3Slave if self.fmi3 else FMU2Slave
         self.fmu = cls(guid=self.md.guid, unzipDirectory=self.unzip,

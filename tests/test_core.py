@@ -7,6 +7,7 @@ are justified where they appear.
 """
 import dataclasses
 import math
+import re
 import struct
 import zlib
 
@@ -36,8 +37,14 @@ def small(**changes) -> RegulatorParams:
     return RegulatorParams(n_neurons=changes.pop("n_neurons", 60), **changes)
 
 
+def clip(v, limit):
+    """The offsets' safety bound, written out: +-delta_limit_rad."""
+    return min(max(v, -limit), limit)
+
+
 def classic_pd(params, seq):
-    """The classic PD regulator, written out independently of the core."""
+    """The classic PD regulator, written out independently of the core (offsets clipped to
+    +-delta_limit_rad)."""
     outs, last, vxp, vyp, pdx, pdy = [], None, None, None, None, None
     for u in seq:
         if u.step_index != last:
@@ -46,23 +53,29 @@ def classic_pd(params, seq):
             pdx = params.Kp_x * (u.vx - u.vx_des) + params.Kd_x * (u.vx - vxp)
             pdy = params.Kp_y * (u.vy - u.vy_des) + params.Kd_y * (u.vy - vyp)
             vxp, vyp, last = u.vx, u.vy, u.step_index
+        lim = params.delta_limit_rad
         outs.append({
-            "delta_swing_hip_pitch": pdx,
+            "delta_swing_hip_pitch": clip(pdx, lim),
             "delta_swing_knee": 0.0,
-            "delta_swing_hip_roll": pdy,
-            "delta_stance_hip_roll": params.Kp_roll * (u.roll - params.roll_des)
-            + params.Kd_roll * u.roll_rate,
-            "delta_stance_hip_pitch": params.Kp_pitch * (u.pitch - params.pitch_des)
-            + params.Kd_pitch * u.pitch_rate,
+            "delta_swing_hip_roll": clip(pdy, lim),
+            "delta_stance_hip_roll": clip(params.Kp_roll * (u.roll - params.roll_des)
+                                          + params.Kd_roll * u.roll_rate, lim),
+            "delta_stance_hip_pitch": clip(params.Kp_pitch * (u.pitch - params.pitch_des)
+                                           + params.Kd_pitch * u.pitch_rate, lim),
             "delta_stance_knee": 0.0,
         })
     return outs
 
 
+#: The Real inputs' declared ranges, in RegulatorInputs order: random walks stay inside them.
+INPUT_LO = np.array([s.min for s in INPUT_SPECS if s.type == "Real"])
+INPUT_HI = np.array([s.max for s in INPUT_SPECS if s.type == "Real"])
+
+
 def random_inputs(rng, n, steps_every=7, scale=1.0):
     seq, walk = [], np.zeros(8)
     for k in range(n):
-        walk = walk + rng.normal(0.0, 0.05 * scale, 8)
+        walk = np.clip(walk + rng.normal(0.0, 0.05 * scale, 8), INPUT_LO, INPUT_HI)
         seq.append(RegulatorInputs(*map(float, walk), step_index=k // steps_every))
     return seq
 
@@ -85,7 +98,7 @@ def test_specs_match_dataclasses_and_api_order():
         "psi_gain_swing_hip_pitch", "psi_gain_swing_knee", "psi_gain_swing_hip_roll",
         "psi_gain_stance_hip_roll", "psi_gain_stance_hip_pitch", "psi_gain_stance_knee",
         "adaptation_enabled", "velocity_scale_mps", "angle_scale_rad",
-        "rate_scale_radps", "n_neurons", "seed"]
+        "rate_scale_radps", "n_neurons", "seed", "delta_limit_rad"]
     assert [f.name for f in dataclasses.fields(RegulatorParams)] == [s.name for s in PARAM_SPECS]
     p = RegulatorParams()
     for s in PARAM_SPECS:
@@ -189,6 +202,48 @@ def test_non_finite_inputs_are_rejected_by_name(name, bad):
     assert reg.state is before
 
 
+@pytest.mark.parametrize("spec", [s for s in INPUT_SPECS if s.type == "Real"], ids=lambda s: s.name)
+def test_inputs_outside_their_declared_range_are_rejected_naming_it(spec):
+    """Every Real input has a physical range; vx = 1e308 used to give a 1e307 rad offset."""
+    assert spec.min is not None and spec.max is not None and spec.min < 0.0 < spec.max
+    reg = Regulator(small())
+    before = reg.state
+    expected = re.escape(f"must be a finite number in [{spec.min:g}, {spec.max:g}]")
+    for bad in (1e308, -1e308, math.nextafter(spec.max, math.inf), math.nextafter(spec.min, -math.inf)):
+        u = dataclasses.replace(RegulatorInputs(), **{spec.name: bad})
+        with pytest.raises(InputError, match=rf"^{spec.name} = .*{expected}"):
+            reg.step(u, DT)
+    assert reg.state is before  # a refused call changes nothing
+    for edge in (spec.min, spec.max):  # the bounds themselves are legal
+        reg.step(dataclasses.replace(RegulatorInputs(), **{spec.name: edge}), DT)
+
+
+def test_joint_offsets_are_clipped_to_the_tunable_delta_limit():
+    u = RegulatorInputs(vx=9.0, vx_des=-9.0, vy=-9.0, vy_des=9.0, pitch=3.0, roll=-3.0,
+                        pitch_rate=90.0, roll_rate=-90.0, step_index=1)
+    p = small(adaptation_enabled=False, Kp_x=5.0, Kp_y=5.0, Kp_pitch=5.0, Kp_roll=5.0)
+    assert p.delta_limit_rad == 1.0  # the documented default
+    signs = {"swing_hip_pitch": 1.0, "swing_hip_roll": -1.0, "stance_hip_roll": -1.0,
+             "stance_hip_pitch": 1.0, "swing_knee": 0.0, "stance_knee": 0.0}
+    for limit in (1.0, 0.25, math.pi):
+        out = Regulator(p.replace(delta_limit_rad=limit)).step(u, DT)
+        assert {j: out[f"delta_{j}"] for j in signs} == {j: s * limit for j, s in signs.items()}
+    out = Regulator(p.replace(delta_limit_rad=0.0)).step(u, DT)
+    assert all(math.copysign(1.0, out[f"delta_{j}"]) == 1.0 and out[f"delta_{j}"] == 0.0 for j in signs)
+    # the networks' outputs are bounded too (psi saturated at 1 rad, gain 5 -> 5 rad before the clip)
+    learner = Regulator(small(psi_limit=1.0, learning_rate=1e-3, psi_gain_swing_knee=5.0))
+    outs = run(learner, [RegulatorInputs(vx=9.0, vx_des=-9.0, step_index=k) for k in range(400)])
+    assert outs[-1]["psi_x"] == 1.0 and outs[-1]["delta_swing_knee"] == 1.0
+
+
+def test_delta_limit_inside_the_bound_changes_nothing_bit_for_bit():
+    seq = random_inputs(np.random.default_rng(4), 200)
+    a = run(Regulator(small(learning_rate=2e-4)), seq)
+    b = run(Regulator(small(learning_rate=2e-4, delta_limit_rad=math.pi)), seq)
+    assert max(abs(o[f"delta_{j}"]) for o in a for j in OUTPUT_JOINTS) < 1.0  # never clipped here
+    assert a == b
+
+
 @pytest.mark.parametrize("bad", [-1, 1.0, True, "3", 2**31])
 def test_bad_step_index_rejected(bad):
     with pytest.raises(InputError, match=r"^step_index = .*integer in \[0, 2147483647\]"):
@@ -269,7 +324,7 @@ def test_network_inputs_are_scaled_and_radially_projected():
                                                 roll_rate=0.8), p)
     assert xl.tolist() == [0.5, 0.25] and xy.tolist() == [-0.1, 0.0]
     assert xt.tolist() == [0.2, 0.0, -0.1, 0.2]
-    xl, _, xt = network_inputs(RegulatorInputs(vx=6.0, vx_des=8.0, pitch=10.0), p)
+    xl, _, xt = network_inputs(RegulatorInputs(vx=6.0, vx_des=8.0, pitch=3.0), p)
     np.testing.assert_allclose(xl, [0.6, 0.8], rtol=1e-15)  # direction kept, norm 1
     np.testing.assert_allclose(xt, [1.0, 0.0, 0.0, 0.0], rtol=1e-15)
 
@@ -621,6 +676,8 @@ def test_property_outputs_compose_pd_and_gained_psi(gains, seed):
     g = dict(zip(OUTPUT_JOINTS, gains))
     for u in random_inputs(np.random.default_rng(seed), 30, 4):
         o, d = reg.step(u, DT), pd.step(u, DT)
+        # (the twin's PD terms stay far below delta_limit_rad for these small inputs, so d
+        # is unclipped; the sum is clipped like the core's output)
         want = {
             "swing_hip_pitch": d["delta_swing_hip_pitch"] + g["swing_hip_pitch"] * o["psi_x"],
             "swing_knee": g["swing_knee"] * o["psi_x"],
@@ -632,7 +689,7 @@ def test_property_outputs_compose_pd_and_gained_psi(gains, seed):
             "stance_knee": g["stance_knee"] * o["psi_pitch"],
         }
         for j, v in want.items():
-            assert o[f"delta_{j}"] == pytest.approx(v, rel=1e-15, abs=1e-15), j
+            assert o[f"delta_{j}"] == pytest.approx(clip(v, p.delta_limit_rad), rel=1e-15, abs=1e-15), j
         for k in ("error_vx", "error_vy", "error_pitch", "error_roll"):
             assert o[k] == d[k]
 

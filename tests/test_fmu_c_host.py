@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 
 from fmu_src.avr_core import OUTPUT_SPECS, Regulator, RegulatorInputs, RegulatorParams
 
@@ -39,8 +39,8 @@ def host(tmp_path_factory):
 
 
 @pytest.fixture(scope="module")
-def unzipped(built_fmu):
-    return extract(str(built_fmu)), read_model_description(str(built_fmu))
+def unzipped(fmu_dir):
+    return fmu_dir, read_model_description(fmu_dir)
 
 
 def _env(md, preload):
@@ -50,7 +50,8 @@ def _env(md, preload):
     env["AVR_VRS"] = ",".join(str(vr[n]) for n in names)
     if preload:
         libpython = Path(sysconfig.get_config_var("LIBDIR")) / sysconfig.get_config_var("LDLIBRARY")
-        env["LD_PRELOAD"] = str(libpython)
+        # after whatever is preloaded already (the sanitizer run preloads libasan, which must come first)
+        env["LD_PRELOAD"] = " ".join(filter(None, [os.environ.get("LD_PRELOAD"), str(libpython)]))
         env["PYTHONHOME"] = sys.base_prefix
         env["PYTHONPATH"] = str(Path(np.__file__).parents[1])  # where numpy is installed
     return env

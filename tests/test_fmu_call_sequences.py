@@ -1,8 +1,10 @@
 """Random FMI call sequences, legal and illegal, against the real FMU in a subprocess.
 
-An independent model of the FMI 2.0 co-simulation state machine (section 4.2.4) and of
-the FMU's variable table says which calls are legal.  Property: the process never
-dies, every legal call returns fmi2OK and no illegal call returns fmi2OK.
+An independent model of the FMI 2.0 co-simulation state machine (section 4.2.4), of
+the FMU's variable table and of its FMU-state rule (a state is restored only into an
+instance whose fixed parameters have the values it was saved with) says which calls
+are legal.  Property: the process never dies, every legal call returns fmi2OK and no
+illegal call returns fmi2OK.
 """
 import json
 import math
@@ -20,6 +22,7 @@ DRIVER = Path(__file__).parent / "fmi" / "driver.py"
 H = 0.005
 SPECS = {s.name: s for s in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)}
 LIVE = {"instantiated", "initializationMode", "stepComplete", "stepFailed", "terminated"}
+FIXED_DEFAULTS = {s.name: s.default for s in PARAM_SPECS if s.variability == "fixed"}
 
 
 class FmiModel:
@@ -28,7 +31,8 @@ class FmiModel:
     def __init__(self):
         self.phase = None  # not instantiated
         self.time = 0.0
-        self.states = []  # (phase, time) per FMUstate index
+        self.fixed = dict(FIXED_DEFAULTS)  # current values of the fixed parameters
+        self.states = []  # (phase, time, fixed) per FMUstate index
         self.blobs = []
 
     def legal(self, op, *args):  # noqa: C901 - one branch per FMI function, as in the standard's table
@@ -63,18 +67,25 @@ class FmiModel:
             return p in ("stepComplete", "stepFailed")
         if op in ("reset", "get_state", "free"):
             return p in LIVE
-        if op in ("set_state", "serialize"):  # an index the driver has no FMUstate for is not sent
+        if op == "serialize":  # an index the driver has no FMUstate for is not sent
             return (p in LIVE) if 0 <= args[0] < len(self.states) else None
+        if op == "set_state":
+            if not 0 <= args[0] < len(self.states):
+                return None
+            return p in LIVE and self.states[args[0]][2] == self.fixed
         if op == "deserialize":  # index -1: garbage bytes, which must be refused
             if args[0] >= len(self.blobs):
                 return None
-            return p in LIVE and args[0] >= 0
+            return p in LIVE and args[0] >= 0 and self.blobs[args[0]][2] == self.fixed
         raise ValueError(op)
 
     def apply(self, op, *args):
         """Update the model after a call that succeeded."""
         if op == "instantiate":
             self.phase, self.time, self.states, self.blobs = "instantiated", 0.0, [], []
+            self.fixed = dict(FIXED_DEFAULTS)
+        elif op == "set" and args[0] in self.fixed:
+            self.fixed[args[0]] = args[1]
         elif op == "setup":
             self.time = args[0]
         elif op == "enter":
@@ -86,11 +97,11 @@ class FmiModel:
         elif op == "terminate":
             self.phase = "terminated"
         elif op == "reset":
-            self.phase, self.time = "instantiated", 0.0
+            self.phase, self.time, self.fixed = "instantiated", 0.0, dict(FIXED_DEFAULTS)
         elif op == "get_state":
-            self.states.append((self.phase, self.time))
+            self.states.append((self.phase, self.time, dict(self.fixed)))
         elif op == "set_state":
-            self.phase, self.time = self.states[args[0]]
+            self.phase, self.time, _ = self.states[args[0]]
         elif op == "serialize":
             self.blobs.append(self.states[args[0]])
         elif op == "deserialize":
@@ -126,8 +137,8 @@ def _coerce(call):
 
 
 @pytest.fixture(scope="module")
-def driver(built_fmu):
-    proc = subprocess.Popen([sys.executable, str(DRIVER), str(built_fmu)], stdin=subprocess.PIPE,
+def driver(fmu_dir):
+    proc = subprocess.Popen([sys.executable, str(DRIVER), fmu_dir], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
     yield proc
     proc.stdin.close()

@@ -1,7 +1,8 @@
 """FMI 2.0 compliance of the FMU that build.py really builds (into a temporary folder).
 
 Calls that could crash run in a subprocess (tests/fmi/driver.py), so a crash shows
-as a failed test, not a dead pytest.
+as a failed test, not a dead pytest.  FMUs are extracted under tmp_path (``fmu_dir``,
+``unzip``), tools are found beside the running interpreter (``venv_tool``).
 """
 import hashlib
 import json
@@ -14,10 +15,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 from fmpy.validation import validate_fmu
+# Imported here, before any test instantiates the FMU in this process: pythonfmu puts the FMU's
+# resources/ (which holds a copy of the pythonfmu package, without its binaries) first on sys.path.
+import pythonfmu
+from pythonfmu.builder import FmuBuilder
 
 from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
 
@@ -26,9 +31,9 @@ OK, DISCARD, ERROR, FATAL = 0, 2, 3, 4
 H = 0.005  # communication step, s
 
 
-def run_calls(fmu, calls):
-    """Statuses of `calls` made in a fresh process; the process must not die."""
-    proc = subprocess.run([sys.executable, str(DRIVER), str(fmu), json.dumps(calls)], capture_output=True,
+def run_calls(fmu_dir, calls):
+    """Statuses of `calls` made in a fresh process on the extracted FMU; the process must not die."""
+    proc = subprocess.run([sys.executable, str(DRIVER), str(fmu_dir), json.dumps(calls)], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 0, f"driver died (exit {proc.returncode}):\n{proc.stderr[-2000:]}"
     return [r["status"] for r in json.loads(proc.stdout.strip().splitlines()[-1])]
@@ -42,8 +47,8 @@ def test_fmpy_validation_finds_no_problems(built_fmu):
     assert validate_fmu(str(built_fmu)) == []
 
 
-def test_fmutool_check_passes(built_fmu):
-    proc = subprocess.run(["fmutool", "-input", str(built_fmu), "-check"], capture_output=True, text=True)
+def test_fmutool_check_passes(built_fmu, venv_tool):
+    proc = subprocess.run([venv_tool("fmutool"), "-input", str(built_fmu), "-check"], capture_output=True, text=True)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out
     assert "compliant with FMI-2.0" in out and "No semantic error" in out, out
@@ -88,14 +93,14 @@ def test_module_names_are_unique_to_this_fmu(built_fmu):
 
 
 # ---- the calling sequence (FMI 2.0 section 4.2.4) ------------------------------------------
-def test_legal_sequence_all_ok(built_fmu):
+def test_legal_sequence_all_ok(fmu_dir):
     calls = [["instantiate"], ["set", "Kp_x", 0.3], ["set", "n_neurons", 200], ["setup", 0.0], ["enter"],
              ["set", "vx", 0.4], ["get", "delta_swing_hip_pitch"], ["exit"],
              ["step", 0.0, H], ["set", "Kp_x", 0.2], ["set", "vx", 0.6], ["set", "step_index", 1],
              ["step", H, H], ["get", "psi_x"], ["get_state"], ["serialize", 0], ["deserialize", 0],
              ["set_state", 1], ["step", 2 * H, H], ["terminate"], ["get", "delta_swing_knee"],
              ["reset"], ["setup", 0.0], ["enter"], ["exit"], ["step", 0.0, H], ["terminate"], ["free"]]
-    assert run_calls(built_fmu, calls) == [OK] * len(calls)
+    assert run_calls(fmu_dir, calls) == [OK] * len(calls)
 
 
 @pytest.mark.parametrize("case, calls, expected", [
@@ -116,6 +121,8 @@ def test_legal_sequence_all_ok(built_fmu):
     ("step starting in the past", INIT + [["step", 0.0, H], ["step", 0.0, H]], ERROR),
     ("NaN input", INIT + [["set", "vx", math.nan]], ERROR),
     ("infinite input", INIT + [["set", "pitch", math.inf]], ERROR),
+    ("input above its declared range", INIT + [["set", "vx", 1e308]], ERROR),
+    ("input below its declared range", INIT + [["set", "roll_rate", -101.0]], ERROR),
     ("negative step_index", INIT + [["set", "step_index", -1]], ERROR),
     ("parameter above its range", [["instantiate"], ["set", "psi_limit", 50.0]], ERROR),
     ("tunable parameter NaN while stepping", INIT + [["set", "Kp_x", math.nan]], ERROR),
@@ -123,17 +130,17 @@ def test_legal_sequence_all_ok(built_fmu):
     ("garbage serialized state", INIT + [["deserialize", -1]], ERROR),
     ("get before initialization", [["instantiate"], ["get", "vx"]], ERROR),
 ])
-def test_illegal_call_is_refused_and_instance_survives(built_fmu, case, calls, expected):
+def test_illegal_call_is_refused_and_instance_survives(fmu_dir, case, calls, expected):
     # After the refused call the instance must still work: a legal step from where it was.
-    statuses = run_calls(built_fmu, calls)
+    statuses = run_calls(fmu_dir, calls)
     assert statuses[:-1] == [OK] * (len(calls) - 1), case
     assert statuses[-1] == expected, case
 
 
-def test_refused_set_changes_nothing_and_stepping_continues(built_fmu):
+def test_refused_set_changes_nothing_and_stepping_continues(fmu_dir):
     calls = INIT + [["set", "vx", 0.7], ["set", "vx", math.nan], ["get", "vx"], ["step", 0.0, H],
                     ["set", "Kp_x", 99.0], ["get", "Kp_x"], ["step", H, H], ["terminate"], ["free"]]
-    proc = subprocess.run([sys.executable, str(DRIVER), str(built_fmu), json.dumps(calls)], capture_output=True,
+    proc = subprocess.run([sys.executable, str(DRIVER), fmu_dir, json.dumps(calls)], capture_output=True,
                           text=True, timeout=120)
     results = json.loads(proc.stdout.strip().splitlines()[-1])
     assert [r["status"] for r in results] == [OK] * 5 + [ERROR, OK, OK, ERROR, OK, OK, OK, OK]
@@ -145,9 +152,9 @@ def test_refused_set_changes_nothing_and_stepping_continues(built_fmu):
 class Slave:
     """A thin helper around fmpy's FMU2Slave with names instead of value references."""
 
-    def __init__(self, fmu_path, name="avr", unzip=None):
-        self.md = read_model_description(str(fmu_path))
-        self.unzip = unzip or extract(str(fmu_path))
+    def __init__(self, fmu_dir, name="avr"):
+        self.md = read_model_description(str(fmu_dir))
+        self.unzip = str(fmu_dir)
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzip,
                              modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
@@ -189,8 +196,8 @@ def input_sequence(n, seed):
     return seq
 
 
-def test_reset_returns_the_start_state(built_fmu):
-    s = Slave(built_fmu).init(n_neurons=300)
+def test_reset_returns_the_start_state(fmu_dir):
+    s = Slave(fmu_dir).init(n_neurons=300)
     seq = input_sequence(50, seed=1)
     first = [s.step(k, u) for k, u in enumerate(seq)]
     s.fmu.terminate()
@@ -202,8 +209,8 @@ def test_reset_returns_the_start_state(built_fmu):
     s.fmu.freeInstance()
 
 
-def test_state_round_trips_are_bit_exact(built_fmu):
-    s = Slave(built_fmu).init()
+def test_state_round_trips_are_bit_exact(fmu_dir):
+    s = Slave(fmu_dir).init()
     seq = input_sequence(120, seed=2)
     for k, u in enumerate(seq[:60]):
         s.step(k, u)
@@ -212,7 +219,7 @@ def test_state_round_trips_are_bit_exact(built_fmu):
     straight = np.array([s.step(k, u) for k, u in enumerate(seq[60:], start=60)])
     s.fmu.setFMUstate(state)  # restore in memory, then continue
     again = np.array([s.step(k, u) for k, u in enumerate(seq[60:], start=60)])
-    other = Slave(built_fmu, name="other").init()  # restore the serialized state in a fresh instance
+    other = Slave(fmu_dir, name="other").init()  # restore the serialized state in a fresh instance
     other.fmu.setFMUstate(other.fmu.deSerializeFMUstate(blob))
     restored = np.array([other.step(k, u) for k, u in enumerate(seq[60:], start=60)])
     assert np.array_equal(straight, again) and np.array_equal(straight, restored)
@@ -223,16 +230,15 @@ def test_state_round_trips_are_bit_exact(built_fmu):
         slave.fmu.freeInstance()
 
 
-def test_twenty_instances_in_one_process_are_independent(built_fmu):
-    unzip = extract(str(built_fmu))
-    slaves = [Slave(built_fmu, name=f"i{i}", unzip=unzip).init(n_neurons=200, seed=i % 2) for i in range(20)]
+def test_twenty_instances_in_one_process_are_independent(fmu_dir):
+    slaves = [Slave(fmu_dir, name=f"i{i}").init(n_neurons=200, seed=i % 2) for i in range(20)]
     seqs = [input_sequence(30, seed=100 + i) for i in range(20)]
     interleaved = [[None] * 30 for _ in range(20)]
     for k in range(30):
         for i, s in enumerate(slaves):
             interleaved[i][k] = s.step(k, seqs[i][k])
     for i in (0, 7, 19):  # each equals a run of its own in a fresh instance
-        alone = Slave(built_fmu, name=f"alone{i}", unzip=unzip).init(n_neurons=200, seed=i % 2)
+        alone = Slave(fmu_dir, name=f"alone{i}").init(n_neurons=200, seed=i % 2)
         assert np.array_equal(np.array(interleaved[i]), np.array([alone.step(k, u) for k, u in enumerate(seqs[i])]))
         alone.fmu.freeInstance()
     for s in slaves:
@@ -258,20 +264,18 @@ class CounterSlave(Fmi2Slave):
 '''
 
 
-def test_two_different_fmus_in_one_process(built_fmu, tmp_path):
-    from pythonfmu.builder import FmuBuilder
-
+def test_two_different_fmus_in_one_process(fmu_dir, tmp_path, unzip):
     script = tmp_path / "avr_test_counter_slave.py"
     script.write_text(OTHER_SLAVE)
     other_path = FmuBuilder.build_FMU(script, dest=tmp_path)
     md = read_model_description(str(other_path))
-    other = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(other_path)),
+    other = FMU2Slave(guid=md.guid, unzipDirectory=unzip(other_path, tmp_path / "counter"),
                       modelIdentifier=md.coSimulation.modelIdentifier, instanceName="counter")
     other.instantiate()
     other.setupExperiment(startTime=0.0)
     other.enterInitializationMode()
     other.exitInitializationMode()
-    s = Slave(built_fmu).init(n_neurons=100)
+    s = Slave(fmu_dir).init(n_neurons=100)
     seq = input_sequence(10, seed=5)
     outputs = [s.step(k, u) for k, u in enumerate(seq)]
     for k in range(10):
@@ -283,23 +287,24 @@ def test_two_different_fmus_in_one_process(built_fmu, tmp_path):
         fmu.freeInstance()
 
 
-def test_refused_calls_log_the_variable_and_its_range(built_fmu):
+def test_refused_calls_log_the_variable_and_its_range(fmu_dir):
     # fmpy's default logger prints FMU messages to stdout; the driver's JSON is the last line.
     calls = [["instantiate"], ["set", "psi_limit", 50.0], ["set", "delta_swing_knee", 0.1], ["setup", 0.0],
-             ["enter"], ["exit"], ["set", "vx", math.nan], ["step", 0.0, -1.0]]
-    proc = subprocess.run([sys.executable, str(DRIVER), str(built_fmu), json.dumps(calls)], capture_output=True,
+             ["enter"], ["exit"], ["set", "vx", math.nan], ["set", "vx", 1e308], ["step", 0.0, -1.0]]
+    proc = subprocess.run([sys.executable, str(DRIVER), fmu_dir, json.dumps(calls)], capture_output=True,
                           text=True, timeout=120)
     log = proc.stdout
     spec = {s.name: s for s in PARAM_SPECS}["psi_limit"]
     assert f"psi_limit = 50: out of range [{spec.min:g}, {spec.max:g}]" in log, log
     assert "delta_swing_knee is an output and cannot be set" in log, log
-    assert "vx = nan: must be a finite number" in log, log
+    assert "vx = nan: must be a finite number in [-10, 10]" in log, log
+    assert "vx = 1e+308: out of range [-10, 10]" in log, log
     assert "communicationStepSize = -1: must be a finite number > 0" in log, log
 
 
-def test_guard_refuses_a_wrong_guid(built_fmu):
-    md = read_model_description(str(built_fmu))
-    fmu = FMU2Slave(guid="{not-the-guid}", unzipDirectory=extract(str(built_fmu)),
+def test_guard_refuses_a_wrong_guid(fmu_dir):
+    md = read_model_description(fmu_dir)
+    fmu = FMU2Slave(guid="{not-the-guid}", unzipDirectory=fmu_dir,
                     modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bad")
     with pytest.raises(Exception, match="instantiate"):
         fmu.instantiate()
@@ -312,8 +317,6 @@ def test_guard_header_matches_model_description(built_fmu):
 
 
 def test_pythonfmu_exit_use_after_free_is_patched(build_module, built_fmu):
-    import pythonfmu
-
     original = (Path(pythonfmu.__file__).parent / "resources" / "binaries" / "linux64" /
                 "libpythonfmu-export.so").read_bytes()
     offset = build_module._elf_symbol_file_offset(original, build_module.EXIT_BUG_SYMBOL)

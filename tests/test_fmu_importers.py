@@ -38,8 +38,8 @@ def test_reference_actually_learns(reference):
     assert psi_x[0] == 0.0 and abs(psi_x[-1]) > 1e-4
 
 
-def test_fmpy_fmu2slave_matches_core(built_fmu, sequence, reference):
-    s = Slave(built_fmu).init(**PARAMS)
+def test_fmpy_fmu2slave_matches_core(fmu_dir, sequence, reference):
+    s = Slave(fmu_dir).init(**PARAMS)
     out = np.array([s.step(k, u) for k, u in enumerate(sequence)])
     s.fmu.terminate()
     s.fmu.freeInstance()
@@ -105,18 +105,18 @@ def test_libcosimpy_matches_core(built_fmu, sequence, reference, tmp_path):
     np.testing.assert_allclose(np.array(out), reference, **TOL)
 
 
-def test_fmu_container_matches_core(built_fmu, sequence, reference, tmp_path):
+def test_fmu_container_matches_core(built_fmu, sequence, reference, tmp_path, venv_tool, unzip):
     """Our FMU inside an FMU container (fmu-manipulation-toolbox's fmucontainer), run by fmpy."""
     import subprocess
 
     shutil.copy(built_fmu, tmp_path / "AdaptiveVelocityRegulator.fmu")
     (tmp_path / "avr_container.csv").write_text("rule;from_fmu;from_port;to_fmu;to_port\n"
                                                  "FMU;AdaptiveVelocityRegulator.fmu;;;\n")
-    proc = subprocess.run(["fmucontainer", "-container", f"avr_container.csv:{H}", "-fmu-directory", str(tmp_path)],
+    proc = subprocess.run([venv_tool("fmucontainer"), "-container", f"avr_container.csv:{H}", "-fmu-directory", str(tmp_path)],
                           cwd=tmp_path, capture_output=True, text=True, timeout=300)
     container = tmp_path / "avr_container.fmu"
     assert container.is_file(), proc.stdout + proc.stderr
-    s = Slave(container)
+    s = Slave(unzip(container, tmp_path / "container_unzipped"))
     # the container exposes the inputs and outputs, not the parameters: run with the defaults
     s.init()
     regulator = Regulator(RegulatorParams())

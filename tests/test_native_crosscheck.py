@@ -12,7 +12,6 @@
 import ctypes
 import shutil
 import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -128,6 +127,22 @@ def test_recorded_closed_loop_matches_the_core(native_fmus, closed_loop_inputs, 
     diff = np.abs(out - reference).max()
     print(f"\nFMI {fmi}.0 native vs numpy core, {len(out)} calls: max |difference| = {diff:.3g}")
     assert diff <= LOOP_TOL
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_offset_limit_binds_the_same_in_c(native_fmus, fmi):
+    """delta_limit_rad clips the six offsets in C exactly as in the core: a limit far below
+    the PD terms that a 1 m/s speed error with Kp_x 0.3 and a 0.2 rad pitch produce."""
+    params = {"n_neurons": 50, "seed": 3, "Kp_x": 0.3, "Kp_y": 0.3, "Kp_pitch": 1.0, "Kp_roll": 1.0,
+              "delta_limit_rad": 0.02, "learning_rate": 1e-3}
+    seq = [dict(u, vx=u["vx"] + 1.0, vy=u["vy"] - 1.0, pitch=0.2, roll=-0.2) for u in input_sequence(60, seed=5)]
+    reference = core_outputs(seq, **params)
+    deltas = reference[:, [OUTPUT_NAMES.index(n) for n in OUTPUT_NAMES if n.startswith("delta_")]]
+    assert np.abs(deltas).max() == 0.02 and (np.abs(deltas) == 0.02).mean() > 0.5  # the limit binds
+    slave = AnySlave(native_fmus[fmi]).init(**params)
+    out = np.array([slave.step(k, u) for k, u in enumerate(seq)])
+    slave.close()
+    np.testing.assert_allclose(out, reference, rtol=1e-12, atol=1e-12)  # as the importer tests below
 
 
 # ---- importers ---------------------------------------------------------------------------------------

@@ -10,18 +10,17 @@ import json
 import math
 import subprocess
 import sys
-import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
 import pytest
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 
 from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
-from native_support import (H, MINGW_OBJDUMP, READELF, fmutool, native_fmus, require)  # noqa: F401 (fixture)
+from native_support import (H, MINGW_OBJDUMP, READELF, fmutool, native_fmus, require, unzipped)  # noqa: F401 (fixture)
 
 DRIVERS = {2: Path(__file__).parent / "fmi" / "driver.py", 3: Path(__file__).parent / "native" / "driver3.py"}
 OK, ERROR = 0, 3
@@ -31,7 +30,7 @@ FMI = pytest.mark.parametrize("fmi", [2, 3])
 
 def run_calls(fmi, fmu, calls):
     """Answers (dicts) to `calls` made in a fresh process; the process must not die."""
-    proc = subprocess.run([sys.executable, str(DRIVERS[fmi]), str(fmu), json.dumps(calls)], capture_output=True,
+    proc = subprocess.run([sys.executable, str(DRIVERS[fmi]), unzipped(fmu), json.dumps(calls)], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 0, f"driver died (exit {proc.returncode}):\n{proc.stderr[-2000:]}"
     return json.loads(proc.stdout.strip().splitlines()[-1]), proc.stdout
@@ -119,13 +118,16 @@ def test_no_python_in_any_binary(native_fmus, fmi, tmp_path):
 
 
 def test_build_all_writes_fmus_json_listing_every_fmu_built(build_module, tmp_path):
-    paths = build_module.build_all(tmp_path)
+    built = build_module.build_all(tmp_path)
+    paths = [p for p in built if p.suffix == ".fmu"]
+    assert {p.name for p in built} - {p.name for p in paths} == {"CassieAVR.ssp", "CassieAVR_osp"}
     listing = json.loads((tmp_path / "fmus.json").read_text())["fmus"]
     assert [e["file"] for e in listing] == [p.name for p in paths] and all(p.is_file() for p in paths)
     assert [(e["fmiVersion"], e["modelIdentifier"], e["implementation"], e["platforms"]) for e in listing] == [
         ("2.0", "AdaptiveVelocityRegulator", "python", ["linux64", "win64"]),
         ("2.0", "AdaptiveVelocityRegulatorNative", "native", ["linux64", "win64"]),
-        ("3.0", "AdaptiveVelocityRegulatorNative", "native", ["x86_64-linux", "x86_64-windows"])]
+        ("3.0", "AdaptiveVelocityRegulatorNative", "native", ["x86_64-linux", "x86_64-windows"]),
+        ("2.0", "CassiePlant", "python", ["linux64"])]
     assert all(e["sha256"] == hashlib.sha256(p.read_bytes()).hexdigest() for e, p in zip(listing, paths))
 
 
@@ -207,7 +209,7 @@ def test_refused_calls_log_the_variable_and_its_range(native_fmus, fmi):
 def test_wrong_guid_is_refused(native_fmus, fmi):
     md = read_model_description(str(native_fmus[fmi]))
     cls = FMU3Slave if fmi == 3 else FMU2Slave
-    fmu = cls(guid="{not-the-guid}", unzipDirectory=extract(str(native_fmus[fmi])),
+    fmu = cls(guid="{not-the-guid}", unzipDirectory=unzipped(native_fmus[fmi]),
               modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bad")
     with pytest.raises(Exception, match="nstantiate"):
         fmu.instantiate()

@@ -25,7 +25,7 @@ from fmpy import read_model_description
 
 from fmu_src.avr_core import INPUT_SPECS
 from native_support import (CC, MINGW_CC, NATIVE_DIR, OUTPUT_NAMES, WINE, AnySlave, compile_c, core_outputs,
-                            input_sequence, native_fmus, require)  # noqa: F401 (fixture)
+                            input_sequence, native_fmus, require, unzipped)  # noqa: F401 (fixture)
 
 FMI_INCLUDE = Path(__file__).parents[1] / "fmu_src" / "native" / "include"
 PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_knee": 0.0}
@@ -194,7 +194,7 @@ def test_sanitized_fmu_runs_state_machine_and_fuzz_with_zero_findings(sanitized_
     from test_native_state import Fmi3Model, FmiModel
 
     env = _sanitizer_env()
-    proc = subprocess.Popen([sys.executable, str(DRIVERS[fmi]), str(sanitized_fmus[fmi])], stdin=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, str(DRIVERS[fmi]), unzipped(sanitized_fmus[fmi])], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1, env=env)
 
     def send(call):

@@ -2,7 +2,6 @@
 call sequences (legal and illegal) against an independent model of the FMI state machine
 (the pythonfmu FMU's model in tests/test_fmu_call_sequences.py, and its FMI 3.0 variant).
 """
-import json
 import math
 import struct
 import subprocess
@@ -11,13 +10,12 @@ import zlib
 
 import numpy as np
 import pytest
-from fmpy import extract
 from fmpy.fmi1 import FMICallException
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fmu_src.avr_core import OUTPUT_SPECS
-from native_support import AnySlave, input_sequence, native_fmus  # noqa: F401 (fixture)
+from native_support import AnySlave, input_sequence, native_fmus, unzipped  # noqa: F401 (fixture)
 from test_fmu_call_sequences import FmiModel, _coerce, _send, calls
 from test_native_fmu import DRIVERS
 
@@ -36,7 +34,7 @@ def test_state_round_trips_are_bit_exact(native_fmus, fmi):
     straight = np.array([s.step(k, u) for k, u in enumerate(seq[60:], start=60)])
     s.set_state(state)  # restore in memory, then continue
     again = np.array([s.step(k, u) for k, u in enumerate(seq[60:], start=60)])
-    other = AnySlave(native_fmus[fmi], name="other").init(n_neurons=50)  # other networks: rebuilt from the state
+    other = AnySlave(native_fmus[fmi], name="other").init()  # same fixed parameters (other ones are refused)
     other.set_state(other.deserialize(blob))
     restored = np.array([other.step(k, u) for k, u in enumerate(seq[60:], start=60)])
     assert np.array_equal(straight, again) and np.array_equal(straight, restored)
@@ -97,7 +95,7 @@ def test_corrupted_or_foreign_blobs_are_refused_and_change_nothing(native_fmus, 
 
 @FMI
 def test_twenty_instances_in_one_process_are_independent(native_fmus, fmi):
-    unzip = extract(str(native_fmus[fmi]))
+    unzip = unzipped(native_fmus[fmi])
     slaves = [AnySlave(native_fmus[fmi], name=f"i{i}", unzip=unzip).init(n_neurons=200, seed=i % 2,
                                                                           learning_rate=1e-4) for i in range(20)]
     seqs = [input_sequence(30, seed=100 + i) for i in range(20)]
@@ -141,7 +139,7 @@ class Fmi3Model(FmiModel):
 @pytest.fixture(scope="module", params=[2, 3])
 def driver(request, native_fmus):
     fmi = request.param
-    proc = subprocess.Popen([sys.executable, str(DRIVERS[fmi]), str(native_fmus[fmi])], stdin=subprocess.PIPE,
+    proc = subprocess.Popen([sys.executable, str(DRIVERS[fmi]), unzipped(native_fmus[fmi])], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
     yield fmi, proc
     proc.stdin.close()
@@ -177,3 +175,27 @@ def test_fmi3_time_is_the_independent_variable(native_fmus):
         s.fmu.setFloat64([time_vr], [1.0])
     assert s.fmu.getFloat64([time_vr]) == [3 * 0.005]
     s.close()
+
+
+@FMI
+def test_a_state_with_other_fixed_parameters_is_refused_until_they_match(native_fmus, fmi):
+    """As the pythonfmu FMU: a state restores only into an instance with the state's n_neurons
+    and seed (it used to bring its own along, silently changing the instance's networks)."""
+    seq = input_sequence(20, seed=4)
+    a = AnySlave(native_fmus[fmi], name="a").init(n_neurons=20, seed=0, learning_rate=1e-3)
+    for k, u in enumerate(seq[:10]):
+        a.step(k, u)
+    blob = a.serialize(a.get_state())
+    expected = np.array([a.step(k, u) for k, u in enumerate(seq[10:], start=10)])
+    a.close()
+
+    b = AnySlave(native_fmus[fmi], name="b").init(n_neurons=10, seed=5)
+    with pytest.raises(FMICallException):
+        b.set_state(b.deserialize(blob))
+    b.step(0, seq[0])  # refused, nothing changed: b still steps from its own start
+    b.close()
+
+    c = AnySlave(native_fmus[fmi], name="c").init(n_neurons=20, seed=0)
+    c.set_state(c.deserialize(blob))
+    np.testing.assert_array_equal([c.step(k, u) for k, u in enumerate(seq[10:], start=10)], expected)
+    c.close()

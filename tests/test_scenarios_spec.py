@@ -202,7 +202,9 @@ def test_model_path_and_missing_file(tmp_path):
     xml.write_text("<mujoco/>")
     f = tmp_path / "s.toml"
     f.write_text('model = "m.xml"\n' + GOOD)
-    assert spec.load_scenario(f).model == str(xml.resolve())  # relative to the scenario's folder
+    assert spec.load_scenario(f, check_plant=False).model == str(xml.resolve())  # relative to the scenario's folder
+    with pytest.raises(ScenarioError, match="not the Cassie model"):  # compiled up front: it is no Cassie
+        spec.load_scenario(f)
     with pytest.raises(ScenarioError, match="file not found"):
         spec.load_scenario(tmp_path / "none.toml")
     (tmp_path / "broken.toml").write_text("name = ")
@@ -299,20 +301,37 @@ def test_report_lists_missing_failed_and_ok(tmp_path):
             self.rows = rows_from(t, np.full(1000, 0.52), 0.5)
             self.wall_s, self.fall_reason, self.model_summary = 1.0, ("pelvis low" if fell else None), {}
 
-    output.write_results(tmp_path, s, "inprocess", [R("adaptive", False)], error="arm pd_only: CosimError: boom")
-    text = report.write_report(tmp_path).read_text()
+    (tmp_path / "nominal").mkdir()
+    output.write_results(tmp_path / "nominal", s, "inprocess",
+                         [output.ArmOutcome("adaptive", "complete", result=R("adaptive", False)),
+                          output.ArmOutcome("pd_only", "failed", error="CosimError: boom")])
+    path, problems = report.write_report(tmp_path)
+    text = path.read_text()
+    assert problems == []
     assert "## nominal" in text and "boom" in text and "failed" in text
     assert "| adaptive |" in text
-    assert "**Paper's claim:**" in text and "`adaptive.fell == false`" in text
+    assert "**Paper's claim:**" in text and "`adaptive.fell == false`" not in text  # no verdict: incomplete
+    assert "**Verdict: n/a**" in text and "incomplete run: pd_only failed" in text
     assert "## mass_15kg" in text and "not run" in text  # suite scenarios without results are listed
     summary = json.loads((tmp_path / "nominal" / "summary.json").read_text())
     for key in ("scenario", "model", "regulator"):
         assert key in summary
+    assert summary["status"] == "failed" and summary["error"] == "arm pd_only: CosimError: boom"
+    assert summary["arms"]["adaptive"]["status"] == "complete" and summary["arms"]["pd_only"]["status"] == "failed"
+    assert summary["verdict"]["overall"] == "n/a"
     for key in ("fell", "t_fall_s", "steady_state_error_vx", "steady_state_error_vy", "convergence_time_s",
                 "wall_s", "realtime_factor"):
         assert key in summary["arms"]["adaptive"]
     header = (tmp_path / "nominal" / "timeseries.csv").read_text().splitlines()[0]
     assert header.startswith("arm,t,")
+
+    # arms are written in the scenario's order, whatever order they ended in (--jobs 2)
+    (tmp_path / "again").mkdir()
+    output.write_results(tmp_path / "again", s, "inprocess",
+                         [output.ArmOutcome("pd_only", "complete", result=R("pd_only", False)),
+                          output.ArmOutcome("adaptive", "complete", result=R("adaptive", True))])
+    arms = [line.split(",", 1)[0] for line in (tmp_path / "again" / "timeseries.csv").read_text().splitlines()[1:]]
+    assert arms == ["adaptive"] * 1000 + ["pd_only"] * 1000
     table = output.format_table([summary])
     assert "adaptive" in table and "pd_only" in table  # the failed arm is listed, not hidden
 

@@ -280,6 +280,19 @@ static void network_outputs(AvrCore *core, const AvrNetworks *net, double *value
     if (V(learning_rate) != 0.0 && si >= (int64_t)V(learn_from_step)) learn(core, values, dt, raw);
 }
 
+/* The safety bound +-delta_limit_rad on the six joint offsets (as the numpy core: values
+ * inside pass unchanged, bit for bit; 0 - limit, not -limit, so a limit of 0 gives +0.0). */
+static void clip_offsets(double *values, double limit) {
+    static const int offsets[] = {AVR_VR_delta_swing_hip_pitch, AVR_VR_delta_swing_knee,
+                                  AVR_VR_delta_swing_hip_roll, AVR_VR_delta_stance_hip_roll,
+                                  AVR_VR_delta_stance_hip_pitch, AVR_VR_delta_stance_knee};
+    double hi = limit, lo = 0.0 - limit;
+    for (size_t i = 0; i < sizeof offsets / sizeof offsets[0]; ++i) {
+        double v = values[offsets[i]];
+        values[offsets[i]] = v > hi ? hi : (v < lo ? lo : v);
+    }
+}
+
 void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) {
     double vx = V(vx), vy = V(vy);
     int64_t si = (int64_t)V(step_index);
@@ -310,6 +323,7 @@ void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) 
         V(delta_stance_hip_pitch) = pd_pitch;
         V(delta_stance_knee) = 0.0;
     }
+    clip_offsets(values, V(delta_limit_rad));
     V(psi_x) = psi[0], V(psi_y) = psi[1], V(psi_pitch) = psi[2], V(psi_roll) = psi[3];
     V(error_vx) = vx - V(vx_des);
     V(error_vy) = vy - V(vy_des);

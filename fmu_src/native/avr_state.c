@@ -20,6 +20,7 @@
 #include "avr_instance.h" /* first: see avr_types.h */
 
 #include <math.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -167,9 +168,29 @@ static AvrStatus check_contents(const AvrInstance *inst, const char *call, const
     return AVR_OK;
 }
 
+/* A state restores only into an instance whose fixed parameters have the state's values
+ * (as the pythonfmu FMU's guard rules): every differing one is named. */
+static AvrStatus check_fixed(const AvrInstance *inst, const char *call, const unsigned char *p) {
+    char differ[600] = "";
+    size_t used = 0;
+    for (int vr = 0; vr < AVR_N_VARS; ++vr) {
+        const AvrVar *v = &AVR_VARS[vr];
+        double saved = get_f64(p + BLOB_HEADER + 8 * vr);
+        if (v->causality != AVR_PARAMETER || v->variability != AVR_FIXED || saved == inst->values[vr]) continue;
+        int k = snprintf(differ + used, sizeof differ - used, "%s%s = %.17g (this instance: %.17g)",
+                         used ? ", " : "", v->name, saved, inst->values[vr]);
+        if (k > 0) used = used + (size_t)k < sizeof differ ? used + (size_t)k : sizeof differ - 1;
+    }
+    if (used == 0) return AVR_OK;
+    return avr_refuse(inst, call, "the state was saved with other fixed parameters: %s. Set them to the state's "
+                      "values before restoring it (fixed parameters can be set only before initialization ends)",
+                      differ);
+}
+
 AvrStatus avr_state_check(const AvrInstance *inst, const char *call, const unsigned char *bytes, size_t size) {
     AvrStatus s = check_frame(inst, call, bytes, size);
-    return s == AVR_OK ? check_contents(inst, call, bytes, size) : s;
+    if (s == AVR_OK) s = check_contents(inst, call, bytes, size);
+    return s == AVR_OK ? check_fixed(inst, call, bytes) : s;
 }
 
 static AvrStatus state_set(AvrInstance *inst, const char *call, const AvrBlob *blob) {

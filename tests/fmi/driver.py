@@ -2,8 +2,10 @@
 
 Runs in its own process, so that a crash of the FMU cannot take pytest down.
 
-    python driver.py FMU_PATH            # JSON lines on stdin -> JSON lines on stdout
-    python driver.py FMU_PATH CALLS_JSON # one sequence, prints one JSON list
+    python driver.py FMU_DIR             # JSON lines on stdin -> JSON lines on stdout
+    python driver.py FMU_DIR CALLS_JSON  # one sequence, prints one JSON list
+
+FMU_DIR is the extracted FMU (the tests extract it under their tmp_path).
 
 A call is a list: ``["instantiate"]``, ``["setup", t0]``, ``["enter"]``, ``["exit"]``,
 ``["step", t, h]``, ``["set", name, value]``, ``["get", name]``, ``["terminate"]``,
@@ -14,15 +16,15 @@ A call is a list: ``["instantiate"]``, ``["setup", t0]``, ``["enter"]``, ``["exi
 import json
 import sys
 
-from fmpy import extract, read_model_description
+from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 
 
 class Driver:
-    def __init__(self, fmu_path):
-        self.md = read_model_description(fmu_path)
-        self.unzip = extract(fmu_path)
+    def __init__(self, fmu_dir):
+        self.md = read_model_description(fmu_dir)
+        self.unzip = fmu_dir
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.fmu = None
         self.states = []

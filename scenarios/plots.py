@@ -1,0 +1,96 @@
+"""The three PNG plots of one scenario's results (matplotlib, Agg backend).
+
+``velocity.png``: step-averaged velocity against the command per arm (faint: the
+instantaneous velocity); ``psi.png``: the networks' outputs and the joint offsets;
+``torso.png``: torso pitch and roll.
+"""
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+
+from scenarios import metrics
+from scenarios.spec import Scenario
+
+PLOTS = ("velocity.png", "psi.png", "torso.png")
+PSI_NAMES = ("psi_x", "psi_y", "psi_pitch", "psi_roll")
+
+
+def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> list[str]:
+    """velocity.png (velocity vs command per arm), psi.png (Psi and joint offsets), torso.png."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    results = [r for r in results if len(r.rows)]
+    if not results:
+        return []
+    written = []
+
+    def save(name: str, fig) -> str:
+        fig.tight_layout()
+        fig.savefig(out_dir / name, dpi=90)
+        plt.close(fig)
+        return name
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+
+    # -- velocity vs command
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    for ax, axis in zip(axes, ("vx", "vy")):
+        for i, r in enumerate(results):
+            c = colors[i % len(colors)]
+            t = r.rows["t"]
+            raw = f"tel_{axis}" if f"tel_{axis}" in r.rows.dtype.names else f"in_{axis}"
+            ax.plot(t, r.rows[raw], color=c, alpha=0.25, lw=0.6)
+            e = metrics.velocity_errors(r.rows)[0 if axis == "vx" else 1]
+            ax.plot(t, e + r.rows[f"cmd_{axis}_des"], color=c, lw=1.4, label=f"{r.arm}: step average")
+            if r.fell:
+                ax.axvline(r.t_fall_s, color=c, ls=":", lw=1)
+        ax.plot(results[0].rows["t"], results[0].rows[f"cmd_{axis}_des"], "k--", lw=1.2, label="command")
+        ax.set_ylabel(f"{axis} (m/s)")
+        ax.grid(alpha=0.3)
+    if scenario.perturbation_t_s > 0:
+        for ax in axes:
+            ax.axvline(scenario.perturbation_t_s, color="grey", ls="-.", lw=0.8)
+    axes[0].legend(loc="best", fontsize=8)
+    axes[0].set_title(f"{scenario.name}: velocity vs command (faint: instantaneous)")
+    axes[-1].set_xlabel("t (s)")
+    written.append(save("velocity.png", fig))
+
+    # -- Psi (network outputs) and the joint offsets they produce
+    deltas = [n[4:] for n in results[0].rows.dtype.names if n.startswith("out_delta_")]
+    psis = [n for n in PSI_NAMES if f"out_{n}" in results[0].rows.dtype.names]
+    panels = psis + deltas
+    ncols = 2
+    nrows = max(1, (len(panels) + ncols - 1) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(11, 2.0 * nrows + 0.8), sharex=True, squeeze=False)
+    for idx, name in enumerate(panels):
+        ax = axes[idx // ncols][idx % ncols]
+        for i, r in enumerate(results):
+            ax.plot(r.rows["t"], r.rows[f"out_{name}"], color=colors[i % len(colors)], lw=0.9, label=r.arm)
+        ax.set_title(name + (" (rad)" if name.startswith("delta_") else ""), fontsize=9)
+        ax.grid(alpha=0.3)
+    for idx in range(len(panels), nrows * ncols):
+        axes[idx // ncols][idx % ncols].axis("off")
+    for ax in axes[-1]:
+        ax.set_xlabel("t (s)")
+    if panels:
+        axes[0][0].legend(fontsize=8)
+    fig.suptitle(f"{scenario.name}: Psi outputs and joint offsets per arm")
+    written.append(save("psi.png", fig))
+
+    # -- torso angles
+    fig, axes = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
+    for ax, name in zip(axes, ("pitch", "roll")):
+        for i, r in enumerate(results):
+            ax.plot(r.rows["t"], np.degrees(r.rows[f"in_{name}"]), color=colors[i % len(colors)], lw=0.9, label=r.arm)
+        ax.set_ylabel(f"torso {name} (deg)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(fontsize=8)
+    axes[0].set_title(f"{scenario.name}: torso angles")
+    axes[-1].set_xlabel("t (s)")
+    written.append(save("torso.png", fig))
+    return written
