@@ -1,4 +1,9 @@
-"""Build ``dist/AdaptiveVelocityRegulator.fmu`` (FMI 2.0 co-simulation) reproducibly.
+"""Build the regulator FMUs into ``dist/`` reproducibly, and ``dist/fmus.json`` listing them.
+
+``AdaptiveVelocityRegulator.fmu`` (FMI 2.0 co-simulation, pythonfmu, the reference) and
+``AdaptiveVelocityRegulatorNative_fmi2.fmu`` / ``_fmi3.fmu`` (the same regulator in C,
+FMI 2.0 and FMI 3.0 from one source, linux and windows x86-64 binaries plus sources;
+the win64 binaries need the MinGW-w64 cross compiler).
 
     python build.py [--out DIR] [--sanitize]
 
@@ -19,6 +24,7 @@ import argparse
 import hashlib
 import html
 import io
+import json
 import logging
 import os
 import shutil
@@ -317,6 +323,154 @@ def build_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path:
     return fmu_path
 
 
+# --------------------------------------------------------------------------------------
+# Native FMUs (C, no Python): FMI 2.0 and FMI 3.0 from one source, fmu_src/native/
+# --------------------------------------------------------------------------------------
+NATIVE_SRC = FMU_SRC / "native"
+NATIVE_MODEL_IDENTIFIER = "AdaptiveVelocityRegulatorNative"
+NATIVE_CORE_SOURCES = ("avr_model.c", "avr_instance.c", "avr_state.c")
+NATIVE_API_SOURCES = {2: ("fmi2_api.c",), 3: ("fmi3_api.c", "fmi3_refused.c")}
+NATIVE_HEADERS = ("avr_types.h", "avr_model.h", "avr_instance.h")
+FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
+               3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
+#: FMI platform folder -> (compiler, library suffix, extra flags) per FMI version.
+NATIVE_PLATFORMS = {
+    2: {"linux64": "linux", "win64": "windows"},
+    3: {"x86_64-linux": "linux", "x86_64-windows": "windows"},
+}
+MINGW_CC = "x86_64-w64-mingw32-gcc"  # Debian package gcc-mingw-w64-x86-64
+#: Besides the options the FMU's sources declare (fmu_src/native/describe.py COMPILER_OPTIONS).
+NATIVE_WARNINGS = ("-Wall", "-Wextra", "-Werror", "-fvisibility=hidden")
+FMUS_JSON = "fmus.json"
+
+
+def _native_modules():
+    """fmu_src.native's ``header`` and ``describe`` (build.py also runs without the package installed)."""
+    sys.path.insert(0, str(REPO_ROOT))
+    try:
+        from fmu_src.native import describe, header
+    finally:
+        sys.path.remove(str(REPO_ROOT))
+    return header, describe
+
+
+def native_cflags() -> tuple[str, ...]:
+    return (*_native_modules()[1].COMPILER_OPTIONS.split(), *NATIVE_WARNINGS)
+
+
+def native_fmu_name(fmi_version: int) -> str:
+    return f"{NATIVE_MODEL_IDENTIFIER}_fmi{fmi_version}.fmu"
+
+
+def native_sources(fmi_version: int) -> tuple[str, ...]:
+    """The C files of the FMI ``fmi_version`` FMU (the rest of ``sources/`` are headers)."""
+    return NATIVE_CORE_SOURCES + NATIVE_API_SOURCES[fmi_version]
+
+
+def _native_compile_command(target: str, sources, out_name: str, extra_flags=()) -> list[str]:
+    """Compiler command (run in the folder holding the sources) for target "linux" or "windows"."""
+    if target == "linux":
+        compiler = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+        if compiler is None:
+            raise RuntimeError("build.py needs a C compiler (cc or gcc; set CC) for the native FMUs")
+        return [compiler, *native_cflags(), *extra_flags, "-shared", "-fPIC", "-Wl,--build-id=none",
+                "-I.", *sources, "-o", out_name, "-lm"]
+    compiler = shutil.which(MINGW_CC)
+    if compiler is None:
+        raise RuntimeError(f"build.py needs the MinGW-w64 cross compiler {MINGW_CC} for the win64 binaries "
+                           "(Debian: apt-get install gcc-mingw-w64-x86-64)")
+    # --no-insert-timestamp: a PE header without the link time, so builds are byte-identical
+    return [compiler, *native_cflags(), *extra_flags, "-shared", "-static-libgcc", "-Wl,--no-insert-timestamp", "-I.", *sources,
+            "-o", out_name]
+
+
+def compile_native(sources_dir: Path, fmi_version: int, target: str, out_path: Path, extra_flags=()) -> Path:
+    """Compile the FMU's C sources in ``sources_dir`` into the shared library ``out_path``
+    (``extra_flags`` after the usual ones, e.g. sanitizers for the tests)."""
+    cmd = _native_compile_command(target, native_sources(fmi_version), out_path.name, extra_flags)
+    result = subprocess.run(cmd, cwd=sources_dir, capture_output=True, text=True)
+    if result.returncode != 0:
+        raise RuntimeError(f"compiling the native FMU failed:\n{' '.join(cmd)}\n{result.stderr}")
+    shutil.move(str(sources_dir / out_path.name), out_path)
+    return out_path
+
+
+def _native_source_entries(fmi_version: int, guid: str) -> dict[str, bytes]:
+    """``sources/`` of the FMU: the C files and headers, the generated headers, the FMI headers."""
+    header, describe = _native_modules()
+    files = {name: (NATIVE_SRC / name).read_bytes() for name in native_sources(fmi_version) + NATIVE_HEADERS}
+    files.update({name: (NATIVE_SRC / "include" / name).read_bytes() for name in FMI_HEADERS[fmi_version]})
+    files["avr_vars.h"] = header.vars_header().encode()
+    files["avr_guid.h"] = header.guid_header(guid).encode()
+    if fmi_version == 3:
+        files["buildDescription.xml"] = describe.build_description(NATIVE_MODEL_IDENTIFIER,
+                                                                   native_sources(fmi_version))
+    return {f"sources/{name}": data for name, data in files.items()}
+
+
+def _native_metadata(fmi_version: int, guid: str) -> dict[str, bytes]:
+    describe = _native_modules()[1]
+    return {
+        "modelDescription.xml": describe.model_description(fmi_version, NATIVE_MODEL_IDENTIFIER, guid,
+                                                           native_sources(fmi_version), UNITS, DEFAULT_EXPERIMENT),
+        "documentation/index.html": describe.documentation(fmi_version, NATIVE_MODEL_IDENTIFIER).encode(),
+    }
+
+
+def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
+    """Build ``<out_dir>/AdaptiveVelocityRegulatorNative_fmi<2|3>.fmu`` (linux and windows x86-64) reproducibly.
+
+    The GUID (FMI 3.0: instantiationToken) is a hash of everything in the FMU except the
+    binaries and the header holding the GUID, which are made from it."""
+    placeholder = "{00000000-0000-0000-0000-000000000000}"
+    digest = hashlib.sha256(f"native fmi{fmi_version}\0".encode())
+    for name, data in sorted({**_native_metadata(fmi_version, placeholder),
+                              **_native_source_entries(fmi_version, placeholder)}.items()):
+        if name != "sources/avr_guid.h":
+            digest.update(name.encode() + b"\0" + data)
+    guid = "{" + str(uuid.uuid5(GUID_NAMESPACE, digest.hexdigest())) + "}"
+    entries = {**_native_metadata(fmi_version, guid), **_native_source_entries(fmi_version, guid)}
+    with tempfile.TemporaryDirectory(prefix="avr_native_") as tmp:
+        src = Path(tmp) / "src"
+        src.mkdir()
+        for name, data in entries.items():
+            if name.startswith("sources/"):
+                (src / name[len("sources/"):]).write_bytes(data)
+        for platform, target in NATIVE_PLATFORMS[fmi_version].items():
+            suffix = ".so" if target == "linux" else ".dll"
+            lib = compile_native(src, fmi_version, target, Path(tmp) / f"{NATIVE_MODEL_IDENTIFIER}{suffix}")
+            entries[f"binaries/{platform}/{lib.name}"] = lib.read_bytes()
+    fmu_path = Path(out_dir) / native_fmu_name(fmi_version)
+    _write_zip(entries, fmu_path)
+    log.info("built %s", fmu_path)
+    return fmu_path
+
+
+def fmu_entry(path: Path, implementation: str) -> dict:
+    """One ``fmus.json`` entry, read back from the built FMU itself."""
+    with zipfile.ZipFile(path) as archive:
+        root = ET.fromstring(archive.read("modelDescription.xml"))
+        platforms = sorted({name.split("/")[1] for name in archive.namelist()
+                            if name.startswith("binaries/") and name.count("/") >= 2 and not name.endswith("/")})
+    return {"file": Path(path).name, "fmiVersion": root.get("fmiVersion"),
+            "modelIdentifier": root.find("CoSimulation").get("modelIdentifier"),
+            "implementation": implementation, "platforms": platforms, "sha256": sha256_of(path)}
+
+
+def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Path]:
+    """Build every FMU (the pythonfmu regulator, both native regulators, the CassiePlant
+    FMU), ``<out_dir>/fmus.json`` listing them, and the CassieAVR system (SSP and OSP)."""
+    regulator = build_fmu(out_dir, sanitize=sanitize)
+    built = [(regulator, "python")] + [(build_native_fmu(v, out_dir), "native") for v in (2, 3)]
+    plant = build_plant_fmu(out_dir)
+    built.append((plant, "python"))
+    listing = {"fmus": [fmu_entry(path, kind) for path, kind in built]}
+    tmp = Path(out_dir) / (FMUS_JSON + ".tmp")
+    tmp.write_text(json.dumps(listing, indent=2) + "\n")
+    tmp.replace(Path(out_dir) / FMUS_JSON)
+    return [path for path, _ in built] + [build_ssp(out_dir, plant, regulator), build_osp(out_dir, plant, regulator)]
+
+
 def sha256_of(path: Path) -> str:
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
@@ -526,30 +680,6 @@ def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path
     return fmu_path
 
 
-def plant_fmu_entry(fmu_path: Path) -> dict:
-    """This FMU's entry of ``dist/fmus.json`` (name, file, sha256, FMI version, kind, platforms)."""
-    return {"name": PLANT_IDENTIFIER, "file": Path(fmu_path).name, "sha256": sha256_of(fmu_path),
-            "fmi_version": "2.0", "kind": "co-simulation", "platforms": ["linux64"],
-            "implementation": "pythonfmu + C guard", "needs": "Python 3 with numpy and mujoco"}
-
-
-def update_fmus_json(out_dir: Path, entries: list[dict]) -> Path:
-    """Write ``entries`` into ``<out_dir>/fmus.json``, replacing entries of the same name, keeping others."""
-    import json
-
-    path = Path(out_dir) / "fmus.json"
-    listed = json.loads(path.read_text())["fmus"] if path.is_file() else []
-    names = {e["name"] for e in entries}
-    listed = sorted([e for e in listed if e["name"] not in names] + entries, key=lambda e: e["name"])
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps({"fmus": listed}, indent=2) + "\n")
-    tmp.replace(path)
-    return path
-
-
-
-
-
 def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path) -> Path:
     """Write ``<out_dir>/CassieAVR.ssp``: both FMUs wired name to name, the nominal parameter sets and a
     30 s, 5 ms default experiment (the structure is ``scenarios/system.py``'s); reproducible zip."""
@@ -577,15 +707,8 @@ def main(argv=None) -> int:
                              "hosts must preload libasan)")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
-    path = build_fmu(args.out, sanitize=args.sanitize)
-    print(path)
-    print(f"sha256 {sha256_of(path)}")
-    plant = build_plant_fmu(args.out)  # issue 10: the plant FMU and the closed loop as a system
-    update_fmus_json(args.out, [plant_fmu_entry(plant)])
-    print(plant)
-    print(f"sha256 {sha256_of(plant)}")
-    print(build_ssp(args.out, plant, path))
-    print(build_osp(args.out, plant, path))
+    for path in build_all(args.out, sanitize=args.sanitize):
+        print(path if path.suffix != ".fmu" else f"{path}\nsha256 {sha256_of(path)}")
     return 0
 
 
