@@ -16,6 +16,9 @@ k]``); if the stepper has a ``close()`` attribute it is called at the end.
   eight Real inputs, ``setInteger`` of ``step_index``, ``doStep`` and ``getReal`` of all
   fourteen outputs (what a co-simulation master does each communication step); the FMU is
   built by ``build.py`` into a temporary folder first,
+* ``setup_native_fmu``: the same calls on the native FMI 2.0 FMU (C, ``fmu_src/native``),
+* ``measure_c_host``: the native FMU in a plain C host (``tests/native/fmi2_host.c``), the
+  same set+doStep+get per step timed in C; run after the interleaved paths,
 * ``setup_nengo``: ``nengo.Simulator.step()`` of three LIFRate ensembles (2-, 2- and
   4-dimensional, n_neurons each) with the core's encoders/gains/biases, input and error
   Nodes and PES-learning ``neurons -> output`` connections (2, 2 and 3 outputs): the
@@ -129,7 +132,8 @@ def setup_nengo(inputs, dt, n_neurons):
     return stepper
 
 
-def setup_fmu(inputs, dt, n_neurons):
+def _setup_fmu(inputs, dt, n_neurons, build):
+    """A stepper over the FMI 2.0 FMU that ``build(folder)`` makes (fmpy's FMU2Slave)."""
     import tempfile
 
     from fmpy import extract, read_model_description
@@ -137,10 +141,8 @@ def setup_fmu(inputs, dt, n_neurons):
 
     from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS
 
-    from scenarios.cli import load_build_module
-
     tmp = tempfile.TemporaryDirectory(prefix="bench_fmu_")
-    fmu_path = load_build_module().build_fmu(Path(tmp.name))
+    fmu_path = build(Path(tmp.name))
     md = read_model_description(str(fmu_path))
     vr = {v.name: v.valueReference for v in md.modelVariables}
     fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmu_path), unzipdir=tmp.name + "/x"),
@@ -174,10 +176,62 @@ def setup_fmu(inputs, dt, n_neurons):
     return timed
 
 
+def _build_module():
+    from scenarios.cli import load_build_module
+
+    return load_build_module()
+
+
+def setup_fmu(inputs, dt, n_neurons):
+    return _setup_fmu(inputs, dt, n_neurons, _build_module().build_fmu)
+
+
+def setup_native_fmu(inputs, dt, n_neurons):
+    return _setup_fmu(inputs, dt, n_neurons, lambda out: _build_module().build_native_fmu(2, out))
+
+
+def measure_c_host(inputs, dt, n_neurons, repeats: int = 5) -> float | None:
+    """Median µs of one set+doStep+get of the native FMI 2.0 FMU in a plain C host
+    (tests/native/fmi2_host.c, -O2), over ``repeats`` passes of the timed inputs; None
+    without a C compiler."""
+    import shutil
+    import subprocess
+    import tempfile
+    import zipfile
+
+    from fmpy import read_model_description
+
+    from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS
+
+    root = Path(__file__).resolve().parents[1]
+    cc = shutil.which("cc")
+    if cc is None or dt != DT:
+        return None
+    with tempfile.TemporaryDirectory(prefix="bench_c_host_") as tmp:
+        tmp = Path(tmp)
+        fmu = _build_module().build_native_fmu(2, tmp)
+        md = read_model_description(str(fmu))
+        vr = {v.name: v.valueReference for v in md.modelVariables}
+        lib = tmp / "native.so"
+        lib.write_bytes(zipfile.ZipFile(fmu).read("binaries/linux64/AdaptiveVelocityRegulatorNative.so"))
+        host = tmp / "fmi2_host"
+        subprocess.run([cc, "-std=c99", "-O2", f"-I{root / 'fmu_src' / 'native' / 'include'}",
+                        str(root / "tests" / "native" / "fmi2_host.c"), "-o", str(host), "-ldl"], check=True)
+        lines = [f"P {vr['n_neurons']} I {n_neurons}",
+                 "I " + " ".join(str(vr[s.name]) for s in INPUT_SPECS),
+                 f"O {len(OUTPUT_SPECS)} " + " ".join(str(vr[s.name]) for s in OUTPUT_SPECS)]
+        lines += ["S " + " ".join(repr(float(getattr(u, s.name))) for s in INPUT_SPECS) for u in inputs]
+        (tmp / "script.txt").write_text("\n".join(lines) + "\n")
+        out = subprocess.run([str(host), str(lib), md.guid, str(tmp / "script.txt"), str(repeats)],
+                             capture_output=True, text=True, check=True).stdout.split()
+    return float(out[out.index("median_us") + 1])
+
+
 #: (label, setup); the nengo reference must keep the label "nengo".
 PATHS = [
     ("Regulator.step", setup_regulator_step),
     ("FMU via fmpy (set+doStep+get)", setup_fmu),
+    ("native FMU via fmpy", setup_native_fmu),
     ("pure step()", setup_pure_step),
     ("step(), adaptation off", setup_pd_only),
     ("nengo", setup_nengo),
@@ -234,6 +288,9 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     results = run(n_steps=args.steps, n_neurons=args.neurons, rounds=args.rounds,
                   seed=args.seed)
+    c_host = measure_c_host(make_inputs(args.steps + WARMUP, args.seed), DT, args.neurons)
+    if c_host is not None:  # measured right after the interleaved paths (no p90: the host reports the median)
+        results["native FMU in a C host"] = (c_host, float("nan"))
     print(format_table(results, args.neurons))
     return 0
 

@@ -40,7 +40,12 @@ rates ~ U(200, 400) Hz and intercepts ~ U(-1, 0.9) (nengo 4's Ensemble defaults;
 upper end stays below 1 because the gain ``(J_max - 1) / (1 - intercept)`` diverges as
 an intercept approaches 1, giving neurons that switch on only in a sliver of the input
 space with a huge slope).  Gains and biases follow from the analytic LIF rate curve
-exactly as nengo builds an Ensemble with radius 1.  Network inputs:
+exactly as nengo builds an Ensemble with radius 1.  The random numbers come from one
+small documented generator, SplitMix64 counter streams keyed by (seed, network, field),
+with encoders by rejection from the cube (:class:`SplitMix64`, :func:`sphere_encoders`):
+the C implementation (``native/``) builds the same networks from the same seed.
+
+Network inputs:
 
 * longitudinal: ``[vx, vx_des] / velocity_scale_mps``
 * lateral:      ``[vy, vy_des] / velocity_scale_mps``
@@ -106,7 +111,8 @@ __all__ = [
     "VELOCITY_LIMIT_MPS", "ANGLE_LIMIT_RAD", "RATE_LIMIT_RADPS",
     "FIXED_PARAMS", "TAU_RC", "TAU_REF", "MAX_RATE_RANGE_HZ", "INTERCEPT_RANGE",
     "RegulatorParams", "validate_params", "RegulatorInputs", "validate_inputs",
-    "NetworkSpec", "Networks", "build_networks", "lif_gain_bias", "neuron_rates",
+    "NetworkSpec", "Networks", "SplitMix64", "sphere_encoders", "build_networks",
+    "lif_gain_bias", "neuron_rates",
     "network_inputs", "WEIGHT_ROWS", "RegulatorState", "initial_state", "step",
     "state_to_bytes", "state_from_bytes", "Regulator",
 ]
@@ -517,19 +523,78 @@ class NetworkSpec:
         return self.encoders.shape[1]
 
 
-def _make_network(name: str, n: int, d: int, rng: np.random.Generator) -> NetworkSpec:
-    # Order of draws is part of the format: encoders, max rates, intercepts.
-    enc = rng.standard_normal((n, d))
-    norms = np.linalg.norm(enc, axis=1, keepdims=True)
-    # A zero-length Gaussian vector has probability 0; guard anyway (use e_0).
-    zero = norms[:, 0] == 0.0
-    if np.any(zero):
-        enc[zero] = 0.0
-        enc[zero, 0] = 1.0
-        norms[zero] = 1.0
-    enc = enc / norms
-    max_rates = rng.uniform(*MAX_RATE_RANGE_HZ, size=n)
-    intercepts = rng.uniform(*INTERCEPT_RANGE, size=n)
+class SplitMix64:
+    """The networks' random numbers: SplitMix64 streams, one per (seed, network, field).
+
+    SplitMix64 (Steele, Lea and Flood, OOPSLA 2014; the generator Vigna recommends for
+    seeding xoshiro) is a counter passed through a 64-bit finaliser, so the C core
+    (``native/avr_model.c``) computes exactly the same integers.  All arithmetic is on
+    unsigned 64-bit integers modulo 2**64::
+
+        mix(z) = z3 ^ (z3 >> 31),  z3 = (z2 ^ (z2 >> 27)) * 0x94D049BB133111EB,
+                                   z2 = (z  ^ (z  >> 30)) * 0xBF58476D1CE4E5B9
+        key(seed, net, field) = mix(16 seed + 4 net + field)
+        draw i (i = 0, 1, ...) = mix(key + (i + 1) * 0x9E3779B97F4A7C15)
+        uniform_i = (draw_i >> 11) * 2**-53                     in [0, 1), exact
+
+    ``net`` is 0 (longitudinal), 1 (lateral), 2 (torso); ``field`` is 0 (encoders),
+    1 (max rates), 2 (intercepts).  Distinct (seed, net, field) give distinct keys
+    (``mix`` is a bijection), so the nine streams of a seed never overlap in practice.
+    """
+
+    GAMMA = 0x9E3779B97F4A7C15
+    _M1 = np.uint64(0xBF58476D1CE4E5B9)
+    _M2 = np.uint64(0x94D049BB133111EB)
+
+    def __init__(self, seed: int, net: int, field: int):
+        z = np.array([16 * seed + 4 * net + field], dtype=np.uint64)
+        self.key = int(self.mix(z)[0])
+        self.next_index = 0
+
+    @classmethod
+    def mix(cls, z: np.ndarray) -> np.ndarray:
+        """The SplitMix64 finaliser on a uint64 array (wrapping arithmetic)."""
+        z = (z ^ (z >> np.uint64(30))) * cls._M1
+        z = (z ^ (z >> np.uint64(27))) * cls._M2
+        return z ^ (z >> np.uint64(31))
+
+    def uniform(self, count: int) -> np.ndarray:
+        """The next ``count`` doubles in [0, 1) of this stream."""
+        i = np.arange(self.next_index + 1, self.next_index + count + 1, dtype=np.uint64)
+        self.next_index += count
+        z = np.uint64(self.key) + i * np.uint64(self.GAMMA)
+        return (self.mix(z) >> np.uint64(11)).astype(np.float64) * 2.0**-53
+
+
+def sphere_encoders(stream: SplitMix64, n: int, d: int) -> np.ndarray:
+    """``n`` unit vectors uniform on the sphere in R^d, by rejection from the cube.
+
+    Candidate j takes the next d uniforms u of ``stream``, ``v = 2 u - 1`` (exact);
+    ``r2 = (((v0 v0 + v1 v1) + v2 v2) + ...)`` in that order; it is accepted iff
+    ``0 < r2 <= 1`` and becomes ``v / sqrt(r2)``.  Only correctly rounded IEEE
+    operations, in a fixed order, so the C core gets the same bits.
+    """
+    accepted, have = [], 0
+    while have < n:  # acceptance 79% (d = 2) or 31% (d = 4): one batch, rarely two
+        # The field-0 stream serves the encoders only, so candidates drawn past the
+        # last accepted one are simply never used: the accepted sequence is the one a
+        # candidate-by-candidate loop (the C core's) finds.
+        v = 2.0 * stream.uniform(((n - have) * 4 + 16) * d).reshape(-1, d) - 1.0
+        r2 = v[:, 0] * v[:, 0]
+        for j in range(1, d):
+            r2 = r2 + v[:, j] * v[:, j]
+        take = np.flatnonzero((r2 > 0.0) & (r2 <= 1.0))[:n - have]
+        accepted.append(v[take] / np.sqrt(r2[take])[:, None])
+        have += len(take)
+    return np.concatenate(accepted) if accepted else np.zeros((0, d))
+
+
+def _make_network(name: str, n: int, d: int, seed: int, net: int) -> NetworkSpec:
+    enc = sphere_encoders(SplitMix64(seed, net, 0), n, d)
+    lo, hi = MAX_RATE_RANGE_HZ
+    max_rates = lo + (hi - lo) * SplitMix64(seed, net, 1).uniform(n)
+    lo, hi = INTERCEPT_RANGE
+    intercepts = lo + (hi - lo) * SplitMix64(seed, net, 2).uniform(n)
     gain, bias = lif_gain_bias(max_rates, intercepts)
     scaled = enc * gain[:, None]
     return NetworkSpec(name, _readonly(enc), _readonly(max_rates), _readonly(intercepts),
@@ -582,16 +647,16 @@ class Networks:
 def build_networks(params: RegulatorParams) -> Networks:
     """Build the three networks from ``params.n_neurons`` and ``params.seed`` only.
 
-    Network k (0 longitudinal, 1 lateral, 2 torso) draws from its own stream
-    ``np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,)))`` (the k-th
-    child of ``SeedSequence(seed)``), so the networks are independent of each other and
-    identical for identical seeds.
+    Network k (0 longitudinal, 1 lateral, 2 torso) takes its encoders, maximum rates
+    and intercepts from its own :class:`SplitMix64` streams (encoders uniform on the
+    sphere by :func:`sphere_encoders`; ``max_rate = 200 + 200 u``, ``intercept = -1 +
+    1.9 u``), so the networks are independent of each other, identical for identical
+    seeds, and the same in the C core (bit for bit on glibc, whose ``expm1`` the gains
+    go through; another libm may differ in the last bit of a gain).
     """
     n, seed = int(params.n_neurons), int(params.seed)
-    rngs = [np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(k,)))
-            for k in range(3)]
-    nets = [_make_network(name, n, d, rng)
-            for name, d, rng in zip(("longitudinal", "lateral", "torso"), _DIMS, rngs)]
+    nets = [_make_network(name, n, d, seed, k)
+            for k, (name, d) in enumerate(zip(("longitudinal", "lateral", "torso"), _DIMS))]
     logger.debug("built 3 networks of %d LIFRate neurons (seed %d)", n, seed)
     return Networks(n, seed, *nets)
 

@@ -127,6 +127,7 @@ class CassiePhysics:
             self.legs[s] = LegIds(s, qadr, dadr, jid, act, jid["hip-pitch"], jid["foot"],
                                   foot_body, geoms)
         self._foot_geom_side = {g: s for s in SIDES for g in self.legs[s].foot_geoms}
+        self._motor_ids = np.array([self.legs[s].act[j] for s in SIDES for j in MOTOR_JOINTS])
         # Original motor limits: peak joint torque = gear * ctrlrange (N m).
         self.torque_limit_nm = {
             (s, j): float(m.actuator_gear[a, 0] * max(abs(m.actuator_ctrlrange[a, 0]),
@@ -217,6 +218,36 @@ class CassiePhysics:
         a = self.legs[side].act[joint]
         self.model.actuator_biasprm[a, 1] = -kp
         self.model.actuator_biasprm[a, 2] = -kd
+
+    # ------------------------------------------------------------------ state
+    #: MuJoCo's full integration state: restoring it makes the following steps identical
+    #: to never having stopped (time, qpos, qvel, act, warm start, ctrl, applied forces, ...).
+    STATE_SPEC = mujoco.mjtState.mjSTATE_INTEGRATION
+
+    def physics_state(self) -> np.ndarray:
+        """The integration state followed by the servo gains (``biasprm[:, 1:3]`` of the
+        motors, which the controller rewrites at every update), float64."""
+        m, d = self.model, self.data
+        state = np.empty(mujoco.mj_stateSize(m, self.STATE_SPEC))
+        mujoco.mj_getState(m, d, state, self.STATE_SPEC)
+        return np.concatenate([state, m.actuator_biasprm[self._motor_ids, 1:3].ravel()])
+
+    def physics_state_size(self) -> int:
+        return int(mujoco.mj_stateSize(self.model, self.STATE_SPEC)) + 2 * len(self._motor_ids)
+
+    def set_physics_state(self, state) -> None:
+        """Restore :meth:`physics_state`; ValueError (nothing changed) on a wrong size or
+        non-finite values.  Derived quantities (positions of bodies, contacts) are those of
+        the last step until the next step recomputes them, as after any ``mj_step``."""
+        state = np.asarray(state, dtype=float)
+        if state.shape != (self.physics_state_size(),):
+            raise ValueError(f"physics state has shape {state.shape}, this model needs ({self.physics_state_size()},)")
+        if not np.all(np.isfinite(state)):
+            raise ValueError("physics state has non-finite values")
+        m, d = self.model, self.data
+        n = int(mujoco.mj_stateSize(m, self.STATE_SPEC))
+        mujoco.mj_setState(m, d, state[:n], self.STATE_SPEC)
+        m.actuator_biasprm[self._motor_ids, 1:3] = state[n:].reshape(-1, 2)
 
     # -------------------------------------------------------------- accessors
     @property

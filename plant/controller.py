@@ -345,6 +345,47 @@ class NominalController:
         phys.configure_pd_servos()
         self.update()
 
+    # ----------------------------------------------------------- memory
+    #: Everything the controller carries from one update to the next (the rest is fixed
+    #: at construction from the model and the standing pose); the FMU state holds these.
+    MEMORY_FIELDS = ("offsets", "vx_des", "vy_des", "cmd_vx", "cmd_vy", "mode", "stance", "step_index",
+                     "t_step_start", "tau", "vx_step_avg", "vy_step_avg", "vy_filt", "vx_filt",
+                     "_step_start_xy", "_swing_start", "_last_t", "yaw_ref")
+
+    def memory(self) -> dict:
+        """The controller's memory as plain Python values (floats exact, arrays as lists)."""
+        out = {}
+        for name in self.MEMORY_FIELDS:
+            value = getattr(self, name)
+            if isinstance(value, np.ndarray):
+                value = value.tolist()
+            elif isinstance(value, tuple):
+                value = list(value)
+            elif isinstance(value, dict):
+                value = dict(value)
+            out[name] = value
+        return out
+
+    def restore_memory(self, memory: Mapping) -> None:
+        """Set the memory saved by :meth:`memory` (same library of gaits assumed).
+
+        Raises KeyError naming a missing field; the gait is looked up again for the
+        saved gait speed (it is always ``lookup(vx_des, vy_des)``).
+        """
+        missing = [n for n in self.MEMORY_FIELDS if n not in memory]
+        if missing:
+            raise KeyError(f"controller memory lacks {', '.join(missing)}")
+        for name in self.MEMORY_FIELDS:
+            value = memory[name]
+            if name == "_step_start_xy":
+                value = np.array(value, dtype=float)
+            elif name == "_swing_start":
+                value = tuple(float(v) for v in value)
+            elif name == "offsets":
+                value = {k: float(value[k]) for k in OFFSET_KEYS}
+            setattr(self, name, value)
+        self.gait = self._gaits.lookup(self.vx_des, self.vy_des)
+
     # ----------------------------------------------------------- interface
     def set_command(self, vx: float, vy: float, gaits) -> None:
         """Commanded speed (m/s) and the gait library (``lookup(vx, vy) -> GaitParams``).

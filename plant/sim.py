@@ -116,6 +116,41 @@ class CassieWalker:
             if self._fall_reason:
                 log.info("fall at t=%.3f s: %s", self.time_s, self._fall_reason)
 
+    def get_state(self) -> dict:
+        """Everything needed to continue exactly from here: MuJoCo's integration state with
+        the servo gains, the walker's and the controller's memory (plain Python values)."""
+        return {"physics": self.physics.physics_state().tolist(),
+                "walker": {"substep": self._substep, "fall_reason": self._fall_reason,
+                           "vx_des_mps": self.vx_des_mps, "vy_des_mps": self.vy_des_mps},
+                "controller": self.controller.memory()}
+
+    def set_state(self, state: Mapping) -> None:
+        """Restore :meth:`get_state` of a walker on the same model and gaits.
+
+        Raises ValueError/KeyError/TypeError when the state does not fit; the walker is
+        then as it was.
+        """
+        backup = self.get_state()
+        try:
+            self._apply_state(state)
+        except Exception:
+            self._apply_state(backup)
+            raise
+
+    def _apply_state(self, state: Mapping) -> None:
+        walker = state["walker"]
+        substep = walker["substep"]
+        if not (isinstance(substep, int) and 0 <= substep < self.params.control_substeps):
+            raise ValueError(f"walker substep = {substep!r}: must be an int in [0, {self.params.control_substeps})")
+        missing = [n for n in self.controller.MEMORY_FIELDS if n not in state["controller"]]
+        if missing:
+            raise KeyError(f"controller memory lacks {', '.join(missing)}")
+        self.physics.set_physics_state(state["physics"])  # checks size and finiteness first
+        self.controller.restore_memory(state["controller"])
+        self._substep = substep
+        self._fall_reason = walker["fall_reason"]
+        self.vx_des_mps, self.vy_des_mps = float(walker["vx_des_mps"]), float(walker["vy_des_mps"])
+
     def set_pelvis_force(self, force_n) -> None:
         """Constant world-frame force (N, 3-vector) on the pelvis until changed."""
         self.physics.set_pelvis_force(force_n)

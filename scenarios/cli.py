@@ -5,6 +5,7 @@
     python -m scenarios run NAME|FILE|all|paper [...] [--model M] [--out DIR]
                             [--regulator fmu|inprocess] [--jobs N] [--fmu PATH]
                             [--duration S] [--rebuild-fmu] [--overwrite | --resume]
+                            [--plant inprocess|fmu] [--plant-fmu PATH]
     python -m scenarios report DIR
 
 ``run`` checks everything before it simulates and names every problem at once: the
@@ -177,6 +178,16 @@ def cmd_run(args) -> int:
         except Exception as exc:
             print(f"cannot get the FMU: {exc}", file=sys.stderr)
             return 1
+    if args.plant == "fmu":
+        from scenarios.plant_fmu import ensure_plant_fmu
+
+        try:
+            args.plant_fmu = str(ensure_plant_fmu(args.plant_fmu, rebuild=args.rebuild_fmu))
+        except Exception as exc:
+            print(f"cannot get the plant FMU: {exc}", file=sys.stderr)
+            return 1
+    else:
+        args.plant_fmu = None
     out_root = Path(args.out)
     try:
         with store.ResultsDir(out_root) as results_dir:
@@ -223,7 +234,7 @@ class _RunSession:
         with bar, _sigint_sets(self.stop):
             runner.run_tasks(tasks, regulator=self.args.regulator, fmu_path=self.fmu_path,
                              unpack_dir=self.results_dir.fmu_dir, jobs=jobs, stop=self.stop,
-                             on_outcome=self.on_outcome, progress=bar.update)
+                             on_outcome=self.on_outcome, progress=bar.update, plant_fmu=self.args.plant_fmu)
         self.wall_s = time.perf_counter() - wall0
 
     def on_outcome(self, scenario, outcome) -> None:
@@ -352,12 +363,20 @@ def build_parser() -> argparse.ArgumentParser:
                                                           "built if missing)")
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--duration", type=float, default=None, help="override every scenario's duration_s (quick runs)")
+    sp.add_argument("--plant", choices=("inprocess", "fmu"), default="inprocess",
+                    help="the MuJoCo plant in-process (default) or the CassiePlant FMU through fmpy")
+    sp.add_argument("--plant-fmu", type=Path, default=None,
+                    help="CassiePlant FMU file (default dist/CassiePlant.fmu, built if missing or stale)")
     again = sp.add_mutually_exclusive_group()
     again.add_argument("--overwrite", action="store_true",
                        help="replace the results of this run's scenarios already in --out")
     again.add_argument("--resume", action="store_true",
                        help="keep the complete results already in --out (same set-up) and run the other scenarios")
     sp.set_defaults(func=cmd_run)
+
+    from scenarios.campaign.cli import add_parser as add_campaign_parser
+
+    add_campaign_parser(sub)
 
     sp = sub.add_parser("report", help="write DIR/report.md over the results in DIR")
     sp.add_argument("dir")

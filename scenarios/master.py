@@ -508,7 +508,8 @@ class _Steps:
 
 def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
             progress: Callable[[int], None] | None = None, model=None, model_summary: dict | None = None,
-            stop: Callable[[], bool] | None = None) -> ArmResult:
+            stop: Callable[[], bool] | None = None,
+            plant: Callable[[Scenario, Any], Any] | None = None) -> ArmResult:
     """Run one arm of ``scenario`` closed-loop; return its trajectory (nothing printed).
 
     ``progress(n)`` is called with the number of communication steps done since the
@@ -516,7 +517,10 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     (it is only read: a fresh walker is built on it). ``stop()`` is asked before every
     communication step; when it answers true the run ends with ``KeyboardInterrupt``
     (a cooperative Ctrl-C: raised here, never inside the FMU). The regulator is closed
-    whatever happens. The result's ``timings`` say where the time went (:data:`TIMINGS`).
+    whatever happens. ``plant(scenario, model)`` makes the walker instead of
+    ``CassieWalker(model)`` (``scenarios.plant_fmu``: the plant FMU); its ``close()``, if
+    any, is called at the end. The result's ``timings`` say where the time went
+    (:data:`TIMINGS`).
     """
     from plant.sim import CassieWalker
 
@@ -529,7 +533,7 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     if model is None:
         model, model_summary = load_plant_model(scenario)
         lap = _lap(timings, "model_s", lap)
-    walker = CassieWalker(model)  # the walker works on its own copy of the model
+    walker = CassieWalker(model) if plant is None else plant(scenario, model)  # its own copy of the model
     n_plant = plant_steps_per_comm(scenario.comm_step_s, float(walker.SIM_DT_S))
     outputs = regulator.output_names()
     missing = [n for n in DELTA_NAMES if n not in outputs]
@@ -544,6 +548,8 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
         lap = _lap(timings, "loop_s", lap)
     finally:
         regulator.close()
+        if hasattr(walker, "close"):
+            walker.close()
     if progress is not None and steps.done % 200:
         progress(steps.done % 200)
     rows = steps.recorder.rows(steps.done) if steps.recorder is not None else np.zeros(0, dtype=[("t", "f8")])
@@ -618,8 +624,8 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
 
 
 def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | Path | None = None,
-                 arms: tuple[str, ...] | None = None,
-                 progress: Callable[[int], None] | None = None) -> list[ArmResult]:
+                 arms: tuple[str, ...] | None = None, progress: Callable[[int], None] | None = None,
+                 plant: Callable[[Scenario, Any], Any] | None = None) -> list[ArmResult]:
     """Every arm of ``scenario`` (or those named in ``arms``), each on a fresh plant and regulator."""
     from scenarios.plantio import load_plant_model
 
@@ -629,5 +635,5 @@ def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | 
         if arms is not None and arm.name not in arms:
             continue
         results.append(run_arm(scenario, arm, make_regulator(regulator, fmu_path), progress=progress,
-                               model=model, model_summary=summary))
+                               model=model, model_summary=summary, plant=plant))
     return results

@@ -187,7 +187,11 @@ def write_report(out_dir: Path) -> tuple[Path, list[str]]:
     out_dir = Path(out_dir)
     if not out_dir.is_dir():
         raise AvrError(f"no such results folder: {out_dir}")
+    from scenarios.campaign.report import campaigns_section, is_campaign_dir, write_report as write_campaign
+
+    if is_campaign_dir(out_dir):  # a campaign folder: its own campaign.md
+        return write_campaign(out_dir), []
     entries = collect(out_dir)
     path = out_dir / "report.md"
-    path.write_text(render(out_dir, entries))
+    path.write_text(render(out_dir, entries) + campaigns_section(out_dir))
     return path, [p for name, s, p in entries if s is None and p and p.startswith("invalid ")]

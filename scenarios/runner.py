@@ -75,9 +75,10 @@ class StopFlag:
 
 def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None, unpack_dir: str | None,
              stop: Callable[[], bool], progress: Callable[[int], None] | None = None,
-             origin: float | None = None) -> ArmOutcome:
-    """One scenario x arm (its own walker and regulator instance) as an outcome; a
-    complete arm's timings say when it ran (s since ``origin``, a ``perf_counter``)."""
+             origin: float | None = None, plant_fmu: str | None = None) -> ArmOutcome:
+    """One scenario x arm (its own walker and regulator instance) as an outcome; the plant
+    in-process, or the CassiePlant FMU at ``plant_fmu`` (``--plant fmu``). A complete
+    arm's timings say when it ran (s since ``origin``, a ``perf_counter``)."""
     from scenarios.master import make_regulator, run_arm
     from scenarios.plantio import load_plant_model
 
@@ -88,7 +89,13 @@ def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
         model, summary = load_plant_model(scenario, shared=True)
         model_s = time.perf_counter() - started
         reg = make_regulator(regulator, fmu_path, unpack_dir=unpack_dir)
-        result = run_arm(scenario, arm, reg, progress=progress, stop=stop, model=model, model_summary=summary)
+        plant = None
+        if plant_fmu is not None:
+            from scenarios.plant_fmu import plant_factory
+
+            plant = plant_factory(plant_fmu, unpack_dir=unpack_dir)
+        result = run_arm(scenario, arm, reg, progress=progress, stop=stop, model=model, model_summary=summary,
+                         plant=plant)
     except KeyboardInterrupt:
         return ArmOutcome(arm, "interrupted")
     except Exception as exc:  # one arm's failure is reported, the run goes on
@@ -114,9 +121,9 @@ def _init_worker(event: Any, origin: float) -> None:
 
 
 def _worker_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
-                 unpack_dir: str | None) -> ArmOutcome:
+                 unpack_dir: str | None, plant_fmu: str | None = None) -> ArmOutcome:
     out = run_task(scenario, arm, regulator, fmu_path, unpack_dir, _WORKER["stop"].is_set,
-                   origin=_WORKER["origin"])
+                   origin=_WORKER["origin"], plant_fmu=plant_fmu)
     if out.status == "complete" and "startup" in _WORKER:  # reported once, with the first complete arm
         out.result.timings.update(_WORKER.pop("startup"))
     return out
@@ -124,7 +131,7 @@ def _worker_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | N
 
 def run_tasks(tasks: Sequence[Task], *, regulator: str, fmu_path: str | None, unpack_dir: Path | None, jobs: int,
               stop: StopFlag, on_outcome: Callable[[Scenario, ArmOutcome], None],
-              progress: Callable[[int], None] | None = None) -> None:
+              progress: Callable[[int], None] | None = None, plant_fmu: str | None = None) -> None:
     """Run every task (``jobs`` > 1: in that many spawned processes, longest first) and
     hand each outcome to ``on_outcome`` in the calling thread; after a stop, the tasks not run are
     reported interrupted (not started). ``progress(n)``: communication steps done
@@ -133,22 +140,22 @@ def run_tasks(tasks: Sequence[Task], *, regulator: str, fmu_path: str | None, un
     if jobs == 1:
         origin = time.perf_counter()
         for s, arm in tasks:
-            out = run_task(s, arm, regulator, fmu_path, unpack, stop, progress, origin)
+            out = run_task(s, arm, regulator, fmu_path, unpack, stop, progress, origin, plant_fmu)
             if progress is not None and out.status == "complete":
                 progress(s.n_comm_steps - len(out.result.rows))  # the steps a fall skipped
             on_outcome(s, _first_line(s, out))
         return
-    _run_pool(longest_first(tasks), regulator, fmu_path, unpack, jobs, stop, on_outcome, progress)
+    _run_pool(longest_first(tasks), regulator, fmu_path, unpack, jobs, stop, on_outcome, progress, plant_fmu)
 
 
-def _run_pool(tasks, regulator, fmu_path, unpack, jobs, stop, on_outcome, progress) -> None:
+def _run_pool(tasks, regulator, fmu_path, unpack, jobs, stop, on_outcome, progress, plant_fmu=None) -> None:
     ctx = multiprocessing.get_context("spawn")
     stop.event = ctx.Event()
     if stop.requested:
         stop.event.set()
     pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker,
                                   initargs=(stop.event, time.perf_counter()))
-    futures = {pool.submit(_worker_task, s, a, regulator, fmu_path, unpack): (s, a) for s, a in tasks}
+    futures = {pool.submit(_worker_task, s, a, regulator, fmu_path, unpack, plant_fmu): (s, a) for s, a in tasks}
     pending = set(futures)
     try:
         while pending and not stop.requested:

@@ -25,6 +25,16 @@
  *    guard's own memory (pythonfmu's instance is deliberately leaked: freeing it would
  *    release its Python objects a second time).
  *
+ * A Python slave cannot answer fmi2Error itself (pythonfmu turns an exception into
+ * fmi2Fatal): a call after which pythonfmu reports fmi2OK but the slave logged a message
+ * with status fmi2Error is answered with fmi2Error (the slave logs the reason and changes
+ * nothing).  For that pythonfmu is instantiated with loggingOn and keeps logging; its
+ * messages reach the host if they are warnings or worse, or while the host has logging on.
+ *
+ * The same sources guard a second FMU (CassiePlant) built with its own table; its
+ * avr_guard_vars.h may define AVR_STEP_QUANTUM: communication steps must then be whole
+ * multiples of it.
+ *
  * The variable table (AVR_VARS, the fixed parameters, the log categories) is generated
  * by build.py from the model description into avr_guard_vars.h.  Each FMI function's
  * allowed phases are one MASK_<function> in guard.h, checked by the one PROLOGUE macro.
@@ -42,6 +52,10 @@
 
 /* Relative tolerance on "doStep starts where the last step ended" (t0 + k*h vs t + h differ by ulps). */
 #define TIME_MATCH_RTOL 1e-9
+#ifdef AVR_STEP_QUANTUM
+/* "A whole multiple of AVR_STEP_QUANTUM": within 1e-6 of a whole number >= 1 of quanta. */
+#define STEP_QUANTUM_TOL 1e-6
+#endif
 
 const char *const PHASE_NAMES[N_PHASES] = {"instantiated", "initializationMode", "stepComplete",
                                            "stepFailed", "terminated", "fatal"};
@@ -115,15 +129,53 @@ fmi2Status refuse(Guard *g, const char *call, const char *fmt, ...) {
 static void inner_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
                          fmi2String message, ...) {
     (void)name;
-    const Guard *g = (const Guard *)env;
-    if (g == NULL || g->host.logger == NULL) return;
+    Guard *g = (Guard *)env;
+    if (g == NULL) return;
+    if (status == fmi2Error) g->inner_logged_error = 1;
+    if (g->host.logger == NULL || (status == fmi2OK && !g->logging_on)) return;
     if (category == NULL || string_problem(category, MAX_CATEGORY_BYTES) != NULL) category = "logAll";
     if (message == NULL || string_problem(message, 1u << 20) != NULL) message = "(unprintable message)";
     g->host.logger(g->host.componentEnvironment, g->name, status, category, "%s", message);
 }
 
+/* ---- Python thread states for threads Python did not create ----------------------------
+ * pythonfmu enters Python with PyGILState_Ensure/Release around every call.  In a thread Python
+ * did not create (the workers of a multi-threaded master such as libcosim, or a C host's main
+ * thread) each pair creates and destroys a Python thread state, which costs more than a get or
+ * set itself (measured: 7 us against 0.7 us per fmi2GetReal from a C host).  Such a thread gets
+ * one thread state instead (PyGILState_Ensure once, the GIL released at once), kept until the
+ * interpreter ends: a few kB per host thread.  It is not freed when the thread ends, because that
+ * would need the GIL, and a host that joins its workers while holding it would deadlock. */
+static struct {
+    int (*is_initialized)(void);
+    void *(*this_thread_state)(void);
+    int (*ensure)(void);
+    void *(*save_thread)(void);
+} py;
+static pthread_once_t py_once = PTHREAD_ONCE_INIT;
+static _Thread_local int thread_state_kept = 0;
+
+static void find_python(void) {
+    *(void **)&py.is_initialized = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
+    *(void **)&py.this_thread_state = dlsym(RTLD_DEFAULT, "PyGILState_GetThisThreadState");
+    *(void **)&py.ensure = dlsym(RTLD_DEFAULT, "PyGILState_Ensure");
+    *(void **)&py.save_thread = dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
+}
+
+static void keep_python_thread_state(void) {
+    if (thread_state_kept) return;
+    pthread_once(&py_once, find_python);
+    if (!py.is_initialized || !py.this_thread_state || !py.ensure || !py.save_thread || !py.is_initialized())
+        return; /* no Python (yet): try again on the next call */
+    thread_state_kept = 1;
+    if (py.this_thread_state() != NULL) return; /* a thread Python knows */
+    py.ensure();
+    py.save_thread();
+}
+
 fmi2Status check_phase(Guard *g, const char *call, unsigned allowed) {
     if (g == NULL || g->tag != GUARD_TAG) return fmi2Error;  /* not an instance: nothing to log to */
+    keep_python_thread_state();
     if (g->phase == FATAL) {
         guard_log(g, fmi2Fatal, "%s refused: the instance had a fatal error; only fmi2FreeInstance is allowed", call);
         return fmi2Fatal;
@@ -138,13 +190,15 @@ fmi2Status check_phase(Guard *g, const char *call, unsigned allowed) {
     return refuse(g, call, "not allowed in state %s (allowed in: %s)", PHASE_NAMES[g->phase], list);
 }
 
-/* Records what the inner library answered; a Fatal makes the instance unusable for good.
- * (pythonfmu logs its reason only with loggingOn, so say at least what happened.) */
+/* Records what the inner library answered: fmi2OK after the slave logged an fmi2Error is an
+ * fmi2Error (the slave's way to refuse); a Fatal makes the instance unusable for good. */
 fmi2Status track(Guard *g, fmi2Status status) {
+    if (status == fmi2OK && g->inner_logged_error) status = fmi2Error;
+    g->inner_logged_error = 0;
     if (status == fmi2Fatal && g->phase != FATAL) {
         g->phase = FATAL;
-        guard_log(g, fmi2Fatal, "the Python slave failed (pythonfmu answered fmi2Fatal; its reason is logged when "
-                  "logging is on); only fmi2FreeInstance is allowed now");
+        guard_log(g, fmi2Fatal, "the Python slave failed (pythonfmu answered fmi2Fatal, its reason is logged above); "
+                  "only fmi2FreeInstance is allowed now");
     }
     return status;
 }
@@ -206,12 +260,13 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     g->to_inner.componentEnvironment = g;
     g->name = copy;
     g->phase = INSTANTIATED;
+    g->logging_on = loggingOn;
     fixed_defaults(g->fixed);
-    g->inner = inner.fmi2Instantiate(instanceName, fmuType, fmuGUID, path, &g->to_inner, visible, loggingOn);
+    g->inner = inner.fmi2Instantiate(instanceName, fmuType, fmuGUID, path, &g->to_inner, visible, fmi2True);
     free(path);
     if (g->inner == NULL) {
         guard_log(g, fmi2Error, "fmi2Instantiate failed: pythonfmu could not create the Python slave (its reason "
-                  "is logged when loggingOn = fmi2True)");
+                  "is logged above)");
         g->tag = 0;
         free(copy);
         free(g);
@@ -254,7 +309,8 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
                           categories[i], known);
         }
     }
-    return track(g, inner.fmi2SetDebugLogging(g->inner, loggingOn, nCategories, categories));
+    g->logging_on = loggingOn;  /* pythonfmu keeps logging: its errors must reach track() */
+    return fmi2OK;
 }
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
@@ -313,6 +369,12 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                       currentCommunicationPoint, g->time);
     if (!isfinite(currentCommunicationPoint + communicationStepSize))
         return refuse(g, call, "currentCommunicationPoint + communicationStepSize overflows");
+#ifdef AVR_STEP_QUANTUM
+    const double quanta = communicationStepSize / AVR_STEP_QUANTUM;
+    if (!(quanta >= 1.0 - STEP_QUANTUM_TOL && fabs(quanta - nearbyint(quanta)) <= STEP_QUANTUM_TOL))
+        return refuse(g, call, "communicationStepSize = %.17g s: must be a whole multiple of the plant step %g s",
+                      communicationStepSize, AVR_STEP_QUANTUM);
+#endif
     fmi2Status s = track(g, inner.fmi2DoStep(g->inner, currentCommunicationPoint, communicationStepSize,
                                              noSetFMUStatePriorToCurrentPoint));
     if (s == fmi2OK) {

@@ -35,6 +35,8 @@ typedef struct {
     double fixed[AVR_N_FIXED];         /* current values of the fixed parameters (AVR_FIXED_VRS order) */
     fmi2CallbackFunctions host;        /* the host's callbacks (a copy) */
     fmi2CallbackFunctions to_inner;    /* what pythonfmu gets: our logger, environment = this Guard */
+    int inner_logged_error;            /* pythonfmu logged an fmi2Error during the current call */
+    fmi2Boolean logging_on;            /* the host's choice; pythonfmu itself always logs (see track) */
     char *name;
 } Guard;
 

@@ -1,0 +1,151 @@
+"""Campaign throughput on Dask: the same 8-sample campaign with 1 and 2 local workers.
+
+    python benchmarks/bench_campaign.py [--duration 10] [--repeat 1] [--fmu PATH] [--json FILE]
+
+The campaign is the built-in ``smoke`` one (mass/COM Latin hypercube, damping, seed, a
+2-speed grid) with 4 draws x 2 speeds = 8 samples x 2 arms of ``--duration`` simulated
+seconds, run by the real CLI (``python -m scenarios campaign``) into a temporary
+folder, with ``--workers 1`` and ``--workers 2``, interleaved ``--repeat`` times (the
+fastest campaign of each counts). Printed:
+
+- wall time of each campaign (CLI start to exit: cluster start-up included) and the
+  scaling ``wall(1 worker) / wall(2 workers)`` (target >= 1.8 on 2 cores); the fixed
+  cost per campaign (wall minus the tasks' wall per worker), the scaling of the task
+  phase alone, and the scaling per unit of co-simulation work (on a shared machine the
+  same work runs slower with two workers than with one: dividing that out estimates the
+  scaling on two free cores);
+- per-task overhead = the task's wall time (its ``scenarios run`` process, start to
+  exit) minus the co-simulation loops of its arms (``wall_s`` in summary.json), per
+  task and per arm (target <= 0.5 s per task);
+- what that overhead is made of, from one ``scenarios run`` of a sample under cProfile
+  (profiling inflates Python-heavy parts; read the shares, not the absolute seconds):
+  interpreter start and imports, plant model compilation, FMU set-up, writing the run's
+  plots and time series.
+
+The machine may be shared: the numbers are only as steady as its load.
+"""
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import os
+import pstats
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO_ROOT))
+os.environ.setdefault("MENAGERIE_ROOT", str(REPO_ROOT.parent / "shared" / "cassie" / "menagerie"))
+os.environ["MENAGERIE_ROOT"] = str(Path(os.environ["MENAGERIE_ROOT"]).resolve())
+
+SMOKE = REPO_ROOT / "scenarios" / "campaigns" / "smoke.toml"
+#: (file, function) under cProfile -> the part of a task it measures
+PARTS = {("scenarios/plantio.py", "load_plant_model"): "plant model compilation (overhead)",
+         ("scenarios/output.py", "write_plots"): "plots, matplotlib (overhead)",
+         ("scenarios/output.py", "write_timeseries"): "time series CSV (overhead)",
+         ("scenarios/master.py", "run_arm"): "arms: co-simulation incl. FMU start (work)",
+         ("scenarios/master.py", "start"): "  of which FMU extract + instantiate"}
+
+
+def campaign_file(folder: Path, duration: float) -> Path:
+    text = SMOKE.read_text().replace("samples = 2\n", "samples = 4\n")
+    text = text.replace("duration_s = 2.0\n", f"duration_s = {duration!r}\n").replace('name = "smoke"', 'name = "bench"')
+    path = folder / "bench.toml"
+    path.write_text(text)
+    return path
+
+
+def run_campaign(cfile: Path, out: Path, workers: int, fmu: str) -> dict:
+    t0 = time.perf_counter()
+    r = subprocess.run([sys.executable, "-m", "scenarios", "campaign", str(cfile), "--out", str(out),
+                        "--workers", str(workers), "--fmu", fmu], capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    if r.returncode != 0:
+        raise SystemExit(f"campaign with {workers} worker(s) failed ({r.returncode}):\n{r.stderr}")
+    with open(out / "campaign.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    tasks: dict[str, dict] = {}
+    for row in rows:
+        t = tasks.setdefault(row["sample"], {"task_wall_s": float(row["task_wall_s"]), "arms_wall_s": 0.0})
+        t["arms_wall_s"] += float(row["wall_s"])
+    overhead = [t["task_wall_s"] - t["arms_wall_s"] for t in tasks.values()]
+    return {"workers": workers, "wall_s": wall, "tasks": len(tasks), "arms": len(rows),
+            "sum_task_wall_s": sum(t["task_wall_s"] for t in tasks.values()),
+            "sum_cosim_s": sum(t["arms_wall_s"] for t in tasks.values()),
+            "overhead_per_task_s": sum(overhead) / len(overhead), "overhead_max_s": max(overhead)}
+
+
+def overhead_breakdown(sample: Path, folder: Path, fmu: str) -> dict:
+    """One ``scenarios run`` of a sample under cProfile; seconds per part, and the imports."""
+    t0 = time.perf_counter()
+    subprocess.run([sys.executable, "-c", "import scenarios.cli, scenarios.master, scenarios.output, mujoco, fmpy, "
+                    "matplotlib.pyplot, plant.sim"], check=True)
+    imports = time.perf_counter() - t0
+    prof = folder / "run.prof"
+    subprocess.run([sys.executable, "-m", "cProfile", "-o", str(prof), "-m", "scenarios", "run", str(sample),
+                    "--out", str(folder / "profiled"), "--fmu", fmu], check=True, capture_output=True)
+    stats = pstats.Stats(str(prof))
+    out = {"interpreter + imports (separate run)": imports}
+    total = 0.0
+    for (path, _, name), (_, _, _, cum, _) in stats.stats.items():
+        total = max(total, cum if name == "<module>" else 0.0)
+        for (suffix, func), label in PARTS.items():
+            if name == func and path.endswith(suffix):
+                out[label] = out.get(label, 0.0) + cum
+    out["whole run under cProfile"] = total
+    return out
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--duration", type=float, default=10.0, help="simulated seconds per arm (default 10)")
+    ap.add_argument("--fmu", default=None, help="the FMU (default: dist/, built if missing or stale)")
+    ap.add_argument("--repeat", type=int, default=1, help="campaigns per worker count; the fastest counts")
+    ap.add_argument("--json", default=None, help="also write the numbers to this file")
+    args = ap.parse_args(argv)
+    from scenarios.cli import ensure_fmu
+
+    fmu = str(Path(ensure_fmu(Path(args.fmu) if args.fmu else None)).resolve())
+    with tempfile.TemporaryDirectory(prefix="bench_campaign_") as tmp:
+        folder = Path(tmp)
+        cfile = campaign_file(folder, args.duration)
+        trials = {1: [], 2: []}
+        for k in range(args.repeat):  # interleaved: load from other processes hits both alike
+            for n in (1, 2):
+                trials[n].append(run_campaign(cfile, folder / f"w{n}-{k}", n, fmu))
+        runs = [min(trials[n], key=lambda r: r["wall_s"]) for n in (1, 2)]
+        parts = overhead_breakdown(folder / "w1-0" / "samples" / "s0000.toml", folder, fmu)
+    one, two = runs
+    scaling = one["wall_s"] / two["wall_s"]
+    print(f"campaign: 8 samples x 2 arms x {args.duration:g} s simulated, cpu_count = {os.cpu_count()}, "
+          f"load average {os.getloadavg()[0]:.2f} (other processes share the cores)")
+    print(f"{'workers':>8} {'wall s':>8} {'sum task s':>11} {'sum cosim s':>12} {'overhead/task s':>16} {'max':>6}")
+    for r in runs:
+        print(f"{r['workers']:>8} {r['wall_s']:>8.1f} {r['sum_task_wall_s']:>11.1f} {r['sum_cosim_s']:>12.1f} "
+              f"{r['overhead_per_task_s']:>16.2f} {r['overhead_max_s']:>6.2f}")
+    fixed = [r["wall_s"] - r["sum_task_wall_s"] / r["workers"] for r in runs]
+    print(f"fixed cost per campaign (wall - sum task / workers: cluster start/close, validation, report): "
+          f"{fixed[0]:.1f} s with 1 worker, {fixed[1]:.1f} s with 2; task phase alone scales "
+          f"{one['sum_task_wall_s'] / (two['sum_task_wall_s'] / 2):.2f} x")
+    normalised = (one["wall_s"] / one["sum_cosim_s"]) / (two["wall_s"] / two["sum_cosim_s"])
+    print(f"the same co-simulation work took {two['sum_cosim_s'] / one['sum_cosim_s']:.2f} x as long with 2 workers "
+          f"(1.00 on two free cores); scaling per unit of that work: {normalised:.2f} x (what two free cores "
+          "would give, if every part of a task slowed alike)")
+    print(f"scaling wall(1)/wall(2) = {scaling:.2f} (target >= 1.8); per-task overhead "
+          f"{two['overhead_per_task_s']:.2f} s with 2 workers, {one['overhead_per_task_s']:.2f} s with 1 "
+          f"(target <= 0.5 s; {one['overhead_per_task_s'] / 2:.2f} s per arm)")
+    print("one task's run under cProfile (s):")
+    for k, v in sorted(parts.items(), key=lambda kv: -kv[1]):
+        print(f"  {k:<40} {v:7.2f}")
+    if args.json:
+        Path(args.json).write_text(json.dumps({"runs": runs, "trials": trials, "scaling": scaling,
+                                               "breakdown": parts}, indent=2))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

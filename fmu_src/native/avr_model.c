@@ -1,0 +1,335 @@
+/*
+ * The regulator's numerics (see avr_model.h).  Each function mirrors the numpy core's
+ * function of the same purpose, operation for operation and in the same order, so that
+ * with IEEE float64, no FMA contraction (-ffp-contract=off) and no -ffast-math:
+ *   - the networks are bit-identical to avr_core.build_networks on glibc (only +, *, /,
+ *     sqrt, which are correctly rounded, and expm1 from the same libm);
+ *   - a step differs from avr_core.step only by the summation order of the dot products
+ *     (numpy hands them to BLAS), a few ulp per call.
+ */
+#include "avr_model.h"
+
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* The element-wise loops also get an AVX2 clone where GCC can pick one at load time (ELF
+ * ifunc): the same IEEE operations in the same order (no FMA contraction), four lanes wide. */
+#if defined(__GNUC__) && !defined(__clang__) && defined(__x86_64__) && defined(__linux__) && !defined(AVR_NO_CLONES)
+#define VECTOR_CLONES __attribute__((target_clones("arch=x86-64-v3", "default")))
+#else
+#define VECTOR_CLONES
+#endif
+
+#define TAU_RATIO (AVR_TAU_REF / AVR_TAU_RC)
+#define INV_TAU_RC (1.0 / AVR_TAU_RC)
+#define SPLITMIX_GAMMA UINT64_C(0x9E3779B97F4A7C15)
+
+static const int DIMS[AVR_N_NETS] = {2, 2, 4};
+static const int FIRST_INPUT[AVR_N_NETS] = {0, 2, 4};
+
+/* ---- random numbers (avr_core.SplitMix64) ------------------------------------------ */
+uint64_t avr_splitmix64_mix(uint64_t z) {
+    z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
+    z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
+    return z ^ (z >> 31);
+}
+
+double avr_uniform(uint64_t key, uint64_t index) {
+    return (double)(avr_splitmix64_mix(key + index * SPLITMIX_GAMMA) >> 11) * 0x1p-53;
+}
+
+static uint64_t stream_key(uint32_t seed, int net, int field) {
+    return avr_splitmix64_mix(16u * (uint64_t)seed + 4u * (uint64_t)net + (uint64_t)field);
+}
+
+/* avr_core.sphere_encoders: rejection from the cube, candidates in stream order. */
+static void sphere_encoders(uint64_t key, int n, int d, double *out) {
+    uint64_t index = 0;
+    for (int have = 0; have < n;) {
+        double v[4] = {0.0, 0.0, 0.0, 0.0};
+        for (int j = 0; j < d; ++j) v[j] = 2.0 * avr_uniform(key, ++index) - 1.0;
+        double r2 = v[0] * v[0];
+        for (int j = 1; j < d; ++j) r2 = r2 + v[j] * v[j];
+        if (r2 > 0.0 && r2 <= 1.0) {
+            double norm = sqrt(r2);
+            for (int j = 0; j < d; ++j) out[(size_t)have * d + j] = v[j] / norm;
+            ++have;
+        }
+    }
+}
+
+static void uniform_range(uint64_t key, int n, double lo, double hi, double *out) {
+    for (int i = 0; i < n; ++i) out[i] = lo + (hi - lo) * avr_uniform(key, (uint64_t)i + 1);
+}
+
+/* ---- networks (avr_core._make_network, lif_gain_bias, Networks.stacked) ------------- */
+static void make_network(AvrNetworks *net, int k) {
+    int n = net->n, d = DIMS[k];
+    sphere_encoders(stream_key(net->seed, k, 0), n, d, net->encoders[k]);
+    uniform_range(stream_key(net->seed, k, 1), n, AVR_MAX_RATE_LO_HZ, AVR_MAX_RATE_HI_HZ, net->max_rates[k]);
+    uniform_range(stream_key(net->seed, k, 2), n, AVR_INTERCEPT_LO, AVR_INTERCEPT_HI, net->intercepts[k]);
+    for (int i = 0; i < n; ++i) {
+        double j_max_minus_1 = 1.0 / expm1((1.0 / net->max_rates[k][i] - AVR_TAU_REF) / AVR_TAU_RC);
+        double gain = j_max_minus_1 / (1.0 - net->intercepts[k][i]);
+        net->gain[k][i] = gain;
+        net->bias[k][i] = 1.0 - gain * net->intercepts[k][i];
+        net->bias_m1[(size_t)k * n + i] = net->bias[k][i] - 1.0;
+        for (int j = 0; j < d; ++j)
+            net->scaled_t[(size_t)(FIRST_INPUT[k] + j) * n + i] = net->encoders[k][(size_t)i * d + j] * gain;
+    }
+}
+
+AvrNetworks *avr_networks_new(int n, uint32_t seed) {
+    if (n < 1) return NULL;
+    size_t per_net = 0;
+    for (int k = 0; k < AVR_N_NETS; ++k) per_net += (size_t)n * (DIMS[k] + 4);
+    size_t total = per_net + (size_t)n * (AVR_N_INPUTS + AVR_N_NETS);
+    AvrNetworks *net = calloc(1, sizeof *net);
+    double *block = calloc(total, sizeof *block);
+    if (net == NULL || block == NULL) {
+        free(net);
+        free(block);
+        return NULL;
+    }
+    net->n = n;
+    net->seed = seed;
+    double *p = block;
+    for (int k = 0; k < AVR_N_NETS; ++k) {
+        net->encoders[k] = p, p += (size_t)n * DIMS[k];
+        net->max_rates[k] = p, p += n;
+        net->intercepts[k] = p, p += n;
+        net->gain[k] = p, p += n;
+        net->bias[k] = p, p += n;
+    }
+    net->scaled_t = p, p += (size_t)n * AVR_N_INPUTS;
+    net->bias_m1 = p;
+    for (int k = 0; k < AVR_N_NETS; ++k) make_network(net, k);
+    return net;
+}
+
+void avr_networks_free(AvrNetworks *net) {
+    if (net == NULL) return;
+    free(net->encoders[0]); /* the start of the one block */
+    free(net);
+}
+
+int avr_core_init(AvrCore *core, int n) {
+    memset(core, 0, sizeof *core);
+    core->weights = calloc((size_t)AVR_N_ROWS * n, sizeof(double));
+    core->rates = calloc((size_t)AVR_N_NETS * n, sizeof(double));
+    core->active = calloc((size_t)AVR_N_NETS * n, sizeof(int));
+    core->currents = calloc((size_t)n, sizeof(double));
+    if (core->weights == NULL || core->rates == NULL || core->active == NULL || core->currents == NULL) {
+        avr_core_free(core);
+        return -1;
+    }
+    core->n = n;
+    core->last_step_index = -1;
+    return 0;
+}
+
+void avr_core_free(AvrCore *core) {
+    free(core->weights);
+    free(core->rates);
+    free(core->active);
+    free(core->currents);
+    core->weights = core->rates = core->currents = NULL;
+    core->active = NULL;
+    core->n = 0;
+}
+
+/* ---- one call (avr_core.step) -------------------------------------------------------- */
+#define V(name) values[AVR_VR_##name]
+
+/* a, b divided by their norm if it exceeds 1 (avr_core._ball2). */
+static void ball2(double *a, double *b) {
+    double r = hypot(*a, *b);
+    if (r > 1.0) *a /= r, *b /= r;
+}
+
+/* The 8 network inputs, scaled and radially projected into the unit ball (avr_core._scaled_values). */
+static void network_inputs(const double *values, double x[AVR_N_INPUTS]) {
+    double vs = V(velocity_scale_mps), sa = V(angle_scale_rad), sr = V(rate_scale_radps);
+    x[0] = V(vx) / vs, x[1] = V(vx_des) / vs;
+    x[2] = V(vy) / vs, x[3] = V(vy_des) / vs;
+    x[4] = V(pitch) / sa, x[5] = V(roll) / sa, x[6] = V(pitch_rate) / sr, x[7] = V(roll_rate) / sr;
+    ball2(&x[0], &x[1]);
+    ball2(&x[2], &x[3]);
+    double m = 0.0; /* 4-d norm, scaled so that huge inputs cannot overflow */
+    for (int i = 4; i < 8; ++i) m = fmax(m, fabs(x[i]));
+    if (m > 1.0) {
+        double s = 0.0;
+        for (int i = 4; i < 8; ++i) s += (x[i] / m) * (x[i] / m);
+        double norm = m * sqrt(s);
+        if (norm > 1.0)
+            for (int i = 4; i < 8; ++i) x[i] /= norm;
+    } else if (m > 0.0) {
+        double norm = sqrt(x[4] * x[4] + x[5] * x[5] + x[6] * x[6] + x[7] * x[7]);
+        if (norm > 1.0)
+            for (int i = 4; i < 8; ++i) x[i] /= norm;
+    }
+}
+
+/* log(1 + y) for finite y > 0, within ~1 ulp of a correctly rounded log1p, in straight-line
+ * code (no calls, no branches) so that the rate loop below vectorizes; a libm log1p call per
+ * neuron was half of a step's time.  Method: u = 1 + y rounded, e = (1 + y) - u exactly
+ * (Fast2Sum); u = 2^k m with m in [sqrt(1/2), sqrt(2)) from u's bits; with f = m - 1 and
+ * s = f / (2 + f), log(m) = 2 atanh(s) = f - (f^2/2 - s (f^2/2 + R)), R = sum_{n=1..9} 2 s^(2n) / (2n+1)
+ * (|s| < 0.172: the next term is below 3e-17 relative); log(1 + y) = k ln2 + log(m) + e/u. */
+static inline double log1p_positive(double y) {
+    const double ln2_hi = 0x1.62e42p-1, ln2_lo = 0x1.fdf473de6af28p-22; /* ln2_hi: 21 bits, k ln2_hi exact */
+    double u = 1.0 + y;
+    double e = y >= 1.0 ? 1.0 - (u - y) : y - (u - 1.0);
+    uint64_t bits, m_bits, k_bits;
+    memcpy(&bits, &u, sizeof bits);
+    m_bits = (bits & UINT64_C(0x000FFFFFFFFFFFFF)) | UINT64_C(0x3FF0000000000000); /* m in [1, 2) */
+    k_bits = (bits >> 52) | UINT64_C(0x4330000000000000);                           /* 2^52 + biased exponent */
+    double m, k;
+    memcpy(&m, &m_bits, sizeof m);
+    memcpy(&k, &k_bits, sizeof k);
+    k = k - (0x1p52 + 1023.0);
+    int big = m > 1.4142135623730951;
+    m = big ? 0.5 * m : m;
+    k = big ? k + 1.0 : k;
+    double f = m - 1.0, s = f / (2.0 + f), z = s * s;
+    double r = z * (2.0 / 3 + z * (2.0 / 5 + z * (2.0 / 7 + z * (2.0 / 9 + z * (2.0 / 11 + z * (2.0 / 13 + z * (
+        2.0 / 15 + z * (2.0 / 17 + z * (2.0 / 19)))))))));
+    double hfsq = 0.5 * f * f;
+    double log_m = f - (hfsq - s * (hfsq + r));
+    return k * ln2_hi + (log_m + (k * ln2_lo + e / u));
+}
+
+/* The active neurons of network k for input x and their tau_rc * LIF rates
+ * (avr_core._lif_rates_times_tau_rc): indices into active[], rates into rates[]; returns
+ * their number.  The currents are computed for all n; the active ones are packed
+ * branch-free, then their rates computed in one straight loop that the compiler
+ * vectorizes: no unpredictable branch per neuron, no work for silent ones. */
+VECTOR_CLONES static int network_rates(const AvrNetworks *net, int k, const double x[AVR_N_INPUTS],
+                                       double *restrict cur, double *restrict rates, int *restrict active) {
+    int n = net->n;
+    const double *restrict bias_m1 = net->bias_m1 + (size_t)k * n;
+    const double *restrict e0 = net->scaled_t + (size_t)FIRST_INPUT[k] * n;
+    const double *restrict e1 = e0 + n;
+    double x0 = x[FIRST_INPUT[k]], x1 = x[FIRST_INPUT[k] + 1];
+    if (DIMS[k] == 2) {
+        for (int i = 0; i < n; ++i) cur[i] = x0 * e0[i] + x1 * e1[i] + bias_m1[i];
+    } else {
+        const double *restrict e2 = e1 + n, *restrict e3 = e2 + n;
+        double x2 = x[FIRST_INPUT[k] + 2], x3 = x[FIRST_INPUT[k] + 3];
+        for (int i = 0; i < n; ++i) cur[i] = x0 * e0[i] + x1 * e1[i] + x2 * e2[i] + x3 * e3[i] + bias_m1[i];
+    }
+    int m = 0;
+    for (int i = 0; i < n; ++i) { /* j = J - 1 > 0: active */
+        rates[m] = cur[i];
+        active[m] = i;
+        m += cur[i] > 0.0;
+    }
+    for (int i = 0; i < m; ++i) {
+        double j = rates[i] > 1e-300 ? rates[i] : 1e-300;
+        rates[i] = 1.0 / (TAU_RATIO + log1p_positive(1.0 / j));
+    }
+    return m;
+}
+
+static const int NET_OF_ROW[AVR_N_ROWS] = {0, 1, 2, 2};
+
+/* sum over the active neurons of network k of w[i] * rate[i], in increasing i: the dense
+ * sum without its zero terms. */
+static double sparse_dot(const AvrCore *core, int k, const double *restrict w) {
+    const double *restrict rates = core->rates + (size_t)k * core->n;
+    const int *restrict active = core->active + (size_t)k * core->n;
+    double sum = 0.0;
+    for (int i = 0; i < core->n_active[k]; ++i) sum += w[active[i]] * rates[i];
+    return sum;
+}
+
+/* Learning with anti-windup (the PES block of avr_core.step): raw = unsaturated outputs.
+ * A silent neuron's weight would change by coef * 0: it is left as it is. */
+static void learn(AvrCore *core, const double *values, double dt, const double raw[AVR_N_ROWS]) {
+    int n = core->n;
+    double alpha = -V(learning_rate) * dt / (double)n * INV_TAU_RC;
+    double lim = V(psi_limit);
+    double err[AVR_N_ROWS] = {V(vx_des) - V(vx), V(vy_des) - V(vy), V(pitch_des) - V(pitch), V(roll_des) - V(roll)};
+    for (int r = 0; r < AVR_N_ROWS; ++r) {
+        int saturated_outward = (raw[r] >= lim || raw[r] <= -lim) && raw[r] * err[r] < 0.0;
+        double coef = saturated_outward ? 0.0 : alpha * err[r];
+        if (coef == 0.0) continue;
+        int k = NET_OF_ROW[r];
+        double *restrict w = core->weights + (size_t)r * n;
+        const double *restrict rates = core->rates + (size_t)k * n;
+        const int *restrict active = core->active + (size_t)k * n;
+        for (int i = 0; i < core->n_active[k]; ++i) w[active[i]] = coef * rates[i] + w[active[i]];
+    }
+}
+
+/* Saturated network outputs psi (x, y, pitch, roll) from the weights before this call's update. */
+static void network_outputs(AvrCore *core, const AvrNetworks *net, double *values, double dt, int64_t si,
+                            double psi[AVR_N_ROWS]) {
+    double x[AVR_N_INPUTS];
+    int n = net->n;
+    network_inputs(values, x);
+    for (int k = 0; k < AVR_N_NETS; ++k)
+        core->n_active[k] = network_rates(net, k, x, core->currents, core->rates + (size_t)k * n,
+                                          core->active + (size_t)k * n);
+    double raw[AVR_N_ROWS];
+    for (int r = 0; r < AVR_N_ROWS; ++r)
+        raw[r] = sparse_dot(core, NET_OF_ROW[r], core->weights + (size_t)r * n) * INV_TAU_RC;
+    double lim = V(psi_limit);
+    for (int r = 0; r < AVR_N_ROWS; ++r) psi[r] = raw[r] > lim ? lim : (raw[r] < -lim ? -lim : raw[r]);
+    if (V(learning_rate) != 0.0 && si >= (int64_t)V(learn_from_step)) learn(core, values, dt, raw);
+}
+
+/* The safety bound +-delta_limit_rad on the six joint offsets (as the numpy core: values
+ * inside pass unchanged, bit for bit; 0 - limit, not -limit, so a limit of 0 gives +0.0). */
+static void clip_offsets(double *values, double limit) {
+    static const int offsets[] = {AVR_VR_delta_swing_hip_pitch, AVR_VR_delta_swing_knee,
+                                  AVR_VR_delta_swing_hip_roll, AVR_VR_delta_stance_hip_roll,
+                                  AVR_VR_delta_stance_hip_pitch, AVR_VR_delta_stance_knee};
+    double hi = limit, lo = 0.0 - limit;
+    for (size_t i = 0; i < sizeof offsets / sizeof offsets[0]; ++i) {
+        double v = values[offsets[i]];
+        values[offsets[i]] = v > hi ? hi : (v < lo ? lo : v);
+    }
+}
+
+void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) {
+    double vx = V(vx), vy = V(vy);
+    int64_t si = (int64_t)V(step_index);
+    if (si != core->last_step_index) { /* PD_x, PD_y: recomputed when step_index changes, held otherwise */
+        int first = core->last_step_index < 0;
+        double vx_prev = first ? vx : core->vx_at_step, vy_prev = first ? vy : core->vy_at_step;
+        core->pd_x = V(Kp_x) * (vx - V(vx_des)) + V(Kd_x) * (vx - vx_prev);
+        core->pd_y = V(Kp_y) * (vy - V(vy_des)) + V(Kd_y) * (vy - vy_prev);
+        core->vx_at_step = vx, core->vy_at_step = vy;
+    }
+    double pd_pitch = V(Kp_pitch) * (V(pitch) - V(pitch_des)) + V(Kd_pitch) * V(pitch_rate);
+    double pd_roll = V(Kp_roll) * (V(roll) - V(roll_des)) + V(Kd_roll) * V(roll_rate);
+    double psi[AVR_N_ROWS] = {0.0, 0.0, 0.0, 0.0};
+    if (V(adaptation_enabled) != 0.0) {
+        network_outputs(core, net, values, dt, si, psi);
+        double g_roll = V(psi_gain_stance_hip_roll);
+        V(delta_swing_hip_pitch) = core->pd_x + V(psi_gain_swing_hip_pitch) * psi[0];
+        V(delta_swing_knee) = V(psi_gain_swing_knee) * psi[0] + 0.0; /* -0.0 -> 0.0 */
+        V(delta_swing_hip_roll) = core->pd_y + V(psi_gain_swing_hip_roll) * psi[1];
+        V(delta_stance_hip_roll) = pd_roll + g_roll * psi[1] + g_roll * psi[3];
+        V(delta_stance_hip_pitch) = pd_pitch + V(psi_gain_stance_hip_pitch) * psi[2];
+        V(delta_stance_knee) = V(psi_gain_stance_knee) * psi[2] + 0.0;
+    } else { /* exactly the classic PD regulator; the weights are kept */
+        V(delta_swing_hip_pitch) = core->pd_x;
+        V(delta_swing_knee) = 0.0;
+        V(delta_swing_hip_roll) = core->pd_y;
+        V(delta_stance_hip_roll) = pd_roll;
+        V(delta_stance_hip_pitch) = pd_pitch;
+        V(delta_stance_knee) = 0.0;
+    }
+    clip_offsets(values, V(delta_limit_rad));
+    V(psi_x) = psi[0], V(psi_y) = psi[1], V(psi_pitch) = psi[2], V(psi_roll) = psi[3];
+    V(error_vx) = vx - V(vx_des);
+    V(error_vy) = vy - V(vy_des);
+    V(error_pitch) = V(pitch) - V(pitch_des);
+    V(error_roll) = V(roll) - V(roll_des);
+    core->last_step_index = si;
+    core->n_calls += 1;
+    core->time_s += dt;
+}

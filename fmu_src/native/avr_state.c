@@ -1,0 +1,266 @@
+/*
+ * The FMU state of an instance as one self-checking blob (see avr_instance.h).
+ *
+ * FMU state blob, little-endian, format version 1 (offsets in bytes):
+ *     0  "AVRNATIV"            magic
+ *     8  u32 version           12  u32 total size in bytes
+ *    16  GUID, NUL-padded to 48 bytes (a state of another FMU build is refused)
+ *    64  u32 number of variables   68  u32 phase bit   72  f64 time
+ *    80  u32 n_neurons of the weights (0: no networks yet)   84  u32 seed of the networks
+ *    88  i64 last_step_index   96  i64 n_calls
+ *   104  f64 vx_at_step, vy_at_step, pd_x, pd_y, time_s
+ *   144  f64 value of every variable, in value-reference order
+ *        f64 weights (4 rows of n_neurons)
+ *   end-4: u32 CRC-32 (zlib's) of every byte before it
+ * A blob is refused unless its size, checksum, GUID and variable count match and every
+ * value is finite, of its type and within its range, and the networks it names are the
+ * ones its variables define.  In memory an FMUstate is this same blob, so get/set and
+ * serialize/deserialize round trips are bit-exact by construction.
+ */
+#include "avr_instance.h" /* first: see avr_types.h */
+
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "avr_guid.h"
+
+#define BLOB_MAGIC "AVRNATIV"
+#define BLOB_VERSION 1u
+#define BLOB_GUID_BYTES 48
+#define BLOB_HEADER 144
+#define N_CORE_DOUBLES 5
+
+/* zlib's CRC-32 (reflected polynomial 0xEDB88320), table built on the stack per call. */
+static uint32_t crc32(const unsigned char *p, size_t n) {
+    uint32_t table[256];
+    for (uint32_t i = 0; i < 256; ++i) {
+        uint32_t c = i;
+        for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+        table[i] = c;
+    }
+    uint32_t crc = 0xFFFFFFFFu;
+    for (size_t i = 0; i < n; ++i) crc = table[(crc ^ p[i]) & 0xFFu] ^ (crc >> 8);
+    return crc ^ 0xFFFFFFFFu;
+}
+
+static void put_u32(unsigned char *p, uint32_t x) {
+    for (int i = 0; i < 4; ++i) p[i] = (unsigned char)(x >> (8 * i));
+}
+static void put_u64(unsigned char *p, uint64_t x) {
+    for (int i = 0; i < 8; ++i) p[i] = (unsigned char)(x >> (8 * i));
+}
+static void put_f64(unsigned char *p, double x) {
+    uint64_t bits;
+    memcpy(&bits, &x, sizeof bits);
+    put_u64(p, bits);
+}
+static uint32_t get_u32(const unsigned char *p) {
+    uint32_t x = 0;
+    for (int i = 3; i >= 0; --i) x = (x << 8) | p[i];
+    return x;
+}
+static uint64_t get_u64(const unsigned char *p) {
+    uint64_t x = 0;
+    for (int i = 7; i >= 0; --i) x = (x << 8) | p[i];
+    return x;
+}
+static double get_f64(const unsigned char *p) {
+    uint64_t bits = get_u64(p);
+    double x;
+    memcpy(&x, &bits, sizeof x);
+    return x;
+}
+
+static size_t blob_size(int n) {
+    return BLOB_HEADER + 8u * AVR_N_VARS + 8u * AVR_N_ROWS * (size_t)n + 4u;
+}
+
+static int has_networks(AvrPhase phase) {
+    return phase == AVR_STEP_MODE || phase == AVR_TERMINATED;
+}
+
+static AvrBlob *state_get(const AvrInstance *inst, AvrBlob *reuse) {
+    int n = has_networks(inst->phase) ? inst->core.n : 0;
+    size_t size = blob_size(n);
+    AvrBlob *blob = reuse;
+    if (blob == NULL || blob->size != size) {
+        blob = malloc(sizeof *blob + size);
+        if (blob == NULL) return NULL;
+        free(reuse);
+    }
+    unsigned char *p = blob->bytes;
+    memset(p, 0, size);
+    blob->size = size;
+    memcpy(p, BLOB_MAGIC, 8);
+    put_u32(p + 8, BLOB_VERSION);
+    put_u32(p + 12, (uint32_t)size);
+    memcpy(p + 16, AVR_GUID, strlen(AVR_GUID) < BLOB_GUID_BYTES ? strlen(AVR_GUID) : BLOB_GUID_BYTES - 1);
+    put_u32(p + 64, AVR_N_VARS);
+    put_u32(p + 68, (uint32_t)inst->phase);
+    put_f64(p + 72, inst->time);
+    if (n > 0) {
+        const AvrCore *c = &inst->core;
+        put_u32(p + 80, (uint32_t)n);
+        put_u32(p + 84, inst->net->seed);
+        put_u64(p + 88, (uint64_t)c->last_step_index);
+        put_u64(p + 96, (uint64_t)c->n_calls);
+        const double core[N_CORE_DOUBLES] = {c->vx_at_step, c->vy_at_step, c->pd_x, c->pd_y, c->time_s};
+        for (int i = 0; i < N_CORE_DOUBLES; ++i) put_f64(p + 104 + 8 * i, core[i]);
+    }
+    for (int vr = 0; vr < AVR_N_VARS; ++vr) put_f64(p + BLOB_HEADER + 8 * vr, inst->values[vr]);
+    unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
+    for (size_t i = 0; i < (size_t)AVR_N_ROWS * n; ++i) put_f64(w + 8 * i, inst->core.weights[i]);
+    put_u32(p + size - 4, crc32(p, size - 4));
+    return blob;
+}
+
+
+static int finite_doubles(const unsigned char *p, size_t count) {
+    for (size_t i = 0; i < count; ++i)
+        if (!isfinite(get_f64(p + 8 * i))) return 0;
+    return 1;
+}
+
+/* The header's framing: magic, version, size, checksum, GUID, variable count. */
+static AvrStatus check_frame(const AvrInstance *inst, const char *call, const unsigned char *p, size_t size) {
+    if (p == NULL || size < blob_size(0) || memcmp(p, BLOB_MAGIC, 8) != 0)
+        return avr_refuse(inst, call, "not a serialized state of this FMU (%zu bytes, bad header)", size);
+    if (get_u32(p + 8) != BLOB_VERSION)
+        return avr_refuse(inst, call, "state format version %u, this FMU reads %u", (unsigned)get_u32(p + 8),
+                          BLOB_VERSION);
+    if (get_u32(p + 12) != size) return avr_refuse(inst, call, "state is %zu bytes, its header says %u", size,
+                                                   (unsigned)get_u32(p + 12));
+    if (crc32(p, size - 4) != get_u32(p + size - 4)) return avr_refuse(inst, call, "state checksum mismatch (corrupted)");
+    char guid[BLOB_GUID_BYTES + 1] = "";
+    memcpy(guid, p + 16, BLOB_GUID_BYTES);
+    if (strcmp(guid, AVR_GUID) != 0)
+        return avr_refuse(inst, call, "state belongs to the FMU with GUID %s, not to this one (%s)", guid, AVR_GUID);
+    if (get_u32(p + 64) != AVR_N_VARS)
+        return avr_refuse(inst, call, "state has %u variables, this FMU %d", (unsigned)get_u32(p + 64), AVR_N_VARS);
+    return AVR_OK;
+}
+
+/* The contents: phase, time, every value in its range, networks consistent with the values. */
+static AvrStatus check_contents(const AvrInstance *inst, const char *call, const unsigned char *p, size_t size) {
+    uint32_t phase = get_u32(p + 68), n = get_u32(p + 80);
+    if (phase != AVR_INSTANTIATED && phase != AVR_INIT_MODE && phase != AVR_STEP_MODE && phase != AVR_TERMINATED)
+        return avr_refuse(inst, call, "state has an unknown phase %u", (unsigned)phase);
+    if ((n > 0) != has_networks((AvrPhase)phase) || size != blob_size((int)n))
+        return avr_refuse(inst, call, "state with %u neurons does not fit its phase or size", (unsigned)n);
+    if (!isfinite(get_f64(p + 72))) return avr_refuse(inst, call, "state has a non-finite time");
+    const unsigned char *values = p + BLOB_HEADER;
+    for (int vr = 0; vr < AVR_N_VARS; ++vr) {
+        char problem[400];
+        double x = get_f64(values + 8 * vr);
+        if (AVR_VARS[vr].causality == AVR_OUTPUT ? !isfinite(x)
+                                                 : avr_value_problem(&AVR_VARS[vr], x, problem, sizeof problem))
+            return avr_refuse(inst, call, "state has an invalid value of %s", AVR_VARS[vr].name);
+    }
+    if (n == 0) return AVR_OK;
+    if (n != (uint32_t)get_f64(values + 8 * AVR_VR_n_neurons) || get_u32(p + 84) != (uint32_t)get_f64(values + 8 * AVR_VR_seed))
+        return avr_refuse(inst, call, "state's networks do not match its n_neurons and seed");
+    if ((int64_t)get_u64(p + 88) < -1 || (int64_t)get_u64(p + 96) < 0)
+        return avr_refuse(inst, call, "state has invalid counters");
+    if (!finite_doubles(p + 104, N_CORE_DOUBLES) || !finite_doubles(values + 8 * AVR_N_VARS, (size_t)AVR_N_ROWS * n))
+        return avr_refuse(inst, call, "state contains non-finite values");
+    return AVR_OK;
+}
+
+/* A state restores only into an instance whose fixed parameters have the state's values
+ * (as the pythonfmu FMU's guard rules): every differing one is named. */
+static AvrStatus check_fixed(const AvrInstance *inst, const char *call, const unsigned char *p) {
+    char differ[600] = "";
+    size_t used = 0;
+    for (int vr = 0; vr < AVR_N_VARS; ++vr) {
+        const AvrVar *v = &AVR_VARS[vr];
+        double saved = get_f64(p + BLOB_HEADER + 8 * vr);
+        if (v->causality != AVR_PARAMETER || v->variability != AVR_FIXED || saved == inst->values[vr]) continue;
+        int k = snprintf(differ + used, sizeof differ - used, "%s%s = %.17g (this instance: %.17g)",
+                         used ? ", " : "", v->name, saved, inst->values[vr]);
+        if (k > 0) used = used + (size_t)k < sizeof differ ? used + (size_t)k : sizeof differ - 1;
+    }
+    if (used == 0) return AVR_OK;
+    return avr_refuse(inst, call, "the state was saved with other fixed parameters: %s. Set them to the state's "
+                      "values before restoring it (fixed parameters can be set only before initialization ends)",
+                      differ);
+}
+
+AvrStatus avr_state_check(const AvrInstance *inst, const char *call, const unsigned char *bytes, size_t size) {
+    AvrStatus s = check_frame(inst, call, bytes, size);
+    if (s == AVR_OK) s = check_contents(inst, call, bytes, size);
+    return s == AVR_OK ? check_fixed(inst, call, bytes) : s;
+}
+
+static AvrStatus state_set(AvrInstance *inst, const char *call, const AvrBlob *blob) {
+    if (blob == NULL) return avr_refuse(inst, call, "FMUstate is NULL");
+    const unsigned char *p = blob->bytes;
+    if (avr_state_check(inst, call, p, blob->size) != AVR_OK) return AVR_ERROR;
+    int n = (int)get_u32(p + 80);
+    if (n > 0) {
+        AvrNetworks *net;
+        AvrCore core;
+        if (avr_prepare_networks(inst, call, n, get_u32(p + 84), &net, &core) != AVR_OK) return AVR_ERROR;
+        core.last_step_index = (int64_t)get_u64(p + 88);
+        core.n_calls = (int64_t)get_u64(p + 96);
+        double *scalars[N_CORE_DOUBLES] = {&core.vx_at_step, &core.vy_at_step, &core.pd_x, &core.pd_y, &core.time_s};
+        for (int i = 0; i < N_CORE_DOUBLES; ++i) *scalars[i] = get_f64(p + 104 + 8 * i);
+        const unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
+        for (size_t i = 0; i < (size_t)AVR_N_ROWS * n; ++i) core.weights[i] = get_f64(w + 8 * i);
+        avr_adopt(inst, net, &core);
+    } else {
+        avr_core_free(&inst->core);
+    }
+    inst->phase = (AvrPhase)get_u32(p + 68);
+    inst->time = get_f64(p + 72);
+    for (int vr = 0; vr < AVR_N_VARS; ++vr) inst->values[vr] = get_f64(p + BLOB_HEADER + 8 * vr);
+    return AVR_OK;
+}
+
+/* ---- the FMI FMUstate functions ------------------------------------------------------- */
+AvrStatus avr_fmustate_get(AvrInstance *inst, const char *call, void **state) {
+    if (state == NULL) return avr_refuse(inst, call, "FMUstate pointer is NULL");
+    AvrBlob *blob = state_get(inst, (AvrBlob *)*state);
+    if (blob == NULL) return avr_refuse(inst, call, "out of memory");
+    *state = blob;
+    return AVR_OK;
+}
+
+AvrStatus avr_fmustate_set(AvrInstance *inst, const char *call, const void *state) {
+    return state_set(inst, call, (const AvrBlob *)state);
+}
+
+void avr_fmustate_free(void **state) {
+    if (state == NULL) return;
+    free(*state);
+    *state = NULL;
+}
+
+AvrStatus avr_fmustate_size(const AvrInstance *inst, const char *call, const void *state, size_t *size) {
+    if (state == NULL || size == NULL) return avr_refuse(inst, call, "NULL FMUstate or size pointer");
+    *size = ((const AvrBlob *)state)->size;
+    return AVR_OK;
+}
+
+AvrStatus avr_fmustate_serialize(const AvrInstance *inst, const char *call, const void *state, unsigned char *bytes,
+                                 size_t size) {
+    const AvrBlob *blob = (const AvrBlob *)state;
+    if (blob == NULL || bytes == NULL) return avr_refuse(inst, call, "NULL FMUstate or byte buffer");
+    if (size != blob->size) return avr_refuse(inst, call, "size = %zu, but this state needs %zu bytes", size, blob->size);
+    memcpy(bytes, blob->bytes, size);
+    return AVR_OK;
+}
+
+AvrStatus avr_fmustate_deserialize(const AvrInstance *inst, const char *call, const unsigned char *bytes, size_t size,
+                                   void **state) {
+    if (bytes == NULL || state == NULL) return avr_refuse(inst, call, "NULL byte buffer or FMUstate pointer");
+    if (avr_state_check(inst, call, bytes, size) != AVR_OK) return AVR_ERROR;
+    AvrBlob *blob = malloc(sizeof *blob + size);
+    if (blob == NULL) return avr_refuse(inst, call, "out of memory");
+    blob->size = size;
+    memcpy(blob->bytes, bytes, size);
+    free(*state); /* a state the host passes back to be replaced */
+    *state = blob;
+    return AVR_OK;
+}

@@ -1,0 +1,160 @@
+"""The native FMUs' XML and documentation, generated from the core's variable tables.
+
+``model_description`` writes ``modelDescription.xml`` for FMI 2.0 or FMI 3.0 from
+``PARAM_SPECS``/``INPUT_SPECS``/``OUTPUT_SPECS`` (in value-reference order, as
+:func:`fmu_src.native.header.all_specs`), ``build_description`` the FMI 3.0
+``sources/buildDescription.xml``, and ``documentation`` the HTML page; build.py packs
+them with the binaries.  Only units listed in ``units`` are declared (the same
+``UNITS`` as the pythonfmu FMU's model description).
+"""
+from __future__ import annotations
+
+import html
+import xml.etree.ElementTree as ET
+
+from .. import avr_core
+from .header import all_specs
+
+AUTHOR = "cassie-avr project"
+VERSION = "0.1.0"
+LICENSE = "MIT"
+DESCRIPTION = ("Adaptive velocity regulator for bipedal walking (native C implementation): PD foot-placement "
+               "and torso regulators plus online-learning neural networks (PES) that output virtual-constraint "
+               "offsets")
+#: Compiler options of the shipped binaries.  -ffp-contract=off (no FMA contraction) is what the
+#: numerics rely on (the operation order of the numpy core); -O3 -fno-trapping-math only let the
+#: element-wise loops vectorize (same IEEE operations, same bits as -O2).  Never -ffast-math.
+COMPILER_OPTIONS = "-std=c99 -O3 -fno-trapping-math -ffp-contract=off"
+_FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
+_LOG_CATEGORIES = (("logStatusError", "Refused calls and errors (always logged)"),
+                   ("logAll", "Debug messages (with logging on)"))
+
+
+def _fmt(value) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+def _units(root: ET.Element, units: dict) -> None:
+    element = ET.SubElement(root, "UnitDefinitions")
+    for name, exponents in units.items():
+        ET.SubElement(ET.SubElement(element, "Unit", name=name), "BaseUnit", exponents)
+
+
+def _typed_attributes(spec, units: dict) -> dict:
+    attrs = {"start": _fmt(spec.default)}
+    if spec.type in ("Real", "Integer"):
+        if spec.min is not None:
+            attrs["min"] = _fmt(spec.min)
+        if spec.max is not None:
+            attrs["max"] = _fmt(spec.max)
+    if spec.type == "Real" and spec.unit in units:
+        attrs["unit"] = spec.unit
+    return attrs
+
+
+def _variable_attributes(spec, vr: int) -> dict:
+    attrs = {"name": spec.name, "valueReference": str(vr), "description": spec.description,
+             "causality": spec.causality, "variability": spec.variability}
+    if spec.causality != "input":  # FMI: `initial` is not allowed on inputs
+        attrs["initial"] = "exact"
+    return attrs
+
+
+def _interface(root: ET.Element, fmi_version: int, model_identifier: str, source_files) -> None:
+    common = {"modelIdentifier": model_identifier, "canHandleVariableCommunicationStepSize": "true",
+              "canBeInstantiatedOnlyOncePerProcess": "false"}
+    if fmi_version == 2:
+        cs = ET.SubElement(root, "CoSimulation", common, canInterpolateInputs="false",
+                           canNotUseMemoryManagementFunctions="true", canGetAndSetFMUstate="true",
+                           canSerializeFMUstate="true", providesDirectionalDerivative="false")
+        files = ET.SubElement(cs, "SourceFiles")
+        for name in source_files:
+            ET.SubElement(files, "File", name=name)
+    else:
+        ET.SubElement(root, "CoSimulation", common, canGetAndSetFMUState="true", canSerializeFMUState="true",
+                      hasEventMode="false", providesIntermediateUpdate="false")
+
+
+def model_description(fmi_version: int, model_identifier: str, guid: str, source_files, units: dict,
+                      default_experiment: dict) -> bytes:
+    """``modelDescription.xml`` of the native FMU for ``fmi_version`` 2 or 3."""
+    token = {"guid": guid} if fmi_version == 2 else {"instantiationToken": guid}
+    root = ET.Element("fmiModelDescription", {
+        "fmiVersion": f"{fmi_version}.0", "modelName": model_identifier, **token, "description": DESCRIPTION,
+        "author": AUTHOR, "version": VERSION, "license": LICENSE, "generationTool": "cassie-avr build.py",
+        "variableNamingConvention": "flat"})
+    _interface(root, fmi_version, model_identifier, source_files)
+    _units(root, units)
+    categories = ET.SubElement(root, "LogCategories")
+    for name, text in _LOG_CATEGORIES:
+        ET.SubElement(categories, "Category", name=name, description=text)
+    ET.SubElement(root, "DefaultExperiment", default_experiment)
+    variables = ET.SubElement(root, "ModelVariables")
+    specs = all_specs()
+    for vr, spec in enumerate(specs):
+        if fmi_version == 2:
+            var = ET.SubElement(variables, "ScalarVariable", _variable_attributes(spec, vr))
+            ET.SubElement(var, spec.type, _typed_attributes(spec, units))
+        else:
+            ET.SubElement(variables, _FMI3_TYPES[spec.type],
+                          {**_variable_attributes(spec, vr), **_typed_attributes(spec, units)})
+    structure = ET.SubElement(root, "ModelStructure")
+    outputs = [(vr, s) for vr, s in enumerate(specs) if s.causality == "output"]
+    if fmi_version == 2:
+        element = ET.SubElement(structure, "Outputs")
+        for vr, _ in outputs:  # no direct feedthrough: outputs change only in doStep
+            ET.SubElement(element, "Unknown", index=str(vr + 1), dependencies="")
+    else:
+        ET.SubElement(variables, "Float64", name="time", valueReference=str(len(specs)), causality="independent",
+                      variability="continuous", unit="s", description="Simulation time, s")
+        for vr, _ in outputs:
+            ET.SubElement(structure, "Output", valueReference=str(vr), dependencies="")
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def build_description(model_identifier: str, source_files) -> bytes:
+    """FMI 3.0 ``sources/buildDescription.xml``: compile every listed C file, link libm."""
+    root = ET.Element("fmiBuildDescription", fmiVersion="3.0")
+    config = ET.SubElement(root, "BuildConfiguration", modelIdentifier=model_identifier,
+                           description="Any C99 compiler; keep -ffp-contract=off (or its equivalent) and never fast-math")
+    files = ET.SubElement(config, "SourceFileSet", language="C99", compilerOptions=COMPILER_OPTIONS)
+    for name in source_files:
+        ET.SubElement(files, "SourceFile", name=name)
+    ET.SubElement(files, "IncludeDirectory", name=".")
+    ET.SubElement(config, "Library", name="m", description="the C math library (Linux, macOS)")
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def documentation(fmi_version: int, model_identifier: str) -> str:
+    """``documentation/index.html``: the method (the core's own description) and the variables."""
+    specs = all_specs()
+    rows = "\n".join(
+        "<tr>" + "".join(f"<td>{html.escape(str(cell))}</td>" for cell in (
+            vr, s.name, s.causality, s.type, s.variability, s.unit, _fmt(s.default),
+            "" if s.min is None else _fmt(s.min), "" if s.max is None else _fmt(s.max), s.description)) + "</tr>"
+        for vr, s in enumerate(specs))
+    method = html.escape(avr_core.__doc__.split("Performance.")[0].strip())
+    return f"""<!DOCTYPE html>
+<html><head><meta charset="utf-8"><title>{model_identifier} (FMI {fmi_version}.0)</title></head><body>
+<h1>{model_identifier} (FMI {fmi_version}.0 co-simulation, native C)</h1>
+<p>{html.escape(DESCRIPTION)}. Binaries for Linux and Windows x86-64; the C sources in <code>sources/</code>
+compile with any C99 compiler ({COMPILER_OPTIONS}) for other platforms. No Python is needed.</p>
+<h2>FMI behaviour</h2>
+<p>Any communication step &gt; 0. Calls the FMI {fmi_version}.0 state machine forbids, sets of outputs or of
+fixed parameters after initialization, NaN/inf values and values outside [min, max] are refused with Error and
+a log message naming the variable and its range; a refused call changes nothing and the instance stays usable.
+FMU state can be saved, restored and serialized (all variables, weights and memories; the serialized form carries
+the GUID and a CRC-32 and is refused if corrupt or from another FMU). Outputs change only in doStep (no direct
+feedthrough). Same value references, variables and numerics as the pythonfmu FMU AdaptiveVelocityRegulator.</p>
+<h2>Method</h2>
+<pre>{method}</pre>
+<h2>Variables</h2>
+<table border="1"><tr><th>valueReference</th><th>name</th><th>causality</th><th>type</th><th>variability</th>
+<th>unit</th><th>start</th><th>min</th><th>max</th><th>description</th></tr>
+{rows}
+</table></body></html>
+"""

@@ -1,0 +1,259 @@
+/*
+ * FMI 3.0 co-simulation API of the native AdaptiveVelocityRegulator FMU: the same
+ * version-independent instance (avr_instance.c) as the FMI 2.0 layer, behind FMI 3.0's
+ * names and types.  Float64/Int32/Boolean variables; the independent variable `time`
+ * has the value reference after the last variable of the table (so every other value
+ * reference equals the FMI 2.0 FMU's).  No event mode, no intermediate update, no
+ * clocks, no Model Exchange or Scheduled Execution: those functions refuse.
+ */
+#include "avr_instance.h" /* first: see avr_types.h */
+
+#include <stdlib.h>
+#include <string.h>
+
+#include "fmi3Functions.h"
+
+#define TIME_VR ((fmi3ValueReference)AVR_N_VARS)
+
+typedef char fmi3Boolean_is_one_byte[sizeof(fmi3Boolean) == 1 ? 1 : -1];
+
+/* ---- allowed phases per function (FMI 3.0 section 4.3, co-simulation without event mode) ------ */
+#define ANY AVR_ANY_PHASE
+#define GET_PHASES (AVR_INIT_MODE | AVR_STEP_MODE | AVR_TERMINATED)
+#define SET_PHASES (AVR_INSTANTIATED | AVR_INIT_MODE | AVR_STEP_MODE)
+#define MASK_fmi3SetDebugLogging ANY
+#define MASK_fmi3EnterInitializationMode AVR_INSTANTIATED
+#define MASK_fmi3ExitInitializationMode AVR_INIT_MODE
+#define MASK_fmi3Terminate AVR_STEP_MODE
+#define MASK_fmi3Reset ANY
+#define MASK_fmi3GetFloat64 GET_PHASES
+#define MASK_fmi3GetInt32 GET_PHASES
+#define MASK_fmi3GetBoolean GET_PHASES
+#define MASK_fmi3SetFloat64 SET_PHASES
+#define MASK_fmi3SetInt32 SET_PHASES
+#define MASK_fmi3SetBoolean SET_PHASES
+#define MASK_fmi3GetFMUState ANY
+#define MASK_fmi3SetFMUState ANY
+#define MASK_fmi3FreeFMUState ANY
+#define MASK_fmi3SerializedFMUStateSize ANY
+#define MASK_fmi3SerializeFMUState ANY
+#define MASK_fmi3DeserializeFMUState ANY
+#define MASK_fmi3DoStep AVR_STEP_MODE
+#define MASK_NO_VARIABLES_GET GET_PHASES /* types this FMU has no variables of */
+#define MASK_NO_VARIABLES_SET SET_PHASES
+#define MASK_NOT_PROVIDED 0u /* event mode, clocks, configuration mode, ME, SE, derivatives */
+
+/* The one prologue: the instance, the call's name, and its phase check. */
+#define BEGIN_MASK(fn, mask)                                                \
+    AvrInstance *inst = (AvrInstance *)instance;                            \
+    static const char call[] = #fn;                                         \
+    if (avr_allowed(inst, call, mask) != AVR_OK) return fmi3Error;
+#define BEGIN(fn) BEGIN_MASK(fn, MASK_##fn)
+
+#define REFUSE(...) return (fmi3Status)avr_refuse(inst, call, __VA_ARGS__)
+
+static const char *const PHASE_NAMES[] = {"Instantiated", "InitializationMode", "StepMode", "Terminated"};
+
+typedef struct {
+    fmi3InstanceEnvironment env;
+    fmi3LogMessageCallback log;
+} Callbacks;
+
+static void log_fmi3(const AvrInstance *inst, AvrStatus status, const char *category, const char *message) {
+    const Callbacks *cb = (const Callbacks *)inst->env;
+    if (cb != NULL && cb->log != NULL) cb->log(cb->env, (fmi3Status)status, category, message);
+}
+
+/* ---- inquiry, creation, life cycle ------------------------------------------------------------ */
+const char *fmi3GetVersion(void) { return fmi3Version; }
+
+fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
+                                         fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                         fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
+                                         const fmi3ValueReference requiredIntermediateVariables[],
+                                         size_t nRequiredIntermediateVariables,
+                                         fmi3InstanceEnvironment instanceEnvironment,
+                                         fmi3LogMessageCallback logMessage,
+                                         fmi3IntermediateUpdateCallback intermediateUpdate) {
+    (void)resourcePath, (void)visible, (void)earlyReturnAllowed, (void)requiredIntermediateVariables;
+    (void)intermediateUpdate; /* never called: no intermediate update */
+    Callbacks *cb = malloc(sizeof *cb);
+    if (cb == NULL) return NULL;
+    cb->env = instanceEnvironment;
+    cb->log = logMessage;
+    AvrInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = log_fmi3};
+    AvrInstance *inst = NULL;
+    if (eventModeUsed)
+        avr_refuse(&probe, "fmi3InstantiateCoSimulation", "eventModeUsed: this FMU has no event mode");
+    else if (nRequiredIntermediateVariables > 0)
+        avr_refuse(&probe, "fmi3InstantiateCoSimulation", "this FMU provides no intermediate variables");
+    else
+        inst = avr_instantiate(instanceName, instantiationToken, cb, log_fmi3, loggingOn, PHASE_NAMES);
+    if (inst == NULL) free(cb);
+    return inst;
+}
+
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage) {
+    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn;
+    if (logMessage != NULL)
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError", "this FMU supports co-simulation only");
+    return NULL;
+}
+
+fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
+                                               fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                               fmi3InstanceEnvironment instanceEnvironment,
+                                               fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
+                                               fmi3LockPreemptionCallback lockPreemption,
+                                               fmi3UnlockPreemptionCallback unlockPreemption) {
+    (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
+    return fmi3InstantiateModelExchange(instanceName, instantiationToken, resourcePath, visible, loggingOn,
+                                        instanceEnvironment, logMessage);
+}
+
+void fmi3FreeInstance(fmi3Instance instance) {
+    AvrInstance *inst = (AvrInstance *)instance;
+    if (inst == NULL) return;
+    void *cb = inst->env;
+    avr_free_instance(inst);
+    free(cb);
+}
+
+fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
+                               const fmi3String categories[]) {
+    BEGIN(fmi3SetDebugLogging)
+    if (nCategories > 0 && categories == NULL) REFUSE("categories is NULL with nCategories = %zu", nCategories);
+    inst->logging_on = loggingOn;
+    return fmi3OK;
+}
+
+fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
+                                       fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
+    BEGIN(fmi3EnterInitializationMode)
+    (void)toleranceDefined, (void)tolerance;
+    if (avr_setup(inst, call, startTime, stopTimeDefined, stopTime) != AVR_OK) return fmi3Error;
+    inst->phase = AVR_INIT_MODE;
+    return fmi3OK;
+}
+
+fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
+    BEGIN(fmi3ExitInitializationMode)
+    return (fmi3Status)avr_exit_init(inst, call);
+}
+
+fmi3Status fmi3Terminate(fmi3Instance instance) {
+    BEGIN(fmi3Terminate)
+    inst->phase = AVR_TERMINATED;
+    return fmi3OK;
+}
+
+fmi3Status fmi3Reset(fmi3Instance instance) {
+    BEGIN(fmi3Reset)
+    avr_reset(inst);
+    return fmi3OK;
+}
+
+/* ---- variables of this FMU's types -------------------------------------------------------------- */
+static fmi3Status check_counts(AvrInstance *inst, const char *call, const fmi3ValueReference vr[], size_t nvr,
+                               const void *values, size_t nValues) {
+    if (nvr > 0 && (vr == NULL || values == NULL)) REFUSE("NULL valueReferences or values with %zu references", nvr);
+    if (nValues != nvr) REFUSE("nValues = %zu, but %zu scalar variables were given", nValues, nvr);
+    return fmi3OK;
+}
+
+fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
+                          size_t nValueReferences, fmi3Float64 values[], size_t nValues) {
+    BEGIN(fmi3GetFloat64)
+    if (check_counts(inst, call, valueReferences, nValueReferences, values, nValues) != fmi3OK) return fmi3Error;
+    for (size_t i = 0; i < nValueReferences; ++i)
+        if (valueReferences[i] != TIME_VR && avr_check_get(inst, call, &valueReferences[i], 1, AVR_REAL) != AVR_OK)
+            return fmi3Error;
+    for (size_t i = 0; i < nValueReferences; ++i)
+        values[i] = valueReferences[i] == TIME_VR ? inst->time : inst->values[valueReferences[i]];
+    return fmi3OK;
+}
+
+#define GETTER(fn, ctype, type, FROM_DOUBLE)                                                                  \
+    fmi3Status fn(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences, \
+                  ctype values[], size_t nValues) {                                                           \
+        BEGIN(fn)                                                                                             \
+        if (check_counts(inst, call, valueReferences, nValueReferences, values, nValues) != fmi3OK ||        \
+            avr_check_get(inst, call, valueReferences, nValueReferences, type) != AVR_OK)                     \
+            return fmi3Error;                                                                                 \
+        for (size_t i = 0; i < nValueReferences; ++i) values[i] = FROM_DOUBLE(inst->values[valueReferences[i]]); \
+        return fmi3OK;                                                                                        \
+    }
+/* READ(values, i) reads element i as a double; a Boolean is read as its byte (a bool other than 0/1 is refused, not UB) */
+#define SETTER(fn, ctype, type, READ)                                                                           \
+    fmi3Status fn(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,   \
+                  const ctype values[], size_t nValues) {                                                       \
+        BEGIN(fn)                                                                                               \
+        if (check_counts(inst, call, valueReferences, nValueReferences, values, nValues) != fmi3OK) return fmi3Error; \
+        for (size_t i = 0; i < nValueReferences; ++i) {                                                         \
+            if (valueReferences[i] == TIME_VR) REFUSE("time is the independent variable and cannot be set");   \
+            if (avr_check_set(inst, call, valueReferences[i], type, READ(values, i)) != AVR_OK) return fmi3Error; \
+        }                                                                                                       \
+        for (size_t i = 0; i < nValueReferences; ++i) inst->values[valueReferences[i]] = READ(values, i);      \
+        return fmi3OK;                                                                                          \
+    }
+#define AS_INT32(x) ((fmi3Int32)(x))
+#define AS_BOOLEAN(x) ((x) != 0.0)
+#define READ_NUMBER(values, i) ((double)(values)[i])
+#define READ_BYTE(values, i) ((double)((const unsigned char *)(values))[i])
+GETTER(fmi3GetInt32, fmi3Int32, AVR_INTEGER, AS_INT32)
+GETTER(fmi3GetBoolean, fmi3Boolean, AVR_BOOLEAN, AS_BOOLEAN)
+SETTER(fmi3SetFloat64, fmi3Float64, AVR_REAL, READ_NUMBER)
+SETTER(fmi3SetInt32, fmi3Int32, AVR_INTEGER, READ_NUMBER)
+SETTER(fmi3SetBoolean, fmi3Boolean, AVR_BOOLEAN, READ_BYTE)
+
+/* ---- FMU state (avr_state.c) --------------------------------------------------------------------- */
+fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
+    BEGIN(fmi3GetFMUState)
+    return (fmi3Status)avr_fmustate_get(inst, call, FMUState);
+}
+
+fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
+    BEGIN(fmi3SetFMUState)
+    return (fmi3Status)avr_fmustate_set(inst, call, FMUState);
+}
+
+fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
+    BEGIN(fmi3FreeFMUState)
+    avr_fmustate_free(FMUState);
+    return fmi3OK;
+}
+
+fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size) {
+    BEGIN(fmi3SerializedFMUStateSize)
+    return (fmi3Status)avr_fmustate_size(inst, call, FMUState, size);
+}
+
+fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size) {
+    BEGIN(fmi3SerializeFMUState)
+    return (fmi3Status)avr_fmustate_serialize(inst, call, FMUState, (unsigned char *)serializedState, size);
+}
+
+fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size, fmi3FMUState *FMUState) {
+    BEGIN(fmi3DeserializeFMUState)
+    return (fmi3Status)avr_fmustate_deserialize(inst, call, (const unsigned char *)serializedState, size, FMUState);
+}
+
+/* ---- stepping ------------------------------------------------------------------------------------ */
+fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
+                      fmi3Float64 communicationStepSize, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
+                      fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn,
+                      fmi3Float64 *lastSuccessfulTime) {
+    BEGIN(fmi3DoStep)
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (eventHandlingNeeded == NULL || terminateSimulation == NULL || earlyReturn == NULL || lastSuccessfulTime == NULL)
+        REFUSE("NULL output argument");
+    if (avr_do_step(inst, call, currentCommunicationPoint, communicationStepSize) != AVR_OK) return fmi3Error;
+    *eventHandlingNeeded = fmi3False;
+    *terminateSimulation = fmi3False;
+    *earlyReturn = fmi3False;
+    *lastSuccessfulTime = inst->time;
+    return fmi3OK;
+}

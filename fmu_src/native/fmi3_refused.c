@@ -1,0 +1,116 @@
+/*
+ * The FMI 3.0 functions this co-simulation FMU does not provide (variable types it has no
+ * variables of, event mode, clocks, configuration mode, Model Exchange, Scheduled
+ * Execution, derivatives).  Each exists so that every host resolves every symbol; each
+ * refuses with fmi3Error and a log message, through the same prologue as fmi3_api.c.
+ */
+#include "avr_instance.h"
+#include "fmi3Functions.h"
+
+#if defined(__GNUC__)
+#pragma GCC diagnostic ignored "-Wunused-parameter" /* the refusing stubs use none */
+#endif
+
+#define GET_PHASES (AVR_INIT_MODE | AVR_STEP_MODE | AVR_TERMINATED)
+#define SET_PHASES (AVR_INSTANTIATED | AVR_INIT_MODE | AVR_STEP_MODE)
+
+/* The one prologue, as in fmi3_api.c. */
+#define BEGIN_MASK(fn, mask)                                                \
+    AvrInstance *inst = (AvrInstance *)instance;                            \
+    static const char call[] = #fn;                                         \
+    if (avr_allowed(inst, call, mask) != AVR_OK) return fmi3Error;
+
+/* Getters and setters of types without variables: nothing to get or set is fine, anything else refused. */
+#define NO_VARIABLES(fn, mask, ctype, type_name)                                                               \
+    fmi3Status fn(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,  \
+                  ctype values[], size_t nValues) {                                                            \
+        BEGIN_MASK(fn, mask)                                                                                   \
+        (void)valueReferences, (void)values, (void)nValues;                                                    \
+        if (nValueReferences == 0) return fmi3OK;                                                              \
+        return (fmi3Status)avr_refuse(inst, call, "this FMU has no %s variables", type_name);                 \
+    }
+#define NO_GET_SET(T)                                                             \
+    NO_VARIABLES(fmi3Get##T, GET_PHASES, fmi3##T, #T)                             \
+    NO_VARIABLES(fmi3Set##T, SET_PHASES, const fmi3##T, #T)
+NO_GET_SET(Float32)
+NO_GET_SET(Int8)
+NO_GET_SET(UInt8)
+NO_GET_SET(Int16)
+NO_GET_SET(UInt16)
+NO_GET_SET(UInt32)
+NO_GET_SET(Int64)
+NO_GET_SET(UInt64)
+NO_GET_SET(String)
+
+fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         size_t valueSizes[], fmi3Binary values[], size_t nValues) {
+    BEGIN_MASK(fmi3GetBinary, GET_PHASES)
+    (void)valueReferences, (void)valueSizes, (void)values, (void)nValues;
+    return nValueReferences == 0 ? fmi3OK : (fmi3Status)avr_refuse(inst, call, "this FMU has no Binary variables");
+}
+
+fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         const size_t valueSizes[], const fmi3Binary values[], size_t nValues) {
+    BEGIN_MASK(fmi3SetBinary, SET_PHASES)
+    (void)valueReferences, (void)valueSizes, (void)values, (void)nValues;
+    return nValueReferences == 0 ? fmi3OK : (fmi3Status)avr_refuse(inst, call, "this FMU has no Binary variables");
+}
+
+/* Not provided at all: refused in every phase (mask 0). */
+#define NOT_PROVIDED(fn, ...)                          \
+    fmi3Status fn(fmi3Instance instance, __VA_ARGS__) { \
+        BEGIN_MASK(fn, 0u)                             \
+        return fmi3Error;                              \
+    }
+#define NOT_PROVIDED0(fn)                \
+    fmi3Status fn(fmi3Instance instance) { \
+        BEGIN_MASK(fn, 0u)               \
+        return fmi3Error;                \
+    }
+NOT_PROVIDED0(fmi3EnterEventMode)
+NOT_PROVIDED0(fmi3EnterConfigurationMode)
+NOT_PROVIDED0(fmi3ExitConfigurationMode)
+NOT_PROVIDED0(fmi3EvaluateDiscreteStates)
+NOT_PROVIDED0(fmi3EnterContinuousTimeMode)
+NOT_PROVIDED0(fmi3EnterStepMode)
+NOT_PROVIDED(fmi3GetClock, const fmi3ValueReference vr[], size_t n, fmi3Clock values[])
+NOT_PROVIDED(fmi3SetClock, const fmi3ValueReference vr[], size_t n, const fmi3Clock values[])
+NOT_PROVIDED(fmi3GetNumberOfVariableDependencies, fmi3ValueReference vr, size_t *n)
+NOT_PROVIDED(fmi3GetVariableDependencies, fmi3ValueReference dependent, size_t elementIndicesOfDependent[],
+             fmi3ValueReference independents[], size_t elementIndicesOfIndependents[],
+             fmi3DependencyKind dependencyKinds[], size_t nDependencies)
+NOT_PROVIDED(fmi3GetDirectionalDerivative, const fmi3ValueReference unknowns[], size_t nUnknowns,
+             const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[], size_t nSeed,
+             fmi3Float64 sensitivity[], size_t nSensitivity)
+NOT_PROVIDED(fmi3GetAdjointDerivative, const fmi3ValueReference unknowns[], size_t nUnknowns,
+             const fmi3ValueReference knowns[], size_t nKnowns, const fmi3Float64 seed[], size_t nSeed,
+             fmi3Float64 sensitivity[], size_t nSensitivity)
+NOT_PROVIDED(fmi3GetIntervalDecimal, const fmi3ValueReference vr[], size_t n, fmi3Float64 intervals[],
+             fmi3IntervalQualifier qualifiers[])
+NOT_PROVIDED(fmi3GetIntervalFraction, const fmi3ValueReference vr[], size_t n, fmi3UInt64 counters[],
+             fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[])
+NOT_PROVIDED(fmi3GetShiftDecimal, const fmi3ValueReference vr[], size_t n, fmi3Float64 shifts[])
+NOT_PROVIDED(fmi3GetShiftFraction, const fmi3ValueReference vr[], size_t n, fmi3UInt64 counters[],
+             fmi3UInt64 resolutions[])
+NOT_PROVIDED(fmi3SetIntervalDecimal, const fmi3ValueReference vr[], size_t n, const fmi3Float64 intervals[])
+NOT_PROVIDED(fmi3SetIntervalFraction, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 counters[],
+             const fmi3UInt64 resolutions[])
+NOT_PROVIDED(fmi3SetShiftDecimal, const fmi3ValueReference vr[], size_t n, const fmi3Float64 shifts[])
+NOT_PROVIDED(fmi3SetShiftFraction, const fmi3ValueReference vr[], size_t n, const fmi3UInt64 counters[],
+             const fmi3UInt64 resolutions[])
+NOT_PROVIDED(fmi3UpdateDiscreteStates, fmi3Boolean *discreteStatesNeedUpdate, fmi3Boolean *terminateSimulation,
+             fmi3Boolean *nominalsOfContinuousStatesChanged, fmi3Boolean *valuesOfContinuousStatesChanged,
+             fmi3Boolean *nextEventTimeDefined, fmi3Float64 *nextEventTime)
+NOT_PROVIDED(fmi3CompletedIntegratorStep, fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *enterEventMode,
+             fmi3Boolean *terminateSimulation)
+NOT_PROVIDED(fmi3SetTime, fmi3Float64 time)
+NOT_PROVIDED(fmi3SetContinuousStates, const fmi3Float64 continuousStates[], size_t nContinuousStates)
+NOT_PROVIDED(fmi3GetContinuousStateDerivatives, fmi3Float64 derivatives[], size_t nContinuousStates)
+NOT_PROVIDED(fmi3GetEventIndicators, fmi3Float64 eventIndicators[], size_t nEventIndicators)
+NOT_PROVIDED(fmi3GetContinuousStates, fmi3Float64 continuousStates[], size_t nContinuousStates)
+NOT_PROVIDED(fmi3GetNominalsOfContinuousStates, fmi3Float64 nominals[], size_t nContinuousStates)
+NOT_PROVIDED(fmi3GetNumberOfEventIndicators, size_t *nEventIndicators)
+NOT_PROVIDED(fmi3GetNumberOfContinuousStates, size_t *nContinuousStates)
+NOT_PROVIDED(fmi3GetOutputDerivatives, const fmi3ValueReference vr[], size_t n, const fmi3Int32 orders[],
+             fmi3Float64 values[], size_t nValues)
+NOT_PROVIDED(fmi3ActivateModelPartition, fmi3ValueReference clockReference, fmi3Float64 activationTime)

@@ -1,0 +1,148 @@
+"""The analysis of a campaign folder: statistics per arm, paired comparison, campaign.md.
+
+Over the ``complete`` rows of ``campaign.csv`` (a ``failed`` row is counted, never
+averaged in): per arm the fall rate with its 95 % Wilson interval, quantiles of the
+steady-state velocity errors of the runs that kept walking, the share that converged;
+for the first two arms, the paired comparison sample by sample (the same plant, command
+and seed) and the samples where the first arm is not better; the worst samples of each
+arm with their scenario files.
+"""
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Sequence
+
+from scenarios.campaign.store import COPY_NAME, CSV_NAME, MANIFEST_NAME, REPORT_NAME, read_rows
+from scenarios.campaign.task import COMPLETE
+
+QUANTILES = (0.5, 0.9)
+Z95 = 1.959964  # two-sided 95 % normal quantile (Wilson interval)
+FLOAT_COLS = ("t_fall_s", "steady_state_error_vx", "steady_state_error_vy", "convergence_time_s",
+              "mean_vx_last_s", "mean_vy_last_s", "max_abs_pitch_rad", "max_abs_roll_rad", "sim_s", "wall_s",
+              "task_wall_s")
+
+
+@dataclass
+class CampaignData:
+    root: Path
+    manifest: dict[str, Any]
+    rows: list[dict[str, Any]]  # typed
+    factors: list[str]
+
+    @property
+    def arms(self) -> list[str]:
+        return list(self.manifest["arms"])
+
+
+def is_campaign_dir(path: Path) -> bool:
+    return (Path(path) / MANIFEST_NAME).is_file()
+
+
+def _typed(row: dict[str, str], factors: Sequence[str]) -> dict[str, Any]:
+    out: dict[str, Any] = dict(row)
+    for c in FLOAT_COLS:
+        out[c] = float(row[c]) if row.get(c) else None
+    out["fell"] = {"true": True, "false": False}.get(row.get("fell", ""))
+    for f in factors:
+        out[f] = _factor_value(row[f])
+    return out
+
+
+def _factor_value(text: str) -> Any:
+    for conv in (int, float):
+        try:
+            return conv(text)
+        except ValueError:
+            pass
+    return {"true": True, "false": False}.get(text, text)
+
+
+def load(root: Path) -> CampaignData:
+    root = Path(root)
+    manifest = json.loads((root / MANIFEST_NAME).read_text())
+    cols = manifest["columns"]
+    factors = cols[2:cols.index("status")]
+    rows = [_typed(r, factors) for r in read_rows(root / CSV_NAME, cols)]
+    return CampaignData(root, manifest, rows, factors)
+
+
+# --------------------------------------------------------------------------- statistics
+def quantile(values: Sequence[float], q: float) -> float | None:
+    """Linear-interpolation quantile (numpy's default); None for no values."""
+    if not values:
+        return None
+    v = sorted(values)
+    pos = q * (len(v) - 1)
+    lo = math.floor(pos)
+    hi = min(lo + 1, len(v) - 1)
+    return v[lo] + (v[hi] - v[lo]) * (pos - lo)
+
+
+def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float] | None:
+    """The Wilson score interval of a proportion k/n (None for n = 0)."""
+    if n == 0:
+        return None
+    p = k / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def arm_stats(rows: Sequence[dict[str, Any]], arm: str) -> dict[str, Any]:
+    mine = [r for r in rows if r["arm"] == arm]
+    done = [r for r in mine if r["status"] == COMPLETE]
+    walked = [r for r in done if r["fell"] is False]
+    fell = len(done) - len(walked)
+    out: dict[str, Any] = {"arm": arm, "rows": len(mine), "complete": len(done), "failed": len(mine) - len(done),
+                           "fell": fell, "fall_rate": fell / len(done) if done else None,
+                           "fall_ci": wilson(fell, len(done)), "walked": len(walked)}
+    for key in ("steady_state_error_vx", "steady_state_error_vy"):
+        vals = [r[key] for r in walked if r[key] is not None]
+        out[key] = {**{f"p{int(q * 100)}": quantile(vals, q) for q in QUANTILES}, "max": max(vals, default=None)}
+    conv = [r["convergence_time_s"] for r in walked if r["convergence_time_s"] is not None]
+    out["converged"] = len(conv)
+    out["convergence_p50"] = quantile(conv, 0.5)
+    return out
+
+
+def paired(rows: Sequence[dict[str, Any]], a: str, b: str) -> dict[str, Any]:
+    """Arm ``a`` against arm ``b`` on the samples where both are complete."""
+    by = {(r["sample"], r["arm"]): r for r in rows if r["status"] == COMPLETE}
+    samples = sorted({s for s, arm in by if arm == a and (s, b) in by})
+    out = {"a": a, "b": b, "n": len(samples), "both_fell": 0, "only_a_fell": [], "only_b_fell": [],
+           "both_walked": 0, "a_lower_vx": 0, "a_lower_vy": 0, "not_better": []}
+    diffs, diffs_vy = [], []
+    for s in samples:
+        ra, rb = by[(s, a)], by[(s, b)]
+        if ra["fell"] and rb["fell"]:
+            out["both_fell"] += 1
+        elif ra["fell"]:
+            out["only_a_fell"].append(s)
+            out["not_better"].append((s, "fell (the other arm did not)", ra, rb))
+        elif rb["fell"]:
+            out["only_b_fell"].append(s)
+        elif ra["steady_state_error_vx"] is not None and rb["steady_state_error_vx"] is not None:
+            out["both_walked"] += 1
+            d = ra["steady_state_error_vx"] - rb["steady_state_error_vx"]
+            diffs.append(d)
+            if d < 0:
+                out["a_lower_vx"] += 1
+            else:
+                out["not_better"].append((s, f"sse_vx {d:+.4f} m/s", ra, rb))
+            if ra["steady_state_error_vy"] is not None and rb["steady_state_error_vy"] is not None:
+                diffs_vy.append(ra["steady_state_error_vy"] - rb["steady_state_error_vy"])
+                out["a_lower_vy"] += diffs_vy[-1] < 0
+    out["median_diff_vx"] = quantile(diffs, 0.5)
+    out["median_diff_vy"] = quantile(diffs_vy, 0.5)
+    out["max_diff_vy"] = max(diffs_vy, default=None)
+    return out
+
+
+def worst(rows: Sequence[dict[str, Any]], arm: str, k: int = 5) -> list[dict[str, Any]]:
+    """Falls first (earliest first), then the largest sse_vx."""
+    done = [r for r in rows if r["arm"] == arm and r["status"] == COMPLETE]
+    return sorted(done, key=lambda r: (0, r["t_fall_s"] or 0.0) if r["fell"]
+                  else (1, -(r["steady_state_error_vx"] or 0.0)))[:k]

@@ -1,0 +1,140 @@
+"""``python -m scenarios campaign NAME|FILE --out DIR [--workers N | --scheduler ADDRESS] [--resume]``.
+
+Validates the campaign and every sample before anything runs (exit 2 with every
+problem), claims DIR (exit 2 if it holds another campaign, or this one without
+``--resume``), runs the samples that are not complete on Dask, streams the rows to
+``DIR/campaign.csv``, then writes ``DIR/campaign.md`` and prints the table per arm.
+Exit status: 0 every row complete; 1 some failed (they are in the CSV with the reason;
+``--resume`` runs them again); 2 invalid campaign, arguments or DIR; 130 interrupted.
+"""
+from __future__ import annotations
+
+import logging
+import sys
+from pathlib import Path
+
+from fmu_src.avr_errors import ScenarioError
+
+log = logging.getLogger("scenarios.campaign")
+
+
+def add_parser(sub) -> None:
+    """Register the ``campaign`` subcommand on the ``python -m scenarios`` parser."""
+    sp = sub.add_parser("campaign", help="run a robustness campaign (sampled scenarios x arms) on Dask")
+    sp.add_argument("campaign", metavar="NAME|FILE", help="a built-in campaign (robustness, smoke) or a file")
+    sp.add_argument("--out", default=None, help="campaign folder (default: runs/<campaign name>)")
+    where = sp.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None,
+                       help="local Dask worker processes, one thread each (default: the CPU count)")
+    where.add_argument("--scheduler", metavar="ADDRESS", default=None,
+                       help="an existing Dask scheduler (e.g. tcp://host:8786); workers need a shared file system")
+    sp.add_argument("--resume", action="store_true", help="continue the campaign in --out (skips complete samples)")
+    sp.add_argument("--regulator", choices=("fmu", "inprocess"), default="fmu")
+    sp.add_argument("--fmu", type=Path, default=None, help="FMU file (default: dist/, built if missing or stale)")
+    sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
+    sp.add_argument("--task-timeout", type=float, default=None, help="seconds per sample (overrides the file)")
+    sp.add_argument("--retries", type=int, default=None, help="retries of a task whose worker/run process died")
+    sp.add_argument("--dry-run", action="store_true", help="validate and list the samples; run nothing")
+    sp.set_defaults(func=cmd_campaign)
+
+
+def _check_args(args) -> list[str]:
+    problems = []
+    if args.workers is not None and args.workers < 1:
+        problems.append(f"--workers {args.workers}: must be >= 1")
+    if args.task_timeout is not None and not args.task_timeout > 0:
+        problems.append(f"--task-timeout {args.task_timeout:g}: must be > 0")
+    if args.retries is not None and not 0 <= args.retries <= 10:
+        problems.append(f"--retries {args.retries}: must be within [0, 10]")
+    return problems
+
+
+def _print_samples(samples, factor_names) -> None:
+    from scenarios.campaign.sampling import format_value
+
+    print("sample  " + "  ".join(factor_names))
+    for s in samples:
+        print(f"{s.id}   " + "  ".join(str(format_value(s.values[f])) for f in factor_names))
+
+
+def cmd_campaign(args) -> int:
+    from scenarios.campaign import execute, sampling, spec
+    from scenarios.campaign.report import text_table, write_report
+    from scenarios.campaign.store import CampaignDir, CampaignDirError
+
+    problems = _check_args(args)
+    try:
+        import distributed  # noqa: F401  (the optional `campaign` extra)
+    except ImportError:
+        problems.append("the campaign command needs Dask: pip install 'cassie-avr[campaign]' "
+                        "(or pip install 'dask[distributed]')")
+    try:
+        path = spec.resolve_campaign(args.campaign)
+        campaign = spec.load_campaign(path)
+        samples = sampling.draw(campaign)
+        texts = sampling.build_samples(campaign, samples)
+    except ScenarioError as exc:
+        problems.append(str(exc))
+    if problems:
+        print("\n".join(problems), file=sys.stderr)
+        return 2
+    names = [f.name for f in campaign.factors]
+    if args.dry_run:
+        _print_samples(samples, names)
+        return 0
+    out = Path(args.out) if args.out else Path("runs") / campaign.name
+    cdir = CampaignDir(out, campaign.name, texts, campaign.arm_names(), names)
+    try:
+        cdir.open(resume=args.resume, campaign_file=path)
+    except CampaignDirError as exc:
+        print(str(exc), file=sys.stderr)
+        return 2
+    values = {s.id: {k: sampling.format_value(v) for k, v in s.values.items()} for s in samples}
+    if args.resume:
+        n_done = len(cdir.complete_samples())
+        print(f"resuming {campaign.name} in {out}: {n_done} of {len(samples)} samples complete, "
+              f"{len(samples) - n_done} to run", file=sys.stderr)
+    try:
+        fmu = _fmu(args)
+        if fmu is False:
+            return 1
+        opts = execute.RunOptions(workers=args.workers, scheduler=args.scheduler, regulator=args.regulator,
+                                  fmu=fmu, timeout_s=args.task_timeout, retries=args.retries)
+        execute.run(campaign, cdir, values, opts, fmu)
+    except execute.CampaignInterrupted as exc:
+        print(f"interrupted: {exc.done} sample(s) finished in this run and are in {cdir.csv_path}, {exc.remaining} "
+              f"not run; continue with: python -m scenarios campaign {args.campaign} --out {out} --resume",
+              file=sys.stderr)
+        return 130
+    except OSError as exc:  # e.g. the scheduler address cannot be reached
+        print(f"campaign {campaign.name}: {type(exc).__name__}: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        cdir.finish()
+        cdir.close()
+    return _finish(out, write_report, text_table)
+
+
+def _fmu(args):
+    """The FMU path for the fmu regulator (built when missing/stale), None in-process, False on error."""
+    if args.regulator != "fmu":
+        return None
+    from scenarios.cli import ensure_fmu
+
+    try:
+        return str(Path(ensure_fmu(args.fmu, rebuild=args.rebuild_fmu)).resolve())
+    except Exception as exc:
+        print(f"cannot get the FMU: {exc}", file=sys.stderr)
+        return False
+
+
+def _finish(out: Path, write_report, text_table) -> int:
+    from scenarios.campaign import analysis
+
+    report = write_report(out)
+    data = analysis.load(out)
+    print(text_table(data))
+    failed = sum(r["status"] != "complete" for r in data.rows)
+    expected = data.manifest["n_samples"] * len(data.arms)
+    print(f"\n{len(data.rows)} of {expected} rows, {failed} failed; {out / 'campaign.csv'}; report {report}")
+    return 1 if failed or len(data.rows) < expected else 0

@@ -1,0 +1,161 @@
+"""``DIR/campaign.md`` (with its plots) and the plain-text table the CLI prints.
+
+``python -m scenarios report DIR`` writes it for a campaign folder, and lists the
+campaign folders inside a results folder in ``report.md``.
+"""
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+from typing import Any, Sequence
+
+from scenarios.campaign import analysis
+from scenarios.campaign.store import COPY_NAME, REPORT_NAME
+
+log = logging.getLogger(__name__)
+
+is_campaign_dir = analysis.is_campaign_dir
+
+SSE = (("steady_state_error_vx", "sse_vx"), ("steady_state_error_vy", "sse_vy"))
+
+
+def _f(v: Any, digits: int = 3) -> str:
+    return "-" if v is None else f"{v:.{digits}f}" if isinstance(v, float) else str(v)
+
+
+def _rate(s: dict[str, Any]) -> str:
+    if s["fall_rate"] is None:
+        return "-"
+    lo, hi = s["fall_ci"]
+    return f"{s['fell']}/{s['complete']} = {100 * s['fall_rate']:.0f} % [{100 * lo:.0f}, {100 * hi:.0f}]"
+
+
+def stats_table(data: analysis.CampaignData) -> tuple[list[str], list[list[str]]]:
+    header = ["arm", "complete", "failed", "fell (95 % CI)", "sse_vx p50", "sse_vx p90", "sse_vx max",
+              "sse_vy p50", "sse_vy p90", "converged", "t_conv p50 (s)"]
+    rows = []
+    for arm in data.arms:
+        s = analysis.arm_stats(data.rows, arm)
+        cells = [arm, str(s["complete"]), str(s["failed"]), _rate(s)]
+        for key, _ in SSE:
+            q = s[key]
+            cells += [_f(q["p50"]), _f(q["p90"])] + ([_f(q["max"])] if key.endswith("vx") else [])
+        cells += [f"{s['converged']}/{s['walked']}", _f(s["convergence_p50"], 1)]
+        rows.append(cells)
+    return header, rows
+
+
+def text_table(data: analysis.CampaignData) -> str:
+    header, rows = stats_table(data)
+    widths = [max(len(h), *(len(r[i]) for r in rows)) if rows else len(h) for i, h in enumerate(header)]
+    lines = ["  ".join(h.ljust(w) for h, w in zip(header, widths)), "  ".join("-" * w for w in widths)]
+    return "\n".join(lines + ["  ".join(c.ljust(w) for c, w in zip(r, widths)).rstrip() for r in rows])
+
+
+def _md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)] + \
+        ["| " + " | ".join(str(c).replace("|", "\\|") for c in r) + " |" for r in rows]
+
+
+def _factor_cells(r: dict[str, Any], factors: Sequence[str]) -> str:
+    return ", ".join(f"{f} = {_f(r[f], 3) if isinstance(r[f], float) else r[f]}" for f in factors)
+
+
+def _paired_lines(data: analysis.CampaignData) -> list[str]:
+    if len(data.arms) < 2:
+        return []
+    a, b = data.arms[:2]
+    p = analysis.paired(data.rows, a, b)
+    lines = [f"## {a} vs {b}, sample by sample", "",
+             f"{p['n']} samples with both arms complete (same plant, command and seed). Both fell: "
+             f"{p['both_fell']}; only {a} fell: {len(p['only_a_fell'])}; only {b} fell: {len(p['only_b_fell'])}. "
+             f"Both kept walking: {p['both_walked']}; {a} had the lower sse_vx in {p['a_lower_vx']} of them "
+             f"(median difference {a} - {b}: {_f(p['median_diff_vx'], 4)} m/s) and the lower sse_vy in "
+             f"{p['a_lower_vy']} (median difference {_f(p['median_diff_vy'], 4)} m/s, largest "
+             f"{_f(p['max_diff_vy'], 4)} m/s).", ""]
+    if p["not_better"]:
+        lines += [f"Samples where {a} is not better ({len(p['not_better'])}):", ""]
+        rows = [[f"[{s}](samples/{s}.toml)", why, _f(ra["steady_state_error_vx"]), _f(rb["steady_state_error_vx"]),
+                 _factor_cells(ra, data.factors)] for s, why, ra, rb in p["not_better"][:20]]
+        lines += _md_table(["sample", "why", f"{a} sse_vx", f"{b} sse_vx", "factors"], rows)
+        if len(p["not_better"]) > 20:
+            lines.append(f"\n... and {len(p['not_better']) - 20} more (see campaign.csv).")
+        lines.append("")
+    return lines + ["![paired](paired.png)", ""]
+
+
+def _worst_lines(data: analysis.CampaignData) -> list[str]:
+    lines = ["## Worst samples per arm", "", "Falls first (earliest first), then the largest sse_vx. "
+             "Re-run one alone: `python -m scenarios run samples/<id>.toml --out <folder>`.", ""]
+    for arm in data.arms:
+        rows = []
+        for r in analysis.worst(data.rows, arm):
+            outcome = f"fell at {r['t_fall_s']:.2f} s" if r["fell"] else f"sse_vx {_f(r['steady_state_error_vx'])}"
+            run = f"[run]({r['run_dir']}/summary.json)" if r.get("run_dir") else "-"
+            rows.append([f"[{r['sample']}](samples/{r['sample']}.toml)", outcome, run, _factor_cells(r, data.factors)])
+        lines += [f"**{arm}**", ""] + _md_table(["sample", "outcome", "output", "factors"], rows) + [""]
+    return lines
+
+
+def _unconverged_lines(data: analysis.CampaignData) -> list[str]:
+    """Per arm, the runs that kept walking but never settled within the convergence band."""
+    lines = []
+    for arm in data.arms:
+        ids = [r["sample"] for r in data.rows if r["arm"] == arm and r["status"] == "complete"
+               and r["fell"] is False and r["convergence_time_s"] is None]
+        if ids:
+            shown = ", ".join(f"[{i}](samples/{i}.toml)" for i in ids[:20]) + (" ..." if len(ids) > 20 else "")
+            lines.append(f"- {arm}: kept walking but did not converge in {len(ids)} run(s): {shown}")
+    return lines + [""] if lines else []
+
+
+def render(data: analysis.CampaignData, plots: Sequence[str]) -> str:
+    m = data.manifest
+    failed = [r for r in data.rows if r["status"] != "complete"]
+    expected = m["n_samples"] * len(data.arms)
+    lines = [f"# Campaign {m['name']}", "",
+             f"{m['n_samples']} samples x {len(data.arms)} arms ({', '.join(data.arms)}); {len(data.rows)} of "
+             f"{expected} rows present, {len(failed)} failed. Factors: {', '.join(data.factors)}. "
+             f"Definition: [{COPY_NAME}]({COPY_NAME}); every sample's scenario: `samples/<id>.toml`; "
+             "all rows: `campaign.csv`.", "",
+             "Fall rate over the complete runs, with its 95 % Wilson interval; the velocity errors (`sse_*`: mean "
+             "|step-averaged velocity - command| over the last 5 s, m/s) and convergence over the runs that kept "
+             "walking.", ""]
+    lines += _md_table(*stats_table(data)) + [""]
+    if len(data.rows) < expected:
+        lines += [f"**Incomplete:** {expected - len(data.rows)} row(s) missing "
+                  "(interrupted; `python -m scenarios campaign FILE --out DIR --resume` continues).", ""]
+    for r in failed[:20]:
+        lines.append(f"- failed: {r['sample']} / {r['arm']}: `{str(r.get('error') or '')[:200]}`")
+    lines += [""] if failed else []
+    lines += _unconverged_lines(data)
+    lines += [f"![{p}]({p})" for p in plots] + [""]
+    return "\n".join(lines + _paired_lines(data) + _worst_lines(data)) + "\n"
+
+
+def write_report(root: Path) -> Path:
+    """Write ``root/campaign.md`` and its plots; return the path."""
+    from scenarios.campaign import plots as plots_mod
+
+    data = analysis.load(root)
+    written = plots_mod.write_plots(data)
+    path = Path(root) / REPORT_NAME
+    path.write_text(render(data, [p for p in written if p != "paired.png"]))
+    return path
+
+
+def campaigns_section(out_dir: Path) -> str:
+    """A section of report.md listing the campaign folders directly inside ``out_dir``."""
+    dirs = sorted(p.parent for p in Path(out_dir).glob("*/campaign.json"))
+    if not dirs:
+        return ""
+    lines = ["## Campaigns", ""]
+    for d in dirs:
+        try:
+            write_report(d)
+            header, rows = stats_table(analysis.load(d))
+        except (OSError, ValueError, KeyError) as exc:
+            lines += [f"### {d.name}", "", f"**Unreadable campaign folder:** {exc}", ""]
+            continue
+        lines += [f"### [{d.name}]({d.name}/{REPORT_NAME})", ""] + _md_table(header, rows) + [""]
+    return "\n".join(lines) + "\n"

@@ -1,0 +1,326 @@
+"""Campaign files: TOML parsed into a frozen :class:`Campaign`, every problem at once.
+
+Layout (every key below is known; anything else is an error)::
+
+    name = "robustness"             # [a-z0-9][a-z0-9_-]*
+    description = "..."
+    base = "nominal"                # a suite scenario name, a scenario file (relative to
+                                    # this file), or an inline [base] table (a scenario)
+    duration_s = 30.0               # optional: replaces the base's duration_s
+    compare = ["adaptive", "pd_only"]   # optional: replaces the base's arms
+    samples = 60                    # random draws; a grid multiplies them
+    seed = 2026                     # every draw comes from it (same seed, same samples)
+    task_timeout_s = 600.0          # optional: one sample (all arms); default from the duration
+    retries = 2                     # optional (0-10, default 2): re-runs of a task whose
+                                    # worker or run process died
+
+    [factors.torso_mass_kg]         # see scenarios.campaign.factors for the names
+    dist = "uniform"                # uniform | lhs: low, high (+ step); randint: low, high
+    low = 10.33                     # (integers, inclusive); choice: values (+ weights);
+    high = 25.0                     # grid: values (every value x every random draw)
+
+Factors with ``dist = "lhs"`` are drawn together as one Latin hypercube of ``samples``
+points. ``step`` rounds uniform/lhs draws to ``low + k*step`` (push times default to
+the base's communication step). The base with each factor at its extreme values is
+checked by the scenario validator before any sample is drawn, so a range the scenario
+format does not allow is reported once, against the factor.
+"""
+from __future__ import annotations
+
+import copy
+import difflib
+import math
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Mapping
+
+from fmu_src.avr_errors import ScenarioError
+from scenarios import spec as scenario_spec
+from scenarios.campaign import factors as fx
+from scenarios.spec import _integer, _number, _Problems, _show, _string, _unknown_keys
+
+CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
+TOP_KEYS = ("name", "description", "base", "duration_s", "compare", "samples", "seed",
+            "task_timeout_s", "retries", "factors")
+DISTS = ("uniform", "lhs", "randint", "choice", "grid")
+DIST_KEYS = {"uniform": ("dist", "low", "high", "step"), "lhs": ("dist", "low", "high", "step"),
+             "randint": ("dist", "low", "high"), "choice": ("dist", "values", "weights"),
+             "grid": ("dist", "values")}
+MAX_SAMPLES = 100_000
+MAX_RETRIES = 10
+DEFAULT_RETRIES = 2
+
+
+@dataclass(frozen=True)
+class Factor:
+    name: str
+    kind: str
+    dist: str
+    low: Any = None
+    high: Any = None
+    step: float | None = None
+    values: tuple = ()
+    weights: tuple[float, ...] | None = None
+
+    def extremes(self) -> list[Any]:
+        """The values the scenario validator must accept for every draw to be valid."""
+        return [self.low, self.high] if self.dist in ("uniform", "lhs", "randint") else list(self.values)
+
+
+@dataclass(frozen=True)
+class Campaign:
+    name: str
+    description: str
+    base_ref: str  # the suite name, file path or "inline"
+    base_doc: Mapping[str, Any]  # the scenario document every sample starts from (read only)
+    base_dir: Path  # resolves the base's relative paths
+    samples: int
+    seed: int
+    factors: tuple[Factor, ...]
+    retries: int = DEFAULT_RETRIES
+    task_timeout_s: float | None = None
+    source: str | None = None
+    comm_step_s: float = field(default=scenario_spec.DEFAULT_COMM_STEP_S)
+
+    @property
+    def grid(self) -> tuple[Factor, ...]:
+        return tuple(f for f in self.factors if f.dist == "grid")
+
+    @property
+    def n_samples(self) -> int:
+        """Random draws x the grid's cells."""
+        return self.samples * math.prod(len(f.values) for f in self.grid)
+
+    def arm_names(self) -> list[str]:
+        return list(self.base_doc.get("compare") or ["adaptive"])
+
+
+# --------------------------------------------------------------------------- factors
+def _check_values(tab: Mapping[str, Any], f: str, kind: str, probs: _Problems) -> tuple:
+    values = tab.get("values")
+    if "values" not in tab:
+        probs.note(f + ".values", "required")
+        return ()
+    if not isinstance(values, list) or not values:
+        probs.add(f + ".values", values, "must be a non-empty list")
+        return ()
+    ok = True
+    for j, v in enumerate(values):
+        if not fx.value_ok(kind, v):
+            probs.add(f"{f}.values[{j}]", v, f"must be {fx.KIND_HINT[kind]}")
+            ok = False
+    if ok and len({repr(v) for v in values}) != len(values):
+        probs.add(f + ".values", values, "has duplicates")
+    return tuple(values) if ok else ()
+
+
+def _check_weights(tab: Mapping[str, Any], f: str, n: int, probs: _Problems) -> tuple | None:
+    if "weights" not in tab:
+        return None
+    w = tab["weights"]
+    good = isinstance(w, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool)
+                                       and math.isfinite(x) and x >= 0 for x in w)
+    if not good or len(w) != n or sum(w) <= 0:
+        probs.add(f + ".weights", w, f"must be {n} non-negative numbers (one per value) with a positive sum")
+        return None
+    return tuple(float(x) for x in w)
+
+
+def _check_range(tab, f, kind, dist, probs) -> tuple[Any, Any, float | None]:
+    if dist == "randint" or kind == "integer":
+        if dist in ("uniform", "lhs"):
+            probs.add(f + ".dist", dist, "an integer factor takes randint, choice or grid")
+            return None, None, None
+        low = _integer(tab, "low", f + ".low", probs, required=True)
+        high = _integer(tab, "high", f + ".high", probs, required=True)
+        if low is not None and high is not None and low > high:
+            probs.add(f + ".high", high, f"must be >= low = {low}")
+        return low, high, None
+    low = _number(tab, "low", f + ".low", probs, required=True)
+    high = _number(tab, "high", f + ".high", probs, required=True)
+    if low is not None and high is not None and not low < high:
+        probs.add(f + ".high", high, f"must be > low = {_show(low)}")
+    step = _number(tab, "step", f + ".step", probs, gt=0.0)
+    return low, high, step
+
+
+def parse_factor(name: str, tab: Any, probs: _Problems) -> Factor | None:
+    f = f"factors.{name}"
+    kind = fx.lookup(name)
+    if kind is None:
+        close = difflib.get_close_matches(name, fx.known_names(), n=1, cutoff=0.6)
+        hint = f"; did you mean {close[0]!r}?" if close else f"; known: {', '.join(fx.FACTORS)}, regulator.<param>"
+        probs.note(f, "unknown factor" + hint)
+        return None
+    if not isinstance(tab, dict):
+        probs.add(f, tab, "must be a table ([factors.NAME] with dist = ...)")
+        return None
+    dist = _string(tab, "dist", f + ".dist", probs, required=True)
+    if dist not in DISTS:
+        if dist:
+            probs.add(f + ".dist", dist, f"must be one of {', '.join(DISTS)}")
+        return None
+    _unknown_keys(tab, DIST_KEYS[dist], f + ".", probs)
+    if dist in ("choice", "grid"):
+        values = _check_values(tab, f, kind.kind, probs)
+        weights = _check_weights(tab, f, len(values), probs) if dist == "choice" else None
+        return Factor(name, kind.kind, dist, values=values, weights=weights) if values else None
+    if kind.kind not in ("number", "integer"):
+        probs.add(f + ".dist", dist, f"a {kind.kind} factor takes choice or grid")
+        return None
+    low, high, step = _check_range(tab, f, kind.kind, dist, probs)
+    return Factor(name, kind.kind, dist, low=low, high=high, step=step) if low is not None and high is not None else None
+
+
+# --------------------------------------------------------------------------- base scenario
+def _read_toml(path: Path) -> dict[str, Any]:
+    with open(path, "rb") as fh:
+        return tomllib.load(fh)
+
+
+def _resolve_base(raw: Any, base_dir: Path, probs: _Problems) -> tuple[str, dict | None, Path]:
+    """(reference, scenario document, folder its relative paths resolve against)."""
+    if isinstance(raw, dict):
+        return "inline", copy.deepcopy(raw), base_dir
+    if not isinstance(raw, str) or not raw:
+        probs.add("base", raw, "must be a suite scenario name, a scenario file or an inline [base] table")
+        return "", None, base_dir
+    path = (base_dir / raw) if not Path(raw).is_absolute() else Path(raw)
+    if raw.endswith(".toml") or path.exists():
+        try:
+            return str(path), _read_toml(path), path.parent
+        except FileNotFoundError:
+            probs.add("base", raw, f"no such scenario file ({path})")
+        except tomllib.TOMLDecodeError as exc:
+            probs.add("base", raw, f"TOML syntax error: {exc}")
+        return raw, None, base_dir
+    suite = {p.stem: p for p in scenario_spec.suite_files()}
+    if raw not in suite:
+        close = difflib.get_close_matches(raw, list(suite), n=1, cutoff=0.5)
+        hint = f"; did you mean {close[0]!r}?" if close else f"; suite: {', '.join(suite)}"
+        probs.add("base", raw, "no such suite scenario" + hint)
+        return raw, None, base_dir
+    return raw, _read_toml(suite[raw]), suite[raw].parent
+
+
+def _base_document(doc: Mapping[str, Any], name: str, base_dir: Path, probs: _Problems) -> tuple[str, dict | None]:
+    """The base scenario with the campaign's duration/compare on top, checked as a scenario."""
+    ref, base, bdir = _resolve_base(doc.get("base"), base_dir, probs)
+    if base is None:
+        return ref, None
+    base.setdefault("name", name)
+    base.pop("claim", None)  # a campaign measures distributions, not the base's claim
+    for key in ("duration_s", "compare"):
+        if key in doc:
+            base[key] = copy.deepcopy(doc[key])
+    model = base.get("model")
+    if isinstance(model, str) and model not in scenario_spec.BUILTIN_MODELS:
+        base["model"] = scenario_spec.resolve_model(model, bdir)  # samples live elsewhere
+    try:
+        scenario = scenario_spec.parse_scenario(base, source="base", base_dir=bdir)
+    except ScenarioError as exc:
+        for p in exc.problems:
+            probs.note("base", p)
+        return ref, None
+    base.setdefault("compare", [a.name for a in scenario.arms])
+    base.setdefault("comm_step_s", scenario.comm_step_s)
+    return ref, base
+
+
+def _probe_factors(factors: list[Factor], base: dict, base_dir: Path, probs: _Problems) -> None:
+    """Each factor at each extreme value on the base: the scenario rules, reported per factor."""
+    for f in factors:
+        kind = fx.lookup(f.name)
+        for v in f.extremes():
+            doc = copy.deepcopy(base)
+            why = kind.apply(doc, copy.deepcopy(v))
+            if why:
+                probs.note(f"factors.{f.name}", why)
+                break
+            try:
+                scenario_spec.parse_scenario(doc, base_dir=base_dir)
+            except ScenarioError as exc:
+                for p in exc.problems:
+                    probs.add(f"factors.{f.name}", v, f"gives an invalid scenario: {p}")
+
+
+# --------------------------------------------------------------------------- campaign
+def _flatten_regulator(raw: dict[str, Any]) -> dict[str, Any]:
+    """``[factors.regulator.learning_rate]`` (a nested table in TOML) as ``regulator.learning_rate``."""
+    out: dict[str, Any] = {}
+    for name, tab in raw.items():
+        if name == "regulator" and isinstance(tab, dict) and "dist" not in tab:
+            out.update({f"{fx.REGULATOR_PREFIX}{k}": v for k, v in tab.items()})
+        else:
+            out[name] = tab
+    return out
+
+
+def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_dir: Path | None = None) -> Campaign:
+    """Validate a parsed campaign document; raise ScenarioError listing every problem."""
+    base_dir = base_dir or Path.cwd()
+    probs = _Problems()
+    _unknown_keys(doc, TOP_KEYS, "", probs)
+    name = _string(doc, "name", "name", probs, required=True)
+    if name and not scenario_spec._NAME_RE.match(name):
+        probs.add("name", name, "must match [a-z0-9][a-z0-9_-]* (it names samples)")
+    description = _string(doc, "description", "description", probs)
+    samples = _integer(doc, "samples", "samples", probs, required=True, ge=1)
+    if samples is not None and samples > MAX_SAMPLES:
+        probs.add("samples", samples, f"must be <= {MAX_SAMPLES}")
+    seed = _integer(doc, "seed", "seed", probs, required=True, ge=0)
+    retries = _integer(doc, "retries", "retries", probs, default=DEFAULT_RETRIES, ge=0)
+    if retries is not None and retries > MAX_RETRIES:
+        probs.add("retries", retries, f"must be <= {MAX_RETRIES}")
+    timeout = _number(doc, "task_timeout_s", "task_timeout_s", probs, gt=0.0)
+    if "base" not in doc:
+        probs.note("base", "required: a suite scenario name, a scenario file or an inline [base] table")
+    ref, base = _base_document(doc, name or "campaign", base_dir, probs) if "base" in doc else ("", None)
+
+    factors: list[Factor] = []
+    raw = doc.get("factors", {})
+    if not isinstance(raw, dict) or not raw:
+        probs.add("factors", raw, "must be a table of at least one [factors.NAME]")
+        raw = {}
+    for fname, tab in _flatten_regulator(raw).items():
+        factor = parse_factor(fname, tab, probs)
+        if factor is not None:
+            factors.append(factor)
+    if "terrain" in raw and any(n.startswith("terrain_") for n in raw):
+        probs.note("factors.terrain", "give the terrain factor or terrain_* factors, not both")
+    if base is not None and not probs.items:
+        _probe_factors(factors, base, base_dir, probs)
+    if probs.items:
+        raise ScenarioError(probs.items, source=source)
+    order = fx.apply_order([f.name for f in factors])
+    factors.sort(key=lambda f: order.index(f.name))
+    return Campaign(name, description, ref, base, base_dir, samples, seed, tuple(factors), retries, timeout,
+                    source, float(base["comm_step_s"]))
+
+
+def load_campaign(path: str | Path) -> Campaign:
+    path = Path(path)
+    try:
+        doc = _read_toml(path)
+    except FileNotFoundError:
+        raise ScenarioError([f"file not found: {path}"], source=str(path)) from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError([f"TOML syntax error: {exc}"], source=str(path)) from None
+    return parse_campaign(doc, source=str(path), base_dir=path.parent)
+
+
+def builtin_campaigns() -> list[str]:
+    return sorted(p.stem for p in CAMPAIGN_DIR.glob("*.toml"))
+
+
+def resolve_campaign(target: str) -> Path:
+    """A built-in campaign name (``robustness``, ``smoke``) or a campaign file path."""
+    path = Path(target)
+    if target.endswith(".toml") or path.exists():
+        return path
+    if target in builtin_campaigns():
+        return CAMPAIGN_DIR / f"{target}.toml"
+    close = difflib.get_close_matches(target, builtin_campaigns(), n=1, cutoff=0.5)
+    hint = f"; did you mean {close[0]!r}?" if close else f"; built-in: {', '.join(builtin_campaigns())}"
+    raise ScenarioError([f"{target!r}: no such campaign file or built-in campaign{hint}"])

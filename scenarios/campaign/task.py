@@ -1,0 +1,147 @@
+"""One campaign task, as it runs on a Dask worker: one sample, all its arms.
+
+The sample's scenario file is run by a fresh ``python -m scenarios run`` process (a
+crash, a leak or a pythonfmu FMU that cannot share a process touches nothing else);
+the task reads the metrics back from that run's ``summary.json``. One task per sample,
+not per arm: the arms share the process start, the model compilation checks and the
+run's CSV/plot writing, and the sample's folder holds one normal run output.
+
+- The run process dies with the worker (Linux ``PR_SET_PDEATHSIG``) and sits in its
+  own session (a Ctrl-C on the terminal stops the campaign, not the runs one by one).
+- Each execution gets a fresh ``--out`` folder ``runs/<id>/try<k>`` (k = 1, 2, ...,
+  claimed with an atomic ``mkdir``: a retry never writes over an earlier attempt) and
+  its own ``TMPDIR`` under the campaign folder, removed afterwards.
+- A run process killed by a signal raises :class:`RunProcessDied` (Dask's
+  ``retries=`` runs the task again, bounded); a timeout or a run that reports a
+  failure gives ``failed`` rows with the reason (running it again would not help).
+"""
+from __future__ import annotations
+
+import ctypes
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+#: The metrics copied from each arm of ``summary.json`` into the campaign CSV.
+METRICS = ("fell", "t_fall_s", "steady_state_error_vx", "steady_state_error_vy", "convergence_time_s",
+           "mean_vx_last_s", "mean_vy_last_s", "max_abs_pitch_rad", "max_abs_roll_rad", "sim_s", "wall_s")
+COMPLETE, FAILED = "complete", "failed"
+_TAIL = 600  # characters of the run's stderr kept in a failure reason
+
+try:  # Linux: the child gets SIGKILL when the thread that started it (the task) goes away
+    _PRCTL = ctypes.CDLL(None, use_errno=True).prctl
+except (OSError, AttributeError):  # pragma: no cover - not Linux
+    _PRCTL = None
+_PR_SET_PDEATHSIG = 1
+
+
+class RunProcessDied(RuntimeError):
+    """The ``scenarios run`` process was killed by a signal (Dask retries the task)."""
+
+
+@dataclass(frozen=True)
+class Task:
+    sample: str
+    scenario_file: str  # absolute path of samples/<id>.toml
+    runs_dir: str  # runs/<id>: each execution claims runs/<id>/try<k>
+    arms: tuple[str, ...]
+    regulator: str
+    fmu: str | None
+    timeout_s: float
+    tmp_root: str  # the campaign's scratch folder (TMPDIR of the run process)
+    env: tuple[tuple[str, str], ...] = ()  # the client's settings the run must share (MENAGERIE_ROOT)
+
+
+def client_env() -> tuple[tuple[str, str], ...]:
+    """The client's environment the runs must see, with paths made absolute."""
+    root = os.environ.get("MENAGERIE_ROOT")
+    return (("MENAGERIE_ROOT", str(Path(root).resolve())),) if root else ()
+
+
+def _die_with_parent() -> None:  # runs in the child between fork and exec: no allocation-heavy work
+    if _PRCTL is not None:
+        _PRCTL(_PR_SET_PDEATHSIG, signal.SIGKILL)
+
+
+def _claim_out(runs_dir: Path) -> Path:
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    k = 1
+    while True:
+        out = runs_dir / f"try{k}"
+        try:
+            out.mkdir()
+            return out
+        except FileExistsError:
+            k += 1
+
+
+def run_command(task: Task, out: Path) -> list[str]:
+    cmd = [sys.executable, "-m", "scenarios", "run", task.scenario_file, "--out", str(out),
+           "--regulator", task.regulator]
+    return cmd + (["--fmu", task.fmu] if task.fmu else [])
+
+
+def run_sample(task: Task) -> dict[str, Any]:
+    """Run the sample; ``{"sample", "rows": [one per arm], "task_wall_s", "run_dir"}``."""
+    out = _claim_out(Path(task.runs_dir))
+    Path(task.tmp_root).mkdir(parents=True, exist_ok=True)
+    tmp = tempfile.mkdtemp(prefix=f"{task.sample}-", dir=task.tmp_root)
+    env = {**os.environ, **dict(task.env), "TMPDIR": tmp, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    t0 = time.perf_counter()
+    try:
+        proc = subprocess.Popen(run_command(task, out), stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+                                preexec_fn=_die_with_parent, start_new_session=True)
+        try:
+            _, err = proc.communicate(timeout=task.timeout_s)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.communicate()
+            why = f"timeout: the run took longer than {task.timeout_s:g} s (task_timeout_s / --task-timeout)"
+            return _result(task, out, time.perf_counter() - t0, {}, why)
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+    wall = time.perf_counter() - t0
+    tail = err.decode("utf-8", "replace")[-_TAIL:].strip()
+    if proc.returncode < 0:
+        name = signal.Signals(-proc.returncode).name
+        raise RunProcessDied(f"sample {task.sample}: the run process was killed by {name}; stderr: {tail}")
+    summary_path = out / task.sample / "summary.json"
+    try:
+        summary = json.loads(summary_path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        why = f"the run exited with status {proc.returncode} without a readable summary.json ({exc}); stderr: {tail}"
+        return _result(task, out, wall, {}, why)
+    return _result(task, out, wall, summary, tail or f"exit status {proc.returncode}")
+
+
+def arm_status(summary: dict[str, Any], arm: str) -> str:
+    """``complete`` / ``failed`` / ``interrupted`` of one arm of a run's summary.
+
+    A per-arm ``status`` is used when the summary has one; otherwise an arm with
+    metrics is complete and an arm without is failed.
+    """
+    m = (summary.get("arms") or {}).get(arm)
+    if not m:
+        return FAILED
+    status = m.get("status", COMPLETE)
+    return COMPLETE if status in (COMPLETE, "ok") else status
+
+
+def _result(task: Task, out: Path, wall: float, summary: dict[str, Any], why: str) -> dict[str, Any]:
+    rows = []
+    for arm in task.arms:
+        status = arm_status(summary, arm)
+        m = (summary.get("arms") or {}).get(arm) or {}
+        row = {"arm": arm, "status": status, **{k: m.get(k) for k in METRICS}, "error": None}
+        if status != COMPLETE:
+            row["error"] = m.get("error") or summary.get("error") or why
+        rows.append(row)
+    return {"sample": task.sample, "rows": rows, "task_wall_s": wall, "run_dir": str(out / task.sample)}

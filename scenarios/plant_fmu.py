@@ -1,0 +1,192 @@
+"""``--plant fmu``: the CassiePlant FMU in our master, behind the walker's interface.
+
+:class:`FmuPlant` offers what :func:`scenarios.master.run_arm` uses of
+:class:`plant.sim.CassieWalker` (``set_command``, ``set_pelvis_force``,
+``regulator_inputs``, ``telemetry``, ``set_offsets``, ``advance``, ``fell``,
+``fall_reason``, ``SIM_DT_S``), so the same loop runs the plant in-process or as an FMU
+(through fmpy, every status checked, the FMU's messages in the error).  Inputs set
+between two ``advance`` calls are held over the next ``fmi2DoStep``; outputs are read
+after it.  The same scenario gives the same rows bit for bit with either plant: the
+FMU runs the same code at the same plant step, and the master's data flow (sense,
+regulate, apply, advance: Gauss-Seidel) does not change.
+
+The scenario's plant (model and perturbation) becomes the FMU's parameters through
+:func:`plant.fmu_core.values_from_perturbation`; a model given as an MJCF path cannot
+go into the FMU (its models travel inside it) and is refused.
+"""
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Any, Mapping
+
+from fmu_src.avr_errors import CosimError
+from plant.controller import OFFSET_KEYS
+from plant.fmu_core import INPUT_NAMES, MODEL_FILES, PLANT_STEP_S, values_from_perturbation
+from scenarios.master import FmuRegulator, _LOG_ROUTES, _shared_callbacks
+
+REGULATOR_NAMES = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
+
+
+def fmu_parameters(scenario, nominal_torso_mass_kg: float | None = None) -> dict:
+    """The CassiePlant parameters of ``scenario`` (its model and perturbation)."""
+    from scenarios.plantio import build_perturbation
+
+    if scenario.model not in MODEL_FILES:
+        raise CosimError(f"model = {scenario.model!r}: the CassiePlant FMU holds {', '.join(MODEL_FILES)} only "
+                         "(an MJCF path needs --plant inprocess)")
+    return values_from_perturbation(scenario.model, build_perturbation(scenario, nominal_torso_mass_kg))
+
+
+class FmuPlant(FmuRegulator):
+    """The CassiePlant FMU as a walker (see the module docstring)."""
+
+    kind = "fmu-plant"
+    SIM_DT_S = PLANT_STEP_S
+
+    def __init__(self, fmu_path: str | Path, parameters: Mapping[str, Any], instance_name: str = "plant", *,
+                 unpack_dir: str | Path | None = None):
+        """``unpack_dir``: where the FMU is extracted (a fresh subfolder, removed by ``close``)."""
+        super().__init__(fmu_path, instance_name, unpack_dir=unpack_dir)
+        self._inputs = {n: 0.0 for n in INPUT_NAMES}
+        self.vx_des_mps = self.vy_des_mps = 0.0
+        self.time_s = 0.0
+        self.start(parameters, 0.0, 0.0)
+
+    # ---- life cycle: parameters of every type, outputs of every type
+    def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
+        from fmpy import extract
+        from fmpy.fmi2 import FMU2Slave
+
+        unknown = sorted(n for n in parameters if n not in self.vars or self.vars[n].causality != "parameter")
+        if unknown:
+            raise CosimError(f"CassiePlant has no parameter(s) {', '.join(unknown)}")
+        self._unzip = tempfile.mkdtemp(prefix="fmu-", dir=self._unpack_dir)  # close() removes it
+        extract(str(self.fmu_path), self._unzip)
+        _LOG_ROUTES[self.instance_name] = self.messages
+        cwd = os.getcwd()
+        try:
+            self._fmu = fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip,
+                                        modelIdentifier=self.md.coSimulation.modelIdentifier,
+                                        instanceName=self.instance_name)
+        finally:  # fmpy 0.3 changes into binaries/<platform> to load the library (see FmuRegulator.start)
+            os.chdir(cwd)
+        self._call("fmi2Instantiate", lambda: fmu.instantiate(callbacks=_shared_callbacks(), loggingOn=True))
+        self._instantiated = True
+        for name, value in parameters.items():
+            var = self.vars[name]
+            setter = {"Real": fmu.setReal, "Integer": fmu.setInteger, "Boolean": fmu.setBoolean,
+                      "String": fmu.setString}[var.type]
+            self._call(f"fmi2Set{var.type} ({name})", setter, [var.valueReference], [value])
+        self._call("fmi2SetupExperiment", fmu.fmi2SetupExperiment, fmu.component, 0, 0.0, float(t0), 0, 0.0)
+        self._call("fmi2EnterInitializationMode", fmu.fmi2EnterInitializationMode, fmu.component)
+        self._call("fmi2ExitInitializationMode", fmu.fmi2ExitInitializationMode, fmu.component)
+        self._initialized = True
+        self.time_s = float(t0)
+        self._prepare_buffers()
+        self._read_outputs()
+
+    def _prepare_buffers(self) -> None:
+        """ctypes arrays for the per-step calls (value references from the model description)."""
+        from ctypes import c_double, c_int
+
+        self._in_vrs = self._vr_array([self.vars[n].valueReference for n in INPUT_NAMES])
+        self._in_vals = (c_double * len(INPUT_NAMES))()
+        fmu = self._fmu
+        self._out = []
+        for kind, ctype, getter in (("Real", c_double, fmu.fmi2GetReal), ("Integer", c_int, fmu.fmi2GetInteger),
+                                    ("Boolean", c_int, fmu.fmi2GetBoolean)):
+            names = [v.name for v in self.md.modelVariables if v.causality == "output" and v.type == kind]
+            vrs = self._vr_array([self.vars[n].valueReference for n in names])
+            self._out.append((f"fmi2Get{kind} (outputs)", getter, names, vrs, (ctype * len(names))()))
+
+    def _read_outputs(self) -> None:
+        comp, values = self._fmu.component, {}
+        for what, getter, names, vrs, buffer in self._out:
+            self._call(what, getter, comp, vrs, len(names), buffer)
+            values.update(zip(names, buffer))
+        values["fell"] = bool(values["fell"])
+        self.out = values
+
+    # ---- the walker's interface
+    def set_command(self, vx_des_mps: float, vy_des_mps: float) -> None:
+        self.vx_des_mps, self.vy_des_mps = float(vx_des_mps), float(vy_des_mps)
+        self._inputs.update(vx_des=self.vx_des_mps, vy_des=self.vy_des_mps)
+
+    def set_offsets(self, offsets: Mapping[str, float]) -> None:
+        unknown = [k for k in offsets if k not in OFFSET_KEYS]
+        if unknown:
+            raise KeyError(f"unknown offset key(s) {unknown}; allowed: {', '.join(OFFSET_KEYS)}")
+        self._inputs.update({k: float(v) for k, v in offsets.items()})
+
+    def set_pelvis_force(self, force_n) -> None:
+        fx, fy, fz = (float(f) for f in force_n)
+        self._inputs.update(push_fx=fx, push_fy=fy, push_fz=fz)
+
+    def advance(self, n_steps: int) -> None:
+        h = int(n_steps) * self.SIM_DT_S
+        fmu = self._fmu
+        self._t = self.time_s
+        for i, name in enumerate(INPUT_NAMES):
+            self._in_vals[i] = self._inputs[name]
+        self._call("fmi2SetReal (inputs)", fmu.fmi2SetReal, fmu.component, self._in_vrs, len(INPUT_NAMES),
+                   self._in_vals)
+        self._call("fmi2DoStep", fmu.fmi2DoStep, fmu.component, self.time_s, h, 1)
+        self.time_s += h
+        self._read_outputs()
+
+    def regulator_inputs(self) -> dict:
+        out = {n: self.out[n] for n in REGULATOR_NAMES}
+        out["step_index"] = int(out["step_index"])
+        return out
+
+    def telemetry(self) -> dict:
+        o = self.out
+        return {"t": o["plant_time"], "pelvis_x": o["pelvis_x"], "pelvis_y": o["pelvis_y"], "pelvis_z": o["pelvis_z"],
+                "vx": o["pelvis_vx"], "vy": o["pelvis_vy"], "vx_step_avg": o["vx"], "vy_signal": o["vy"],
+                "pitch": o["pitch"], "roll": o["roll"], "stance": float(o["stance"]), "tau": o["gait_phase"],
+                "step_index": float(o["step_index"]), "left_foot_force": o["left_foot_force"],
+                "right_foot_force": o["right_foot_force"], "vx_des": self.vx_des_mps, "vy_des": self.vy_des_mps}
+
+    def fell(self) -> bool:
+        return bool(self.out["fell"])
+
+    @property
+    def fall_reason(self) -> str | None:
+        if not self.fell():
+            return None
+        said = [m for m in self.messages if "CassiePlant fell at t = " in m]  # the FMU logs the reason once
+        return said[-1].split(" s: ", 1)[-1] if said else "fell (CassiePlant FMU output)"
+
+
+def plant_factory(fmu_path: str | Path, unpack_dir: str | Path | None = None):
+    """A ``plant(scenario, model)`` for :func:`scenarios.master.run_arm` that runs the FMU
+    (extracted under ``unpack_dir``, the system temp folder if None)."""
+    def make(scenario, model) -> FmuPlant:
+        nominal = None
+        if scenario.torso_added_mass_kg is not None:
+            from plant.model import load_model, model_summary
+
+            nominal = model_summary(load_model(scenario.model))["pelvis_mass_kg"]
+        return FmuPlant(fmu_path, fmu_parameters(scenario, nominal), unpack_dir=unpack_dir)
+    return make
+
+
+def ensure_plant_fmu(fmu: str | Path | None, *, rebuild: bool = False) -> Path:
+    """The plant FMU to use: ``fmu`` if given (must exist), else ``dist/CassiePlant.fmu``, (re)built
+    when missing, older than its sources (plant/, fmu_src/, build.py) or on ``rebuild``."""
+    from scenarios.cli import REPO_ROOT, load_build_module
+
+    if fmu is not None:
+        if not Path(fmu).is_file():
+            raise CosimError(f"--plant-fmu {fmu}: no such file")
+        return Path(fmu)
+    default = REPO_ROOT / "dist" / "CassiePlant.fmu"
+    sources = [REPO_ROOT / "build.py", *(REPO_ROOT / "plant").rglob("*.py"), *(REPO_ROOT / "plant" / "data").glob("*"),
+               *(REPO_ROOT / "fmu_src").rglob("*.py"), *(REPO_ROOT / "fmu_src").rglob("*.c")]
+    stale = default.is_file() and max(p.stat().st_mtime for p in sources) > default.stat().st_mtime
+    if rebuild or stale or not default.is_file():
+        default.parent.mkdir(parents=True, exist_ok=True)
+        return Path(load_build_module().build_plant_fmu(default.parent))
+    return default

@@ -1,0 +1,83 @@
+"""Shared by tests/test_plant_fmu.py and tests/test_ssp.py: the CassiePlant FMU and the
+CassieAVR system exactly as build.py builds them, built once per session into pytest's
+temporary folder, and a small fmpy helper that reports statuses instead of raising."""
+from __future__ import annotations
+
+from pathlib import Path
+
+from fmpy import read_model_description
+from fmpy.fmi1 import FMICallException
+from fmpy.fmi2 import FMU2Slave
+
+_BUILT: dict[str, Path] = {}
+
+
+def built_plant_fmu(tmp_path_factory, build_module) -> Path:
+    if "plant" not in _BUILT:
+        _BUILT["plant"] = Path(build_module.build_plant_fmu(tmp_path_factory.mktemp("plant_fmu")))
+    return _BUILT["plant"]
+
+
+def built_system(tmp_path_factory, build_module, regulator_fmu) -> Path:
+    """A folder holding both FMUs, CassieAVR.ssp and CassieAVR_osp/ (build.py's own functions)."""
+    if "system" not in _BUILT:
+        out = tmp_path_factory.mktemp("system")
+        plant = built_plant_fmu(tmp_path_factory, build_module)
+        build_module.build_ssp(out, plant, regulator_fmu)
+        build_module.build_osp(out, plant, regulator_fmu)
+        _BUILT["system"] = out
+    return _BUILT["system"]
+
+
+class Plant:
+    """fmpy's FMU2Slave on the plant FMU, by variable name."""
+
+    def __init__(self, fmu_dir, name="plant"):
+        """``fmu_dir``: the extracted FMU (the tests extract it under their tmp_path)."""
+        self.md = read_model_description(str(fmu_dir))
+        self.vars = {v.name: v for v in self.md.modelVariables}
+        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=str(fmu_dir),
+                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
+        self.fmu.instantiate(loggingOn=False)
+        self.t = 0.0
+
+    def set(self, name, value):
+        var = self.vars[name]
+        {"Real": self.fmu.setReal, "Integer": self.fmu.setInteger, "Boolean": self.fmu.setBoolean,
+         "String": self.fmu.setString}[var.type]([var.valueReference], [value])
+
+    def get(self, name):
+        var = self.vars[name]
+        return {"Real": self.fmu.getReal, "Integer": self.fmu.getInteger, "Boolean": self.fmu.getBoolean,
+                "String": self.fmu.getString}[var.type]([var.valueReference])[0]
+
+    def init(self, **values):
+        for name, value in values.items():
+            self.set(name, value)
+        self.fmu.setupExperiment(startTime=0.0)
+        self.fmu.enterInitializationMode()
+        self.fmu.exitInitializationMode()
+        return self
+
+    def step(self, h=0.005, **inputs):
+        for name, value in inputs.items():
+            self.set(name, value)
+        self.fmu.doStep(self.t, h)
+        self.t += h
+        return self.outputs()
+
+    def outputs(self) -> tuple:
+        return tuple(self.get(v.name) for v in self.md.modelVariables if v.causality == "output")
+
+    def free(self):
+        self.fmu.terminate()
+        self.fmu.freeInstance()
+
+
+def status_of(call, *args) -> int:
+    """The FMI status of an fmpy call (fmpy raises for Discard and worse)."""
+    try:
+        call(*args)
+    except FMICallException as exc:
+        return exc.status
+    return 0

@@ -1,0 +1,237 @@
+"""The closed loop as a system (issue 10): dist/CassieAVR.ssp and the OSP structure, run by
+libcosim, by fmpy's simulate_ssp and by our own master with the plant as an FMU.
+
+The main case is ``mass_20kg``-like: a 20 kg torso (nominal 10.33 kg), 0.5 m/s, the
+adaptive regulator at its defaults, 30 s.  Criterion in every master: no fall and a
+step-averaged speed error of at most 0.03 m/s over the last 5 s (the suite's metric,
+``scenarios.metrics.steady_state_error``).
+
+What differs between the masters, and why:
+* libcosim and fmpy both exchange Jacobi-style (every FMU steps with the inputs of the
+  previous communication point): they agree to ~1e-12.  Not bit for bit because libcosim
+  hands the step size over as t(k+1) - t(k) computed in doubles from integer nanoseconds
+  (ulps away from 0.005 s), which the regulator's learning rule multiplies in; the plant
+  rounds it to whole 0.5 ms steps and is unaffected.
+* Our master is Gauss-Seidel (plant outputs -> regulator -> plant inputs within one
+  step): the offsets reach the plant 5 ms earlier; the trajectories differ at the mm/s
+  level, the verdicts do not.  With the same master and order, the plant FMU gives the
+  in-process plant's rows bit for bit.
+"""
+import dataclasses
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenarios import master, spec, system, system_run
+from scenarios.metrics import steady_state_error
+from scenarios.plant_fmu import plant_factory
+from plant_fmu_support import built_plant_fmu, built_system
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+DURATION_S = 30.0
+HEAVY = {"plant": {"torso_mass_kg": 20.0}}
+MAX_ERROR = 0.03  # m/s, the issue's criterion (the suite's mass_20kg claim)
+#: libcosim vs fmpy: both Jacobi; only the regulator's dt differs by ulps (see the docstring).
+JACOBI_AGREEMENT = 1e-9
+
+
+@pytest.fixture(scope="module")
+def system_dir(tmp_path_factory, build_module, built_fmu):
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+
+    log_output_level(CosimLogLevel.ERROR)
+    return built_system(tmp_path_factory, build_module, built_fmu)
+
+
+@pytest.fixture(scope="module")
+def plant_fmu(tmp_path_factory, build_module):
+    return built_plant_fmu(tmp_path_factory, build_module)
+
+
+@pytest.fixture(scope="module")
+def ssp(system_dir):
+    return system_dir / "CassieAVR.ssp"
+
+
+@pytest.fixture(scope="module")
+def libcosim_rows(ssp):
+    return system_run.run_libcosim(ssp, DURATION_S, HEAVY)
+
+
+@pytest.fixture(scope="module")
+def heavy_scenario():
+    return spec.override(spec.resolve_targets(["mass_20kg"])[0], duration_s=DURATION_S)
+
+
+def _verdict(rows):
+    return bool(rows["plant_fell"].any()), system_run.step_averaged_speed_error(rows, 0.5)
+
+
+# ---- the files ------------------------------------------------------------------------------
+def test_ssp_wires_the_fmus_name_to_name_with_the_nominal_parameters(ssp):
+    from fmpy.ssp.ssd import read_ssd
+
+    ssd = read_ssd(str(ssp), validate=True)  # against the SSP 1.0 schema fmpy ships
+    wires = {(c.startElement, c.startConnector, c.endElement, c.endConnector) for c in ssd.system.connections}
+    regulator_inputs = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
+    deltas = ("delta_swing_hip_pitch", "delta_swing_knee", "delta_swing_hip_roll", "delta_stance_hip_roll",
+              "delta_stance_hip_pitch", "delta_stance_knee")
+    assert wires == ({("plant", n, "avr", n) for n in regulator_inputs} | {("avr", n, "plant", n) for n in deltas})
+    values = {p.name: p.value for p in system_run.ssp_parameter_set(ssp).parameters}
+    assert values["plant.vx_des"] == values["avr.vx_des"] == 0.5 and values["plant.torso_mass_kg"] == 10.33
+
+
+def test_osp_structure_runs_the_same_loop_as_the_ssp(system_dir, ssp):
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimObserver import CosimObserver
+
+    execution = CosimExecution.from_osp_config_file(str(system_dir / "CassieAVR_osp"))
+    index, refs = system_run._libcosim_variables(execution)
+    observer = CosimObserver.create_last_value()
+    execution.add_observer(observer)
+    vx = []
+    for _ in range(400):
+        assert execution.step()
+        vx.append(system_run._libcosim_value(observer, index["plant"], refs["plant"]["vx"]))
+    from_ssp = system_run.run_libcosim(ssp, 2.0)
+    assert vx == list(from_ssp["plant_vx"]) and vx[-1] > 0.3
+
+
+# ---- the loop in three masters (30 s each) --------------------------------------------------
+def test_loop_in_libcosim_from_the_ssp_file(ssp, libcosim_rows):
+    fell, error = _verdict(libcosim_rows)
+    assert not fell and error <= MAX_ERROR, error
+    again = system_run.run_libcosim(ssp, DURATION_S, HEAVY)  # same master, same order: identical
+    assert all(np.array_equal(again[n], libcosim_rows[n]) for n in again.dtype.names)
+
+
+def test_loop_in_fmpy_simulate_ssp(ssp, libcosim_rows):
+    rows = system_run.run_fmpy(ssp, DURATION_S, HEAVY)
+    fell, error = _verdict(rows)
+    assert not fell and error <= MAX_ERROR, error
+    assert len(rows) == len(libcosim_rows)
+    for name in rows.dtype.names:
+        if name != "t":
+            np.testing.assert_allclose(rows[name].astype(float), libcosim_rows[name].astype(float),
+                                       rtol=0, atol=JACOBI_AGREEMENT, err_msg=name)
+
+
+def test_loop_in_our_master_with_the_plant_fmu(heavy_scenario, built_fmu, plant_fmu, libcosim_rows):
+    (fmu_run,) = master.run_scenario(heavy_scenario, "fmu", fmu_path=built_fmu, arms=("adaptive",),
+                                     plant=plant_factory(plant_fmu))
+    assert not fmu_run.fell
+    error = steady_state_error(fmu_run.rows, "vx")
+    assert error <= MAX_ERROR, error
+    (in_process,) = master.run_scenario(heavy_scenario, "fmu", fmu_path=built_fmu, arms=("adaptive",))
+    assert fmu_run.rows.dtype == in_process.rows.dtype
+    for name in fmu_run.rows.dtype.names:  # same master, same order: the FMU plant is the plant, bit for bit
+        assert np.array_equal(fmu_run.rows[name], in_process.rows[name]), name
+    # Gauss-Seidel here, Jacobi in libcosim: close, not equal (5 ms earlier offsets).
+    gap = np.max(np.abs(fmu_run.rows["tel_vx_step_avg"][1:] - libcosim_rows["plant_vx"][:-1]))
+    assert 0.0 < gap < 0.1, gap
+
+
+# ---- scripting commands and pushes ----------------------------------------------------------
+@pytest.fixture(scope="module")
+def scripted():
+    """A short scenario: 0.5 m/s, then 0.3 m/s from 1.5 s; a 30 N push along x at 1.0 s for 0.1 s."""
+    base = spec.resolve_targets(["nominal"])[0]
+    return dataclasses.replace(base, duration_s=2.0,
+                               commands=(spec.CommandPoint(0.0, 0.5, 0.0), spec.CommandPoint(1.5, 0.3, 0.0)),
+                               pushes=(spec.Push(1.0, (30.0, 0.0, 0.0), 0.1),))
+
+
+def _expected_inputs(scenario, n):
+    """plant.vx_des, avr.vx_des, plant.push_fx in force over communication steps 0..n-1 (our master's)."""
+    rows = []
+    for k in range(n):
+        vx_des = scenario.command_at_step(k)[0]
+        rows.append([vx_des, vx_des, scenario.push_force_at_step(k)[0]])
+    return rows
+
+
+def test_libcosim_scenario_file_scripts_commands_and_pushes(ssp, scripted, tmp_path):
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimManipulator import CosimManipulator
+    from libcosimpy.CosimObserver import CosimObserver
+
+    path = system_run.write_osp_scenario(scripted, tmp_path / "scenario.json")
+    assert json.loads(path.read_text())["events"]
+    execution = CosimExecution.from_ssp_file(str(ssp))
+    index, refs = system_run._libcosim_variables(execution)
+    manager = CosimManipulator.create_scenario_manager()
+    execution.add_manipulator(manager)
+    assert execution.load_scenario(manager, str(path))
+    observer = CosimObserver.create_last_value()
+    execution.add_observer(observer)
+    seen = []
+    for k in range(400):  # the inputs in force over step k, read after it
+        assert execution.step()
+        seen.append([system_run._libcosim_value(observer, index[i], refs[i][v])
+                     for i, v in (("plant", "vx_des"), ("avr", "vx_des"), ("plant", "push_fx"))])
+    assert seen == _expected_inputs(scripted, 400)
+
+
+def test_fmpy_input_csv_scripts_commands_and_pushes(ssp, scripted, tmp_path):
+    from fmpy.ssp.simulation import simulate_ssp
+
+    csv = tmp_path / "inputs.csv"
+    csv.write_text(system_run.input_csv(scripted))
+    variant = system_run.with_system_inputs(ssp, tmp_path / "CassieAVR_inputs.ssp")
+    result = simulate_ssp(str(variant), stop_time=2.0 - 0.0025, step_size=0.005,
+                          parameter_set=system_run.ssp_parameter_set(ssp), input=system_run.read_input_csv(csv))
+    # fmpy records the connectors after copying the system inputs on (row k: the CSV at t_k);
+    # the FMUs step with them from the next step on
+    got = np.stack([result["plant.vx_des"], result["avr.vx_des"], result["plant.push_fx"]], axis=1)
+    assert got.tolist() == _expected_inputs(scripted, 400)
+
+
+def test_cli_runs_a_scenario_with_the_plant_fmu(built_fmu, plant_fmu, tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "scenarios", "run", "nominal", "--duration", "1", "--plant", "fmu",
+                           "--plant-fmu", str(plant_fmu), "--fmu", str(built_fmu), "--out", str(tmp_path / "runs")],
+                          cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    summary = json.loads((tmp_path / "runs" / "nominal" / "summary.json").read_text())
+    assert set(summary["arms"]) == {"adaptive", "pd_only"}
+
+
+def test_the_system_structure_is_read_from_the_fmus(ssp, tmp_path):
+    """A system built from the same FMUs twice is byte-identical (content from the model descriptions)."""
+    import zipfile
+
+    with zipfile.ZipFile(ssp) as z:
+        plant = tmp_path / "CassiePlant.fmu"
+        regulator = tmp_path / "AdaptiveVelocityRegulator.fmu"
+        plant.write_bytes(z.read("resources/CassiePlant.fmu"))
+        regulator.write_bytes(z.read("resources/AdaptiveVelocityRegulator.fmu"))
+        assert system.ssp_entries(plant, regulator)["SystemStructure.ssd"] == z.read("SystemStructure.ssd")
+
+
+def test_the_readme_lines_run_the_ssp_in_libcosim_and_plot(ssp, tmp_path):
+    """The README's libcosimpy example, as printed there, on a built SSP (40 steps instead of 6000)."""
+    text = (REPO_ROOT / "README.md").read_text()
+    block = text.split("<!-- ssp-libcosim-example -->", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
+    line = 'SSP, STEPS, PLOT = "dist/CassieAVR.ssp", 6000, "docs/cassie_avr_ssp_libcosim.png"'
+    assert line in block
+    plot = tmp_path / "plot.png"
+    code = block.replace(line, f"SSP, STEPS, PLOT = {str(ssp)!r}, 40, {str(plot)!r}")
+    proc = subprocess.run([sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=300,
+                          env={**os.environ, "MPLBACKEND": "Agg"})
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    assert plot.stat().st_size > 10_000
+
+
+def test_a_fall_is_reported_the_same_with_the_plant_fmu(built_fmu, plant_fmu):
+    """A 4000 N sideways push topples Cassie: the same fall time and reason with either plant."""
+    base = spec.override(spec.resolve_targets(["nominal"])[0], duration_s=3.0)
+    s = dataclasses.replace(base, pushes=(spec.Push(1.0, (0.0, 4000.0, 0.0), 0.1),))
+    (with_fmu,) = master.run_scenario(s, "fmu", fmu_path=built_fmu, arms=("adaptive",), plant=plant_factory(plant_fmu))
+    (in_process,) = master.run_scenario(s, "fmu", fmu_path=built_fmu, arms=("adaptive",))
+    assert in_process.fell and with_fmu.fell
+    assert (with_fmu.t_fall_s, with_fmu.fall_reason) == (in_process.t_fall_s, in_process.fall_reason)
+    assert np.array_equal(with_fmu.rows, in_process.rows)
