@@ -5,7 +5,8 @@
 ``<dir>/summary.json``: ``scenario``, ``model``, ``regulator``, the claim, ``status``,
 per arm its ``status`` and, when complete, the metrics of :mod:`scenarios.metrics` and
 its ``timings`` (where its time went, :data:`scenarios.master.TIMINGS`), the verdict of
-the claim's checks, and ``timings`` of the writing (``csv_s``, ``plots_s``).
+the claim's checks, and ``timings`` of the writing (``csv_s``, ``plots_s``, and the
+``pid`` of the process that wrote: with ``--jobs N`` a worker, see :mod:`scenarios.runner`).
 ``<dir>/velocity.png``, ``psi.png``, ``torso.png``: :mod:`scenarios.plots`.
 
 Statuses: an arm is ``complete`` (it ran to the end or to a fall), ``failed`` (it
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import json
 import logging
+import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -198,7 +200,7 @@ def column_text(column: np.ndarray) -> list[str]:
 
 def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome]) -> dict[str, Any]:
     """Write csv, plots and summary (last) into the folder ``dest``; return the summary
-    (its ``timings``: seconds spent writing the csv and the plots).
+    (its ``timings``: seconds spent writing the csv and the plots, in process ``pid``).
 
     Only complete arms have rows; the folder is meant to be a fresh one that
     :mod:`scenarios.store` renames into place once this returns.
@@ -213,7 +215,7 @@ def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequ
         write_timeseries(dest / "timeseries.csv", results)
     csv_done = time.perf_counter()
     summary["plots"] = write_plots(dest, scenario, results)
-    summary["timings"] = {"csv_s": csv_done - lap, "plots_s": time.perf_counter() - csv_done}
+    summary["timings"] = {"csv_s": csv_done - lap, "plots_s": time.perf_counter() - csv_done, "pid": os.getpid()}
     write_json(dest / "summary.json", summary)
     return summary
 

@@ -9,7 +9,10 @@ complete, failed (with the first line of the error; the traceback is logged) or
 interrupted.
 
 With ``jobs`` > 1 the arms go to the workers longest first (:func:`longest_first`), so
-that no long arm is left running alone at the end. A worker imports the heavy modules
+that no long arm is left running alone at the end, and what follows an outcome (the
+CLI writes a scenario's results once its arms are in) runs in a worker as a
+:class:`Job`, ahead of the arms still waiting: this process only hands out work, so it
+never takes a core from an arm. A worker imports the heavy modules
 once, before its first arm, and every process compiles each distinct plant once
 (``load_plant_model(shared=True)``). A complete arm's ``timings``
 (:data:`scenarios.master.TIMINGS`) also say how long getting its model took
@@ -20,6 +23,7 @@ ended (``started_s``, ``ended_s``: s since the tasks began) and in which process
 """
 from __future__ import annotations
 
+import collections
 import concurrent.futures as cf
 import logging
 import multiprocessing
@@ -27,6 +31,7 @@ import os
 import signal
 import time
 import traceback
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -39,8 +44,8 @@ Task = tuple[Scenario, str]
 _WORKER: dict[str, Any] = {}  # in a worker process: the stop event, the tasks' clock origin, its start-up cost
 
 #: Cost per simulated second of a plant on a height field relative to a flat floor, for
-#: the order of the arms only (MuJoCo's contacts with the terrain;
-#: benchmarks/bench_suite.py prints every arm's CPU time per simulated second).
+#: the order of the arms only: MuJoCo's contacts with the terrain and compiling it
+#: (benchmarks/bench_suite.py prints every arm's CPU time; measured 1.35-1.45 on the suite).
 TERRAIN_COST = 1.5
 
 
@@ -129,13 +134,30 @@ def _worker_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | N
     return out
 
 
+@dataclass(frozen=True)
+class Job:
+    """Work that follows outcomes (writing a scenario's results): ``fn(*args)``, in a
+    worker ahead of the arms still waiting (so that this process never competes with
+    the arms for a core), or in this process with ``jobs == 1`` and after a stop;
+    ``done(value, error)`` then gets, in the calling thread, what it returned or the
+    exception it raised."""
+
+    fn: Callable[..., Any]
+    args: tuple
+    done: Callable[[Any, BaseException | None], None]
+
+
+OnOutcome = Callable[[Scenario, ArmOutcome], "Job | None"]
+
+
 def run_tasks(tasks: Sequence[Task], *, regulator: str, fmu_path: str | None, unpack_dir: Path | None, jobs: int,
-              stop: StopFlag, on_outcome: Callable[[Scenario, ArmOutcome], None],
-              progress: Callable[[int], None] | None = None, plant_fmu: str | None = None) -> None:
+              stop: StopFlag, on_outcome: OnOutcome, progress: Callable[[int], None] | None = None,
+              plant_fmu: str | None = None) -> None:
     """Run every task (``jobs`` > 1: in that many spawned processes, longest first) and
-    hand each outcome to ``on_outcome`` in the calling thread; after a stop, the tasks not run are
-    reported interrupted (not started). ``progress(n)``: communication steps done
-    (``jobs == 1``) or arms done (``jobs > 1``)."""
+    hand each outcome to ``on_outcome`` in the calling thread, which may answer a
+    :class:`Job` to run; after a stop, the tasks not run are reported interrupted (not
+    started). ``progress(n)``: communication steps done (``jobs == 1``) or arms done
+    (``jobs > 1``)."""
     unpack = None if unpack_dir is None else str(unpack_dir)
     if jobs == 1:
         origin = time.perf_counter()
@@ -143,50 +165,95 @@ def run_tasks(tasks: Sequence[Task], *, regulator: str, fmu_path: str | None, un
             out = run_task(s, arm, regulator, fmu_path, unpack, stop, progress, origin, plant_fmu)
             if progress is not None and out.status == "complete":
                 progress(s.n_comm_steps - len(out.result.rows))  # the steps a fall skipped
-            on_outcome(s, _first_line(s, out))
+            _run_here(on_outcome(s, _first_line(s, out)))
         return
-    _run_pool(longest_first(tasks), regulator, fmu_path, unpack, jobs, stop, on_outcome, progress, plant_fmu)
+    arm_args = (regulator, fmu_path, unpack, plant_fmu)
+    _Pool(jobs, stop, on_outcome, progress).run(longest_first(tasks), arm_args)
 
 
-def _run_pool(tasks, regulator, fmu_path, unpack, jobs, stop, on_outcome, progress, plant_fmu=None) -> None:
-    ctx = multiprocessing.get_context("spawn")
-    stop.event = ctx.Event()
-    if stop.requested:
-        stop.event.set()
-    pool = cf.ProcessPoolExecutor(max_workers=jobs, mp_context=ctx, initializer=_init_worker,
-                                  initargs=(stop.event, time.perf_counter()))
-    futures = {pool.submit(_worker_task, s, a, regulator, fmu_path, unpack, plant_fmu): (s, a) for s, a in tasks}
-    pending = set(futures)
+def _run_here(job: Job | None) -> None:
+    if job is None:
+        return
     try:
-        while pending and not stop.requested:
-            done, pending = cf.wait(pending, timeout=0.5, return_when=cf.FIRST_COMPLETED)
-            for fut in done:
-                _deliver(fut, futures[fut], on_outcome, progress)
-        pool.shutdown(wait=True, cancel_futures=True)  # after a stop, workers end within a step
-    except KeyboardInterrupt:  # a second Ctrl-C: do not wait for the workers
-        pool.shutdown(wait=False, cancel_futures=True)
-        for proc in list((getattr(pool, "_processes", None) or {}).values()):
-            proc.terminate()
-        raise
-    finally:
-        stop.event = None
-    for fut in futures:
-        if fut in pending:
-            _deliver(fut, futures[fut], on_outcome, progress)
-
-
-def _deliver(fut: cf.Future, task: Task, on_outcome, progress) -> None:
-    s, arm = task
-    if fut.cancelled():
-        out = ArmOutcome(arm, "interrupted", started=False)
+        value = job.fn(*job.args)
+    except Exception as exc:
+        job.done(None, exc)
     else:
+        job.done(value, None)
+
+
+class _Pool:
+    """Spawned workers kept busy with at most one item each: the next is a waiting
+    :class:`Job` if any, else the next arm (so a job never waits behind queued arms)."""
+
+    def __init__(self, jobs: int, stop: StopFlag, on_outcome: OnOutcome, progress) -> None:
+        self.jobs, self.stop, self.on_outcome, self.progress = jobs, stop, on_outcome, progress
+        self.waiting: collections.deque[Job] = collections.deque()
+        self.running: dict[cf.Future, Task | Job] = {}
+
+    def run(self, tasks: list[Task], arm_args: tuple) -> None:
+        ctx = multiprocessing.get_context("spawn")
+        stop = self.stop
+        stop.event = ctx.Event()
+        if stop.requested:
+            stop.event.set()
+        pool = cf.ProcessPoolExecutor(max_workers=self.jobs, mp_context=ctx, initializer=_init_worker,
+                                      initargs=(stop.event, time.perf_counter()))
+        arms = collections.deque(tasks)
         try:
-            out = fut.result()
-        except Exception as exc:  # the worker process died
-            out = ArmOutcome(arm, "failed", error=f"{type(exc).__name__}: {exc}")
-    if progress is not None:
-        progress(1)
-    on_outcome(s, _first_line(s, out))
+            while not stop.requested and self._fill(pool, arms, arm_args):
+                done, _ = cf.wait(self.running, timeout=0.5, return_when=cf.FIRST_COMPLETED)
+                for fut in done:
+                    self._deliver(fut, self.running.pop(fut))
+            pool.shutdown(wait=True, cancel_futures=True)  # after a stop, workers end within a step
+        except KeyboardInterrupt:  # a second Ctrl-C: do not wait for the workers
+            pool.shutdown(wait=False, cancel_futures=True)
+            for proc in list((getattr(pool, "_processes", None) or {}).values()):
+                proc.terminate()
+            raise
+        finally:
+            stop.event = None
+        for fut, item in list(self.running.items()):  # ended or cancelled during the shutdown
+            self._deliver(fut, item)
+        for s, arm in arms:
+            self._add(self.on_outcome(s, ArmOutcome(arm, "interrupted", started=False)))
+        while self.waiting:  # the pool is gone: what is left runs here
+            _run_here(self.waiting.popleft())
+
+    def _fill(self, pool: cf.ProcessPoolExecutor, arms: collections.deque, arm_args: tuple) -> bool:
+        """Give every idle worker the next item; true while anything runs."""
+        while len(self.running) < self.jobs and (self.waiting or arms):
+            if self.waiting:
+                job = self.waiting.popleft()
+                self.running[pool.submit(job.fn, *job.args)] = job
+            else:
+                s, a = arms.popleft()
+                self.running[pool.submit(_worker_task, s, a, *arm_args)] = (s, a)
+        return bool(self.running)
+
+    def _add(self, job: Job | None) -> None:
+        if job is not None:
+            self.waiting.append(job)
+
+    def _deliver(self, fut: cf.Future, item: Task | Job) -> None:
+        if isinstance(item, Job):
+            if fut.cancelled():
+                self.waiting.append(item)
+                return
+            error = fut.exception()
+            item.done(None if error else fut.result(), error)
+            return
+        s, arm = item
+        if fut.cancelled():
+            out = ArmOutcome(arm, "interrupted", started=False)
+        else:
+            try:
+                out = fut.result()
+            except Exception as exc:  # the worker process died
+                out = ArmOutcome(arm, "failed", error=f"{type(exc).__name__}: {exc}")
+        if self.progress is not None:
+            self.progress(1)
+        self._add(self.on_outcome(s, _first_line(s, out)))
 
 
 def _first_line(scenario: Scenario, out: ArmOutcome) -> ArmOutcome:

@@ -2,6 +2,7 @@
 
 - the arms go to the workers longest first (terrain weighted), equal costs in file order;
 - each arm reports where its time went (``timings`` in summary.json, never in the CSV);
+- with ``--jobs N`` the results are written by the workers, not the process that runs them;
 - rows are recorded into a preallocated table of doubles: the same rows as the
   structured assignment per step;
 - timeseries.csv is written column-wise: the same bytes as the writer before
@@ -15,6 +16,7 @@ from __future__ import annotations
 import dataclasses
 import io
 import json
+import os
 from pathlib import Path
 
 import numpy as np
@@ -74,11 +76,31 @@ def test_two_jobs_start_the_longest_arms_first_and_report_their_timings(tmp_path
         assert t["ended_s"] > t["started_s"] and isinstance(t["pid"], int)
     # each worker says once what starting it cost, with its first arm
     assert sum("worker_startup_s" in m["timings"] for m in arms.values()) == 2
+    workers = {m["timings"]["pid"] for m in arms.values()}
+    assert len(workers) == 2 and os.getpid() not in workers
     for n in ("short", "long"):
         written = json.loads((out / n / "summary.json").read_text())["timings"]
-        assert set(written) == {"csv_s", "plots_s"}
+        assert set(written) == {"csv_s", "plots_s", "pid"}
+        assert written["pid"] in workers  # written by a worker: this process never competes with the arms
         columns = (out / n / "timeseries.csv").read_text().splitlines()[0].split(",")
         assert not [c for c in columns if c.endswith("_s") or "timing" in c]  # timings never in the CSV
+
+
+def test_jobs_run_in_the_workers_and_their_values_and_errors_come_back(tmp_path):
+    s = suite("nominal", 0.2)
+    got = {}
+
+    def on_outcome(scenario, outcome):  # each arm's outcome asks for one job
+        if outcome.arm == "adaptive":
+            return runner.Job(os.getpid, (), lambda value, error: got.update(pid=(value, error)))
+        return runner.Job(os.listdir, (str(tmp_path / "missing"),), lambda value, error: got.update(ls=(value, error)))
+
+    runner.run_tasks([(s, "adaptive"), (s, "pd_only")], regulator="inprocess", fmu_path=None, unpack_dir=None,
+                     jobs=2, stop=runner.StopFlag(), on_outcome=on_outcome)
+    pid, error = got["pid"]
+    assert error is None and isinstance(pid, int) and pid != os.getpid()
+    value, error = got["ls"]
+    assert value is None and isinstance(error, FileNotFoundError)
 
 
 # --------------------------------------------------------------------------- recording
