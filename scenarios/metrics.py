@@ -131,6 +131,22 @@ def convergence_time(rows: np.ndarray, *, t_from: float = 0.0, tol: float = CONV
     return max(0.0, t_c - t_from)
 
 
+def step_alternation(rows: np.ndarray, column: str, t0: float, t1: float) -> float | None:
+    """Step-to-step alternation amplitude of ``column`` in ``[t0, t1)``: half the mean
+    |difference| between its values at consecutive changes of ``in_step_index`` (a
+    signal that flips between +a and -a with the stance side gives a).  ``None`` with
+    fewer than three step changes in the window."""
+    if len(rows) == 0 or column not in rows.dtype.names:
+        return None
+    si = np.asarray(rows["in_step_index"])
+    changes = np.nonzero(np.diff(si))[0] + 1
+    t = np.asarray(rows["t"], dtype=float)[changes]
+    values = np.asarray(rows[column], dtype=float)[changes][(t >= t0 - 1e-9) & (t < t1 - 1e-9)]
+    if len(values) < 3:
+        return None
+    return float(np.mean(np.abs(np.diff(values))) / 2.0)
+
+
 def mean_last(rows: np.ndarray, column: str, *, window_s: float = STEADY_WINDOW_S) -> float | None:
     if len(rows) == 0 or column not in rows.dtype.names:
         return None

@@ -272,6 +272,19 @@ def test_step_average_fallback_for_vy():
     assert ex.tolist() == [0.0] * 6 and ey.tolist() == avg.tolist()
 
 
+def test_step_alternation():
+    t = np.arange(12) * 0.5
+    steps = np.arange(12) // 2  # a step change every 2 rows, at t = 1, 2, ..., 5
+    psi = np.where(steps % 2 == 0, 0.1, -0.1) + 0.01 * t  # +-0.1 sway on a ramp
+    rows = rows_from(t, 0.5, 0.5, step_index=steps)
+    import numpy.lib.recfunctions as rfn
+    rows = rfn.append_fields(rows, "out_psi_y", psi, usemask=False)
+    # values at the changes: -0.09, 0.12, -0.07, 0.14, -0.05: |diffs| 0.21 0.19 0.21 0.19
+    assert metrics.step_alternation(rows, "out_psi_y", 0.0, 6.0) == pytest.approx(0.1)
+    assert metrics.step_alternation(rows, "out_psi_y", 0.0, 3.0) is None  # two changes only
+    assert metrics.step_alternation(rows, "out_psi_x", 0.0, 6.0) is None  # no such column
+
+
 def test_summarize_and_checks():
     t = np.arange(2000) * 0.005
     rows = rows_from(t, np.full(2000, 0.52), 0.5)
