@@ -28,6 +28,8 @@ import numpy as np
 CONVERGENCE_TOL_MPS = 0.05
 #: The steady-state window at the end of a run (s).
 STEADY_WINDOW_S = 5.0
+#: Start-up excluded from the whole-run error (s): from rest to the first steady steps.
+STARTUP_S = 5.0
 #: A convergence must hold at least this long before the end of the run to count (s).
 MIN_HOLD_S = 1.0
 
@@ -125,6 +127,19 @@ def steady_state_error(rows: np.ndarray, axis: str = "vx", *, window_s: float = 
     return float(np.mean(np.abs(e[sel])))
 
 
+def run_error_vx(rows: np.ndarray, *, startup_s: float = STARTUP_S, fell: bool = False) -> float | None:
+    """Mean |step-averaged forward velocity error| over the whole run after ``startup_s``
+    (the terrain judgement: over uneven ground the last seconds alone compare two arms on
+    different ground); ``None`` if the robot fell or the run is no longer than start-up."""
+    if fell or len(rows) == 0:
+        return None
+    sel = np.asarray(rows["t"], dtype=float) >= startup_s - 1e-9
+    if not sel.any():
+        return None
+    ex, _ = velocity_errors(rows)
+    return float(np.mean(np.abs(ex[sel])))
+
+
 def convergence_time(rows: np.ndarray, *, t_from: float = 0.0, tol: float = CONVERGENCE_TOL_MPS,
                      min_hold_s: float = MIN_HOLD_S, fell: bool = False) -> float | None:
     """Time from ``t_from`` after which |ex| (step-averaged) and |ey| (stride-averaged:
@@ -195,6 +210,7 @@ def summarize_arm(rows: np.ndarray, *, fell: bool, t_fall_s: float | None, pertu
         "steady_state_error_vx": steady_state_error(rows, "vx", fell=fell),
         "steady_state_error_vy": steady_state_error(rows, "vy", fell=fell),
         "steady_state_error_vy_stride": steady_state_error(rows, "vy_stride", fell=fell),
+        "run_error_vx": run_error_vx(rows, fell=fell),
         "convergence_time_s": convergence_time(rows, t_from=perturbation_t_s, fell=fell),
         "mean_vx_last_s": mean_last(rows, "tel_vx" if "tel_vx" in rows.dtype.names else "in_vx"),
         "mean_vy_last_s": mean_last(rows, "tel_vy" if "tel_vy" in rows.dtype.names else "in_vy"),

@@ -296,6 +296,15 @@ def test_stride_average_and_lateral_stride_metrics():
     assert m["steady_state_error_vy_stride"] == pytest.approx(0.0, abs=1e-12)
 
 
+def test_run_error_vx_after_startup():
+    t = np.arange(2000) * 0.005  # 10 s
+    rows = rows_from(t, np.where(t < 5.0, 0.0, np.where(t < 7.5, 0.6, 0.4)), 0.5)
+    assert metrics.run_error_vx(rows) == pytest.approx(0.1)  # start-up (error 0.5) excluded
+    assert metrics.run_error_vx(rows, startup_s=0.0) == pytest.approx(0.3)
+    assert metrics.run_error_vx(rows, fell=True) is None
+    assert metrics.run_error_vx(rows, startup_s=20.0) is None
+
+
 def test_step_alternation():
     t = np.arange(12) * 0.5
     steps = np.arange(12) // 2  # a step change every 2 rows, at t = 1, 2, ..., 5
