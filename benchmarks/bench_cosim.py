@@ -73,13 +73,14 @@ class ZeroRegulator(master.RegulatorPath):
         pass
 
 
-def bare_mj_step(seconds: float) -> dict[str, float]:
-    """Simulated s per wall s (and per CPU s) of mj_step alone on the nominal model."""
+def bare_mj_step(seconds: float, model=None) -> dict[str, float]:
+    """Simulated s per wall s (and per CPU s) of mj_step alone on ``model`` (a compiled
+    Cassie; default the nominal model)."""
     import mujoco
 
     from plant.model import load_model
 
-    model = load_model("menagerie")
+    model = load_model("menagerie") if model is None else model
     data = mujoco.MjData(model)
     mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
     n = int(round(seconds / model.opt.timestep))

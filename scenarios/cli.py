@@ -241,30 +241,48 @@ class _RunSession:
                              on_outcome=self.on_outcome, progress=bar.update, plant_fmu=self.args.plant_fmu)
         self.wall_s = time.perf_counter() - wall0
 
-    def on_outcome(self, scenario, outcome) -> None:
+    def on_outcome(self, scenario, outcome):
         got = self.outcomes[scenario.name]
         got[outcome.arm] = outcome
         if len(got) == len(scenario.arms):
-            self.finish(scenario, list(got.values()))
+            return self.finish(scenario, list(got.values()))
+        return None
 
-    def finish(self, scenario, outcomes: list) -> None:
-        """Publish the scenario's folder. Only complete results replace earlier ones: a
+    def finish(self, scenario, outcomes: list):
+        """The job that writes the scenario's folder (staged, renamed into place when it is
+        done: :meth:`published`), or None. Only complete results replace earlier ones: a
         failed or interrupted scenario leaves an existing folder as it was."""
-        from scenarios import output
+        from scenarios import output, runner
 
         if not any(o.started for o in outcomes):
-            return  # an interrupt kept every arm from starting: nothing to say on disk
+            return None  # an interrupt kept every arm from starting: nothing to say on disk
         replace = scenario.name in self.plan.replace
         if replace and any(o.status != "complete" for o in outcomes):
             self.left_as_were.append(scenario.name)
             if not self.stop.requested:  # for the table and the exit status
                 self.summaries[scenario.name] = output.build_summary(scenario, self.args.regulator, outcomes)
-            return
-        write = partial(output.write_results, scenario=scenario, regulator=self.args.regulator, outcomes=outcomes)
+            return None
         try:
-            self.summaries[scenario.name] = self.results_dir.publish(scenario.name, write, replace=replace)
-        except (OSError, AvrError) as exc:  # e.g. the disk is full: the other scenarios go on
+            staged = self.results_dir.stage(scenario.name)
+        except OSError as exc:
             self.write_errors.append(f"{scenario.name}: results not written: {exc}")
+            return None
+        return runner.Job(output.write_results, (staged, scenario, self.args.regulator, outcomes),
+                          partial(self.published, scenario.name, replace))
+
+    def published(self, name: str, replace: bool, summary, error: BaseException | None) -> None:
+        """Rename the written folder into place, or say why it was not written."""
+        if error is None:
+            try:
+                self.results_dir.commit(name, replace=replace)
+                self.summaries[name] = summary
+                return
+            except (OSError, AvrError) as exc:  # e.g. the disk is full: the other scenarios go on
+                error = exc
+        if not isinstance(error, (OSError, AvrError)):
+            log.error("%s: writing the results failed", name, exc_info=error)
+        self.results_dir.discard(name)
+        self.write_errors.append(f"{name}: results not written: {error}")
 
     def report(self, scenarios: list, out_root: Path) -> int:
         """Print the table (or, after Ctrl-C, one line); the exit status."""

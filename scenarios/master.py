@@ -235,9 +235,12 @@ class FmuRegulator(RegulatorPath):
         except Exception as exc:  # instantiate raises a bare Exception on NULL
             raise self._fail(what, f"{type(exc).__name__}: {exc}") from None
         if status:  # None (instantiate) or fmi2OK == 0 pass; Warning and worse do not
-            label = _FMI_STATUS[status] if 0 <= status < len(_FMI_STATUS) else str(status)
-            raise self._fail(what, f"status {label}")
+            raise self._status_error(what, status)
         return status
+
+    def _status_error(self, what: str, status: int) -> CosimError:
+        label = _FMI_STATUS[status] if 0 <= status < len(_FMI_STATUS) else str(status)
+        return self._fail(what, f"status {label}")
 
     # ---- life cycle
     def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
@@ -305,6 +308,22 @@ class FmuRegulator(RegulatorPath):
         self._vr_out = self._vr_array([v.valueReference for v in outs])
         self._val_out = (c_double * len(outs))()
         self._first_step = True
+        self._bind_step_calls()
+
+    def _bind_step_calls(self) -> None:
+        """The four per-step FMI functions as ctypes prototypes on the loaded library,
+        called directly by :meth:`step`, which checks their statuses (fmpy's Python
+        wrapper around each call cost about 1.5 us, 5 us a step). :meth:`close` drops
+        them before the library is unloaded."""
+        from ctypes import CFUNCTYPE, POINTER, c_double, c_int, c_size_t, c_uint, c_void_p
+
+        dll = self._fmu.dll
+        reals = CFUNCTYPE(c_int, c_void_p, POINTER(c_uint), c_size_t, POINTER(c_double))
+        ints = CFUNCTYPE(c_int, c_void_p, POINTER(c_uint), c_size_t, POINTER(c_int))
+        self._set_real = reals(("fmi2SetReal", dll))
+        self._get_real = reals(("fmi2GetReal", dll))
+        self._set_int = ints(("fmi2SetInteger", dll))
+        self._do_step = CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_int)(("fmi2DoStep", dll))
 
     @staticmethod
     def _vr_array(vrs: list[int]):
@@ -327,29 +346,43 @@ class FmuRegulator(RegulatorPath):
                        (c_int * len(vals))(*[1 if v else 0 for v in vals]))
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
-        fmu, comp = self._fmu, self._fmu.component
+        comp = self._fmu.component
         self._t = t
+        vals = self._val_in_real
         for i, n in enumerate(self._in_real):
-            self._val_in_real[i] = float(inputs[n])
+            vals[i] = float(inputs[n])
         int_changed = self._first_step
         for i, n in enumerate(self._in_int):
             v = int(inputs[n])
             if v != self._val_in_int[i]:
                 self._val_in_int[i] = v
                 int_changed = True
-        if self._in_real:
-            self._call("fmi2SetReal (inputs)", fmu.fmi2SetReal, comp, self._vr_in_real, len(self._in_real), self._val_in_real)
-        if self._in_int and int_changed:  # step_index changes once a walking step: FMU inputs keep their value
-            self._call("fmi2SetInteger (inputs)", fmu.fmi2SetInteger, comp, self._vr_in_int, len(self._in_int), self._val_in_int)
-        self._first_step = False
-        self._call("fmi2DoStep", fmu.fmi2DoStep, comp, t, h, 1)
-        self._call("fmi2GetReal (outputs)", fmu.fmi2GetReal, comp, self._vr_out, len(self._outputs), self._val_out)
-        vals = self._val_out
-        return {n: vals[i] for i, n in enumerate(self._outputs)}
+        try:
+            if self._in_real:
+                status = self._set_real(comp, self._vr_in_real, len(self._in_real), vals)
+                if status:
+                    raise self._status_error("fmi2SetReal (inputs)", status)
+            if self._in_int and int_changed:  # step_index changes once a walking step: FMU inputs keep their value
+                status = self._set_int(comp, self._vr_in_int, len(self._in_int), self._val_in_int)
+                if status:
+                    raise self._status_error("fmi2SetInteger (inputs)", status)
+            self._first_step = False
+            status = self._do_step(comp, t, h, 1)
+            if status:
+                raise self._status_error("fmi2DoStep", status)
+            status = self._get_real(comp, self._vr_out, len(self._outputs), self._val_out)
+            if status:
+                raise self._status_error("fmi2GetReal (outputs)", status)
+        except CosimError:
+            raise
+        except Exception as exc:  # a ctypes argument error: never a traceback without the FMU log
+            raise self._fail("FMI call", f"{type(exc).__name__}: {exc}") from None
+        return dict(zip(self._outputs, self._val_out))
 
     def close(self) -> None:
         fmu = self._fmu
         self._fmu = None
+        self._set_real = self._get_real = self._set_int = self._do_step = None
         try:
             if fmu is not None and self._instantiated:
                 if self._initialized:
@@ -385,7 +418,11 @@ def make_regulator(kind: str, fmu_path: str | Path | None = None, *,
 # =========================================================================== the loop
 @dataclass(frozen=True, eq=False)
 class ArmResult:
-    """One arm of one scenario: the trajectory and how the run ended."""
+    """One arm of one scenario: the trajectory and how the run ended.
+
+    ``timings``: where the arm's time went, seconds (:data:`TIMINGS`); reported in
+    summary.json, never part of the trajectory.
+    """
 
     scenario: str
     arm: str
@@ -397,6 +434,7 @@ class ArmResult:
     fall_reason: str | None
     wall_s: float
     model_summary: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
 
     @property
     def sim_s(self) -> float:
@@ -404,6 +442,20 @@ class ArmResult:
             return 0.0
         h = float(self.rows["t"][1] - self.rows["t"][0]) if len(self.rows) > 1 else 0.0
         return float(self.rows["t"][-1]) + h
+
+
+#: The phases :func:`run_arm` times (wall seconds, ``time.perf_counter``), and its CPU time.
+TIMINGS = {
+    "model_s": "compiling the plant model (0 when it was passed in)",
+    "walker_s": "building the walker on it",
+    "regulator_start_s": "starting the regulator (FMU: extract, instantiate, initialize)",
+    "loop_s": "every communication step, the three below included",
+    "regulator_s": "the regulator's steps",
+    "plant_s": "the plant's steps (physics and nominal controller)",
+    "record_s": "storing each step's row",
+    "finish_s": "closing the regulator, building the rows",
+    "cpu_s": "CPU time of the process over all of the above",
+}
 
 
 def plant_steps_per_comm(h: float, sim_dt: float) -> int:
@@ -426,6 +478,34 @@ def _row_dtype(outputs: tuple[str, ...], sensed: Mapping[str, Any], telemetry: M
     return np.dtype(fields)
 
 
+class _Recorder:
+    """The rows in a table of doubles preallocated for every step (one store per step),
+    turned into the structured array at the end. Integer columns (step counters) are
+    whole numbers far below 2**53: a double holds them exactly."""
+
+    def __init__(self, n_steps: int, dtype: np.dtype) -> None:
+        self.dtype = dtype
+        self.table = np.empty((n_steps, len(dtype.names)))
+
+    def rows(self, n: int) -> np.ndarray:
+        rows = np.empty(n, dtype=self.dtype)
+        for j, name in enumerate(self.dtype.names):
+            rows[name] = self.table[:n, j]
+        return rows
+
+
+@dataclass
+class _Steps:
+    """What the communication steps of one arm produced (filled in as they run)."""
+
+    recorder: _Recorder | None = None
+    done: int = 0
+    fell: bool = False
+    t_fall: float | None = None
+    reason: str | None = None
+    timings: dict = field(default_factory=dict)
+
+
 def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
             progress: Callable[[int], None] | None = None, model=None, model_summary: dict | None = None,
             stop: Callable[[], bool] | None = None,
@@ -439,7 +519,8 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     (a cooperative Ctrl-C: raised here, never inside the FMU). The regulator is closed
     whatever happens. ``plant(scenario, model)`` makes the walker instead of
     ``CassieWalker(model)`` (``scenarios.plant_fmu``: the plant FMU); its ``close()``, if
-    any, is called at the end.
+    any, is called at the end. The result's ``timings`` say where the time went
+    (:data:`TIMINGS`).
     """
     from plant.sim import CassieWalker
 
@@ -447,26 +528,57 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
 
     if isinstance(arm, str):
         arm = scenario.arm(arm)
-    h = scenario.comm_step_s
-    n_steps = scenario.n_comm_steps
-    t0 = 0.0
+    cpu0, lap = time.process_time(), time.perf_counter()
+    timings = {"model_s": 0.0}
     if model is None:
         model, model_summary = load_plant_model(scenario)
+        lap = _lap(timings, "model_s", lap)
     walker = CassieWalker(model) if plant is None else plant(scenario, model)  # its own copy of the model
-    n_plant = plant_steps_per_comm(h, float(walker.SIM_DT_S))
+    n_plant = plant_steps_per_comm(scenario.comm_step_s, float(walker.SIM_DT_S))
     outputs = regulator.output_names()
     missing = [n for n in DELTA_NAMES if n not in outputs]
     if missing:
         raise CosimError(f"the regulator has no output(s) {', '.join(missing)}")
+    steps = _Steps()
+    wall0 = lap = _lap(timings, "walker_s", lap)
+    try:
+        regulator.start(arm.overrides_dict(), 0.0, scenario.n_comm_steps * scenario.comm_step_s)
+        lap = _lap(timings, "regulator_start_s", lap)
+        _run_steps(scenario, arm, walker, regulator, n_plant, steps, progress, stop)
+        lap = _lap(timings, "loop_s", lap)
+    finally:
+        regulator.close()
+        if hasattr(walker, "close"):
+            walker.close()
+    if progress is not None and steps.done % 200:
+        progress(steps.done % 200)
+    rows = steps.recorder.rows(steps.done) if steps.recorder is not None else np.zeros(0, dtype=[("t", "f8")])
+    _lap(timings, "finish_s", lap)
+    wall = time.perf_counter() - wall0
+    timings.update(steps.timings, cpu_s=time.process_time() - cpu0)
+    return ArmResult(scenario=scenario.name, arm=arm.name, regulator=regulator.kind, model=scenario.model,
+                     rows=rows, fell=steps.fell, t_fall_s=steps.t_fall, fall_reason=steps.reason, wall_s=wall,
+                     model_summary=dict(model_summary or {}), timings=timings)
 
-    rows: np.ndarray | None = None
-    fell, t_fall, reason = False, None, None
+
+def _lap(timings: dict[str, float], key: str, since: float) -> float:
+    """Add the time since ``since`` to ``timings[key]``; return now."""
+    now = time.perf_counter()
+    timings[key] = timings.get(key, 0.0) + (now - since)
+    return now
+
+
+def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n_plant: int, steps: _Steps,
+               progress: Callable[[int], None] | None, stop: Callable[[], bool] | None) -> None:
+    """The communication steps of :func:`run_arm` (see the module docstring), into ``steps``."""
+    h, t0, n_steps = scenario.comm_step_s, 0.0, scenario.n_comm_steps
+    outputs = regulator.output_names()
+    clock = time.perf_counter
     command: tuple[float, float] | None = None
     force = (0.0, 0.0, 0.0)
-    done = 0
-    wall0 = time.perf_counter()
+    table = None
+    reg_s = plant_s = record_s = 0.0
     try:
-        regulator.start(arm.overrides_dict(), t0, t0 + n_steps * h)
         for k in range(n_steps):
             if stop is not None and stop():
                 raise KeyboardInterrupt(f"{scenario.name}/{arm.name} stopped at t = {t0 + k * h:g} s")
@@ -483,33 +595,32 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
             tel = walker.telemetry()
             inputs = {n: sensed[n] for n in SENSED_INPUTS}
             inputs["vx_des"], inputs["vy_des"] = cmd
+            c0 = clock()
             out = regulator.step(t, h, inputs)
+            c1 = clock()
             walker.set_offsets({n: out[n] for n in DELTA_NAMES})
-            if rows is None:
-                rows = np.zeros(n_steps, dtype=_row_dtype(outputs, sensed, tel))
-            rows[k] = (t, cmd[0], cmd[1], f[0], f[1], f[2],
-                       *(inputs[n] for n in SENSED_INPUTS), *(out[n] for n in outputs), *tel.values())
+            if table is None:
+                steps.recorder = _Recorder(n_steps, _row_dtype(outputs, sensed, tel))
+                table = steps.recorder.table
+            c2 = clock()
+            table[k] = (t, *cmd, *f, *map(inputs.__getitem__, SENSED_INPUTS), *map(out.__getitem__, outputs),
+                        *tel.values())
+            c3 = clock()
             walker.advance(n_plant)
-            done += 1
-            if progress is not None and (done % 200 == 0):
+            c4 = clock()
+            reg_s += c1 - c0
+            record_s += c3 - c2
+            plant_s += c4 - c3
+            steps.done += 1
+            if progress is not None and (steps.done % 200 == 0):
                 progress(200)
             if walker.fell():
-                fell = True
-                t_fall = t0 + (k + 1) * h
-                reason = str(getattr(walker, "fall_reason", "") or "") or None
-                log.info("%s/%s: fell at t = %.3f s (%s)", scenario.name, arm.name, t_fall, reason)
+                steps.fell, steps.t_fall = True, t0 + (k + 1) * h
+                steps.reason = str(getattr(walker, "fall_reason", "") or "") or None
+                log.info("%s/%s: fell at t = %.3f s (%s)", scenario.name, arm.name, steps.t_fall, steps.reason)
                 break
     finally:
-        regulator.close()
-        if hasattr(walker, "close"):
-            walker.close()
-    if progress is not None and done % 200:
-        progress(done % 200)
-    wall = time.perf_counter() - wall0
-    rows = rows[:done] if rows is not None else np.zeros(0, dtype=[("t", "f8")])
-    return ArmResult(scenario=scenario.name, arm=arm.name, regulator=regulator.kind, model=scenario.model,
-                     rows=rows, fell=fell, t_fall_s=t_fall, fall_reason=reason, wall_s=wall,
-                     model_summary=dict(model_summary or {}))
+        steps.timings.update(regulator_s=reg_s, plant_s=plant_s, record_s=record_s)
 
 
 def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | Path | None = None,

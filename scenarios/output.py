@@ -3,8 +3,10 @@
 ``<dir>/timeseries.csv``: the rows of every complete arm, the ``arm`` column first
 (no file when no arm completed).
 ``<dir>/summary.json``: ``scenario``, ``model``, ``regulator``, the claim, ``status``,
-per arm its ``status`` and, when complete, the metrics of :mod:`scenarios.metrics`, and
-the verdict of the claim's checks.
+per arm its ``status`` and, when complete, the metrics of :mod:`scenarios.metrics` and
+its ``timings`` (where its time went, :data:`scenarios.master.TIMINGS`), the verdict of
+the claim's checks, and ``timings`` of the writing (``csv_s``, ``plots_s``, and the
+``pid`` of the process that wrote: with ``--jobs N`` a worker, see :mod:`scenarios.runner`).
 ``<dir>/velocity.png``, ``psi.png``, ``torso.png``: :mod:`scenarios.plots`.
 
 Statuses: an arm is ``complete`` (it ran to the end or to a fall), ``failed`` (it
@@ -15,9 +17,10 @@ complete (:func:`verdict`): an incomplete run is never a pass.
 """
 from __future__ import annotations
 
-import io
 import json
 import logging
+import os
+import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping, Sequence
@@ -108,6 +111,8 @@ def build_summary(scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutc
             entry.update(metrics.summarize_arm(r.rows, fell=r.fell, t_fall_s=r.t_fall_s,
                                                perturbation_t_s=scenario.perturbation_t_s, wall_s=r.wall_s))
             entry["fall_reason"] = r.fall_reason
+            if getattr(r, "timings", None):
+                entry["timings"] = dict(r.timings)
         else:
             entry["error"] = o.error
         entry["description"] = arm.description
@@ -164,7 +169,8 @@ def _json_default(o: Any) -> Any:
 
 
 def write_timeseries(path: Path, results: Sequence[Any]) -> None:
-    """All arms in one CSV; the first column is ``arm``; floats round-trip exactly."""
+    """All arms in one CSV; the first column is ``arm``; floats round-trip exactly
+    (Python's repr: the shortest text that reads back to the same double)."""
     results = [r for r in results if len(r.rows)]
     with open(path, "w", newline="") as fh:
         if not results:
@@ -175,20 +181,26 @@ def write_timeseries(path: Path, results: Sequence[Any]) -> None:
         for r in results:
             if r.rows.dtype.names != names:
                 raise ValueError(f"arm {r.arm}: columns differ from arm {results[0].arm}")
-            # Python floats' repr: the shortest text that reads back to the same double
-            fmts = ["%d" if r.rows.dtype[n].kind in "iu" else "%r" for n in names]
-            buf = io.StringIO()
-            cols = [r.rows[n] for n in names]
-            table = np.empty((len(r.rows), len(names)), dtype=object)
-            for j, c in enumerate(cols):
-                table[:, j] = c.tolist()
-            np.savetxt(buf, table, fmt=fmts, delimiter=",")
             prefix = r.arm + ","
-            fh.writelines(prefix + line + "\n" for line in buf.getvalue().splitlines())
+            columns = [column_text(r.rows[n]) for n in names]
+            fh.write("".join([prefix + ",".join(cells) + "\n" for cells in zip(*columns)]))
+
+
+def column_text(column: np.ndarray) -> list[str]:
+    """The CSV text of every value of ``column``: ``repr`` of floats, decimal integers.
+    A column of few distinct values (told apart by their bits: -0.0 is not 0.0) has
+    each of them formatted once."""
+    bits = np.ascontiguousarray(column).view(f"u{column.dtype.itemsize}")
+    distinct, index = np.unique(bits, return_inverse=True)
+    if 4 * len(distinct) > len(column):
+        return list(map(repr, column.tolist()))
+    texts = np.array([repr(v) for v in distinct.view(column.dtype).tolist()], dtype=object)
+    return texts[index].tolist()
 
 
 def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome]) -> dict[str, Any]:
-    """Write csv, plots and summary (last) into the folder ``dest``; return the summary.
+    """Write csv, plots and summary (last) into the folder ``dest``; return the summary
+    (its ``timings``: seconds spent writing the csv and the plots, in process ``pid``).
 
     Only complete arms have rows; the folder is meant to be a fresh one that
     :mod:`scenarios.store` renames into place once this returns.
@@ -198,9 +210,12 @@ def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequ
     by_arm = {o.arm: o for o in outcomes}  # the scenario's arm order, not the order the arms ended in
     ordered = [by_arm[a.name] for a in scenario.arms if a.name in by_arm]
     results = [o.result for o in ordered if o.status == "complete" and len(o.result.rows)]
+    lap = time.perf_counter()
     if results:
         write_timeseries(dest / "timeseries.csv", results)
+    csv_done = time.perf_counter()
     summary["plots"] = write_plots(dest, scenario, results)
+    summary["timings"] = {"csv_s": csv_done - lap, "plots_s": time.perf_counter() - csv_done, "pid": os.getpid()}
     write_json(dest / "summary.json", summary)
     return summary
 

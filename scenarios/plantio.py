@@ -86,10 +86,21 @@ def _base_model_check(model: str, stamp: tuple | None) -> tuple[float | None, st
         return None, str(exc)
 
 
-def load_plant_model(scenario: "Scenario") -> tuple["mujoco.MjModel", dict]:
-    """Compile the scenario's model with its perturbation; return it and its summary."""
+def load_plant_model(scenario: "Scenario", *, shared: bool = False) -> tuple["mujoco.MjModel", dict]:
+    """Compile the scenario's model with its perturbation; return it and its summary.
+
+    ``shared``: compiled once per process for each distinct plant (model and
+    perturbation) and then shared by every caller, who must only read it (a walker
+    works on its own copy): the arms of a run's scenarios on one plant compile it once.
+    """
     from plant.model import load_model, model_summary
 
+    if shared:
+        stamp = _file_stamp(scenario.model)
+        nominal_mass, problem = _base_model_check(scenario.model, stamp)
+        if problem is None:  # else compile below, which raises the model's error
+            model, summary = _shared_model(scenario.model, stamp, build_perturbation(scenario, nominal_mass))
+            return model, dict(summary)
     nominal_mass = None
     if scenario.torso_added_mass_kg is not None:
         nominal_mass = model_summary(load_model(scenario.model))["pelvis_mass_kg"]
@@ -98,3 +109,12 @@ def load_plant_model(scenario: "Scenario") -> tuple["mujoco.MjModel", dict]:
     summary = model_summary(model)
     log.info("scenario %s: model %s, perturbation %s", scenario.name, scenario.model, pert)
     return model, summary
+
+
+@functools.lru_cache(maxsize=8)
+def _shared_model(model: str, stamp: tuple | None, pert: "Perturbation | None") -> tuple["mujoco.MjModel", dict]:
+    from plant.model import load_model, model_summary
+
+    compiled = load_model(model, pert)
+    log.info("model %s, perturbation %s: compiled (shared in this process)", model, pert)
+    return compiled, model_summary(compiled)

@@ -215,24 +215,40 @@ class ResultsDir:
         """Run ``write(folder)`` on a fresh staging folder, then rename it to ``root/name``;
         return what ``write`` returns. If ``write`` raises, nothing in ``root`` changes.
         An existing ``root/name`` is replaced only when ``replace`` is true."""
-        staged = self.scratch / "stage" / name
-        staged.mkdir()
+        staged = self.stage(name)
         try:
             value = write(staged)
         except BaseException:
-            shutil.rmtree(staged, ignore_errors=True)
+            self.discard(name)
             raise
+        self.commit(name, replace=replace)
+        return value
+
+    def stage(self, name: str) -> Path:
+        """A fresh staging folder for ``name``'s results, to fill (in any process) and then
+        :meth:`commit` or :meth:`discard`."""
+        staged = self.scratch / "stage" / name
+        staged.mkdir()
+        return staged
+
+    def discard(self, name: str) -> None:
+        shutil.rmtree(self.scratch / "stage" / name, ignore_errors=True)
+
+    def commit(self, name: str, *, replace: bool) -> None:
+        """Rename the staged folder of ``name`` to ``root/name`` (one step to a user: SIGINT
+        and SIGTERM wait). An existing ``root/name`` is replaced only when ``replace`` is
+        true; otherwise the staged folder is discarded and AvrError raised."""
+        staged = self.scratch / "stage" / name
         final = self.root / name
         aside = self.root / f".{name}{REPLACED_TAG}{os.getpid()}"
         with _signals_deferred():
             if final.exists() or final.is_symlink():
                 if not replace:
-                    shutil.rmtree(staged, ignore_errors=True)
+                    self.discard(name)
                     raise AvrError(f"{final} appeared while the run was writing; not replaced")
                 os.rename(final, aside)
             os.rename(staged, final)
         shutil.rmtree(aside, ignore_errors=True)
-        return value
 
 
 @contextmanager

@@ -257,7 +257,8 @@ def test_ctrl_c_with_two_jobs_stops_workers_keeps_complete_flags_started(tmp_pat
     quick = scenario_file(tmp_path, "quick")
     slow = scenario_file(tmp_path, "slow", duration_s=SLOW_S, arms=("adaptive", "pd_only"))
     out = tmp_path / "out"
-    proc, tmpdir, err = start_run([quick, slow, "--out", out, "--fmu", built_fmu, "--jobs", "2"], tmp_path)
+    # three workers: the arms go longest first, so with two the quick arm would wait for a slow one
+    proc, tmpdir, err = start_run([quick, slow, "--out", out, "--fmu", built_fmu, "--jobs", "3"], tmp_path)
     wait_for(lambda: (out / "quick" / "summary.json").exists(), proc)
     time.sleep(0.5)
     os.killpg(proc.pid, signal.SIGINT)  # as a terminal's Ctrl-C: the whole process group
