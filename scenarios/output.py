@@ -5,8 +5,9 @@
 ``<dir>/summary.json``: ``scenario``, ``model``, ``regulator``, the claim, ``status``,
 per arm its ``status`` and, when complete, the metrics of :mod:`scenarios.metrics` and
 its ``timings`` (where its time went, :data:`scenarios.master.TIMINGS`), the verdict of
-the claim's checks, and ``timings`` of the writing (``csv_s``, ``plots_s``, and the
-``pid`` of the process that wrote: with ``--jobs N`` a worker, see :mod:`scenarios.runner`).
+the claim's checks, and ``timings`` of the writing (``csv_s``, ``plots_s``, their
+``cpu_s``, and the ``pid`` of the process that wrote: with ``--jobs N`` a worker, see
+:mod:`scenarios.runner`).
 ``<dir>/velocity.png``, ``psi.png``, ``torso.png``: :mod:`scenarios.plots`.
 
 Statuses: an arm is ``complete`` (it ran to the end or to a fall), ``failed`` (it
@@ -200,7 +201,8 @@ def column_text(column: np.ndarray) -> list[str]:
 
 def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome]) -> dict[str, Any]:
     """Write csv, plots and summary (last) into the folder ``dest``; return the summary
-    (its ``timings``: seconds spent writing the csv and the plots, in process ``pid``).
+    (its ``timings``: seconds spent writing the csv and the plots, the CPU time of both,
+    the process ``pid``).
 
     Only complete arms have rows; the folder is meant to be a fresh one that
     :mod:`scenarios.store` renames into place once this returns.
@@ -210,12 +212,13 @@ def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequ
     by_arm = {o.arm: o for o in outcomes}  # the scenario's arm order, not the order the arms ended in
     ordered = [by_arm[a.name] for a in scenario.arms if a.name in by_arm]
     results = [o.result for o in ordered if o.status == "complete" and len(o.result.rows)]
-    lap = time.perf_counter()
+    lap, cpu0 = time.perf_counter(), time.process_time()
     if results:
         write_timeseries(dest / "timeseries.csv", results)
     csv_done = time.perf_counter()
     summary["plots"] = write_plots(dest, scenario, results)
-    summary["timings"] = {"csv_s": csv_done - lap, "plots_s": time.perf_counter() - csv_done, "pid": os.getpid()}
+    summary["timings"] = {"csv_s": csv_done - lap, "plots_s": time.perf_counter() - csv_done,
+                          "cpu_s": time.process_time() - cpu0, "pid": os.getpid()}
     write_json(dest / "summary.json", summary)
     return summary
 

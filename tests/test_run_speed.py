@@ -80,7 +80,7 @@ def test_two_jobs_start_the_longest_arms_first_and_report_their_timings(tmp_path
     assert len(workers) == 2 and os.getpid() not in workers
     for n in ("short", "long"):
         written = json.loads((out / n / "summary.json").read_text())["timings"]
-        assert set(written) == {"csv_s", "plots_s", "pid"}
+        assert set(written) == {"csv_s", "plots_s", "cpu_s", "pid"}
         assert written["pid"] in workers  # written by a worker: this process never competes with the arms
         columns = (out / n / "timeseries.csv").read_text().splitlines()[0].split(",")
         assert not [c for c in columns if c.endswith("_s") or "timing" in c]  # timings never in the CSV
