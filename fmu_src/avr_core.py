@@ -64,13 +64,34 @@ neurons) start at zero; at every call, with ``h`` the rates (Hz) for this call's
     W      <- W - learning_rate * dt / n_neurons * outer(E, h)
 
 with ``E = desired - actual``: ``E_x = vx_des - vx`` (both longitudinal outputs),
-``E_y = vy_des - vy``, ``E_pitch = pitch_des - pitch`` (torso outputs 0 and 1) and
-``E_roll = roll_des - roll`` (torso output 2).  So a persistent ``vx > vx_des`` drives
-``Psi_x`` positive, the same sign as its PD term.  Outputs that share an error signal
-keep identical weight rows forever, so the state stores 4 rows (x, y, pitch, roll),
-not 7 (see :class:`RegulatorState`).  The output of a call uses the
-weights from before that call's update (exactly nengo's ordering, in which the delta
-computed in step k is applied at the start of step k+1).
+``E_y = vy_des - vy_stride`` (both lateral outputs), ``E_pitch = pitch_des - pitch``
+(torso outputs 0 and 1) and ``E_roll = roll_des - roll_stride`` (torso output 2).  So
+a persistent ``vx > vx_des`` drives ``Psi_x`` positive, the same sign as its PD term.
+Outputs that share an error signal keep identical weight rows forever, so the state
+stores 4 rows (x, y, pitch, roll), not 7 (see :class:`RegulatorState`).  The output of
+a call uses the weights from before that call's update (exactly nengo's ordering, in
+which the delta computed in step k is applied at the start of step k+1).
+
+Stride-averaged lateral and roll errors.  A biped's lateral velocity and torso roll
+swing with the stance side every step: a sway of alternating sign that no offset can
+remove.  The lateral and torso networks see ``vy`` and ``roll`` in their inputs, so
+their presynaptic rates alternate in phase with the instantaneous errors
+``vy_des - vy`` and ``roll_des - roll``, and PES integrates that correlation every
+stride without bound (on the MuJoCo Cassie with a 20 kg torso the step-to-step
+alternation of psi_roll grew linearly to 0.005 rad in 10 min).  The y and roll rows
+therefore learn from the *stride* error: the core averages ``vy`` and ``roll`` over
+the calls of each walking step (from one change of ``step_index`` to the next; the
+call at which step_index changes belongs to the new step), and uses::
+
+    vy_stride   = (mean_vy[k-1]   + mean_vy[k])   / 2     (last two completed steps)
+    roll_stride = (mean_roll[k-1] + mean_roll[k]) / 2
+
+A left and a right step average out the sway, so the stride error is what the
+outputs can correct.  A step counts only if it was seen from its start (the segment
+before the first change of step_index is not one), and the y and roll rows do not
+learn until two steps are complete; the x and pitch rows, the PD terms and the
+``error_*`` outputs are unchanged (instantaneous).  The accumulators advance at every
+call, also while learning waits or adaptation is disabled.
 
 Anti-windup (conditional integration): when ``|Psi_raw[j]| >= psi_limit`` and the
 update would push ``Psi_raw[j]`` further out (``sign(-E_j) == sign(Psi_raw[j])``), the
@@ -765,6 +786,13 @@ class RegulatorState:
     * ``network_key``: ``(seed, velocity_scale_mps, angle_scale_rad,
       rate_scale_radps)`` of the regulator the weights belong to (``None`` = unknown);
       :func:`state_from_bytes` refuses a state learned on other networks.
+    * Stride accumulators (the y and roll learning signal, see the module docstring):
+      ``stride_boundaries`` step_index changes seen, the first call counting as one
+      (saturates at 4; a completed step needs 2, learning needs 4, i.e. two completed
+      steps); ``stride_calls``, ``stride_sum_vy`` (m/s) and ``stride_sum_roll`` (rad):
+      number of calls and sums of vy and roll in the current step;
+      ``vy_mean_prev``/``vy_mean_last`` (m/s) and ``roll_mean_prev``/``roll_mean_last``
+      (rad): the means over the last two completed steps.
     """
 
     weights: np.ndarray
@@ -776,6 +804,14 @@ class RegulatorState:
     n_calls: int = 0
     time_s: float = 0.0
     network_key: tuple[int, float, float, float] | None = None
+    stride_boundaries: int = 0
+    stride_calls: int = 0
+    stride_sum_vy: float = 0.0
+    stride_sum_roll: float = 0.0
+    vy_mean_prev: float = 0.0
+    vy_mean_last: float = 0.0
+    roll_mean_prev: float = 0.0
+    roll_mean_last: float = 0.0
 
     def __post_init__(self):
         w = self.weights
@@ -886,6 +922,7 @@ def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
     else:
         pd_x, pd_y = state.pd_x, state.pd_y
         vx_at, vy_at = state.vx_at_step, state.vy_at_step
+    stride = _advance_stride(state, si, vy, roll)
     pd_pitch = P.Kp_pitch * (pitch - P.pitch_des) + P.Kd_pitch * pitch_rate
     pd_roll = P.Kp_roll * (roll - P.roll_des) + P.Kd_roll * roll_rate
 
@@ -904,7 +941,7 @@ def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
         psi = [lim if r > lim else (-lim if r < -lim else r) for r in raw]  # rad
         if P.learning_rate != 0.0 and si >= P.learn_from_step:
             alpha = -P.learning_rate * dt / n * _INV_TAU_RC  # per unit of s3
-            err = (vx_des - vx, vy_des - vy, P.pitch_des - pitch, P.roll_des - roll)
+            err = _learning_errors(stride, vx, vx_des, vy_des, pitch, P)
             # The update moves raw[j] by -learning_rate dt/n E_j |rates|^2, i.e. in the
             # direction of -E_j.  Anti-windup: skip rows at or beyond the limit that it
             # would push further out (raw[j] and -E_j of the same sign).
@@ -959,8 +996,48 @@ def step(state: RegulatorState, inputs: RegulatorInputs, dt: float,
     new_state.__dict__.update(  # skips __post_init__: weights are owned and read-only
         weights=weights, last_step_index=si, vx_at_step=vx_at, vy_at_step=vy_at,
         pd_x=pd_x, pd_y=pd_y, n_calls=state.n_calls + 1, time_s=state.time_s + dt,
-        network_key=state.network_key)
+        network_key=state.network_key, **stride)
     return new_state, out
+
+
+def _advance_stride(state: RegulatorState, si: int, vy: float, roll: float) -> dict:
+    """The stride accumulators after a call with ``step_index = si``: at a change of
+    step_index the step that ends is closed (its means shifted in) if it was seen from
+    its start, and this call starts the new step's sums."""
+    if si == state.last_step_index:
+        return dict(
+            stride_boundaries=state.stride_boundaries, stride_calls=state.stride_calls + 1,
+            stride_sum_vy=state.stride_sum_vy + vy, stride_sum_roll=state.stride_sum_roll + roll,
+            vy_mean_prev=state.vy_mean_prev, vy_mean_last=state.vy_mean_last,
+            roll_mean_prev=state.roll_mean_prev, roll_mean_last=state.roll_mean_last)
+    nb = state.stride_boundaries
+    vy_means = (state.vy_mean_prev, state.vy_mean_last)
+    roll_means = (state.roll_mean_prev, state.roll_mean_last)
+    if nb >= 2:  # the step that ends now began at a change of step_index: complete
+        c = float(state.stride_calls)
+        vy_means = (state.vy_mean_last, state.stride_sum_vy / c)
+        roll_means = (state.roll_mean_last, state.stride_sum_roll / c)
+    return dict(
+        stride_boundaries=min(nb + 1, _STRIDE_READY), stride_calls=1,
+        stride_sum_vy=vy, stride_sum_roll=roll,
+        vy_mean_prev=vy_means[0], vy_mean_last=vy_means[1],
+        roll_mean_prev=roll_means[0], roll_mean_last=roll_means[1])
+
+
+def _learning_errors(stride: dict, vx: float, vx_des: float, vy_des: float, pitch: float,
+                     P: RegulatorParams) -> tuple[float, float, float, float]:
+    """PES errors (x, y, pitch, roll): instantaneous for x and pitch, stride-averaged
+    for y and roll (0, i.e. no learning, until two steps are complete)."""
+    if stride["stride_boundaries"] >= _STRIDE_READY:
+        e_y = vy_des - 0.5 * (stride["vy_mean_prev"] + stride["vy_mean_last"])
+        e_roll = P.roll_des - 0.5 * (stride["roll_mean_prev"] + stride["roll_mean_last"])
+    else:
+        e_y = e_roll = 0.0
+    return (vx_des - vx, e_y, P.pitch_des - pitch, e_roll)
+
+
+#: stride_boundaries at which two steps are complete (the first call, then 3 changes)
+_STRIDE_READY = 4
 
 
 _new_state = object.__new__
@@ -971,10 +1048,14 @@ _DELTA_NAMES = tuple(f"delta_{joint}" for joint in OUTPUT_JOINTS)
 # Serialisation
 # --------------------------------------------------------------------------------------
 _MAGIC = b"AVRSTATE"
-_VERSION = 1
+_VERSION = 2  # 2: the stride accumulators (version 1 had none)
 # magic, version, n_rows, n_neurons, seed, velocity/angle/rate scales,
-# last_step_index, n_calls, vx_at_step, vy_at_step, pd_x, pd_y, time_s
-_HEADER = struct.Struct("<8sHHII3dqq5d")
+# last_step_index, n_calls, vx_at_step, vy_at_step, pd_x, pd_y, time_s,
+# stride_boundaries, stride_calls, stride_sum_vy, stride_sum_roll,
+# vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last
+_HEADER = struct.Struct("<8sHHII3dqq5dqq6d")
+_STRIDE_FLOATS = ("stride_sum_vy", "stride_sum_roll", "vy_mean_prev", "vy_mean_last",
+                  "roll_mean_prev", "roll_mean_last")
 _CRC = struct.Struct("<I")
 
 
@@ -985,6 +1066,8 @@ def state_to_bytes(state: RegulatorState) -> bytes:
     uint16, number of weight rows (4) uint16, n_neurons uint32, then ``network_key``:
     seed uint32 and the three input scales float64 (NaN = unknown), then
     last_step_index int64, n_calls int64, vx_at_step, vy_at_step, pd_x, pd_y, time_s
+    float64, stride_boundaries int64, stride_calls int64, stride_sum_vy,
+    stride_sum_roll, vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last
     float64), the weights as 4*n float64 in C order, then a CRC-32 (uint32) of
     everything before it.  Identical states give identical bytes.
     """
@@ -994,7 +1077,9 @@ def state_to_bytes(state: RegulatorState) -> bytes:
         seed, scales = 0, (math.nan,) * 3
     head = _HEADER.pack(_MAGIC, _VERSION, _N_ROWS, state.n_neurons, seed, *scales,
                         state.last_step_index, state.n_calls, state.vx_at_step,
-                        state.vy_at_step, state.pd_x, state.pd_y, state.time_s)
+                        state.vy_at_step, state.pd_x, state.pd_y, state.time_s,
+                        state.stride_boundaries, state.stride_calls,
+                        *(getattr(state, name) for name in _STRIDE_FLOATS))
     body = head + state.weights.astype("<f8", copy=False).tobytes(order="C")
     return body + _CRC.pack(zlib.crc32(body))
 
@@ -1009,15 +1094,19 @@ def state_from_bytes(blob: bytes, params: RegulatorParams) -> RegulatorState:
     if not isinstance(blob, (bytes, bytearray, memoryview)):
         raise StateError(f"state blob must be bytes, got {type(blob).__name__}")
     blob = bytes(blob)
-    if len(blob) < _HEADER.size + _CRC.size:
+    if len(blob) < 10 + _CRC.size:
         raise StateError(f"state blob too short ({len(blob)} bytes)")
-    (magic, version, n_rows, n, seed, vs, sa, sr, last, n_calls, vx_at, vy_at, pd_x,
-     pd_y, time_s) = _HEADER.unpack_from(blob, 0)
+    magic, version = struct.unpack_from("<8sH", blob, 0)
     if magic != _MAGIC:
         raise StateError(f"not a regulator state (magic {magic!r}, expected {_MAGIC!r})")
     if version != _VERSION:
-        raise StateError(f"unsupported state format version {version} "
-                         f"(this build reads {_VERSION})")
+        raise StateError(f"unsupported state format version {version} (this build reads "
+                         f"{_VERSION}; version 1 states predate the stride-averaged "
+                         f"lateral/roll learning and cannot be continued)")
+    if len(blob) < _HEADER.size + _CRC.size:
+        raise StateError(f"state blob too short ({len(blob)} bytes)")
+    (magic, version, n_rows, n, seed, vs, sa, sr, last, n_calls, vx_at, vy_at, pd_x,
+     pd_y, time_s, boundaries, stride_calls, *stride) = _HEADER.unpack_from(blob, 0)
     if n_rows != _N_ROWS:
         raise StateError(f"state has {n_rows} weight rows, expected {_N_ROWS}")
     expected = _HEADER.size + 8 * _N_ROWS * n + _CRC.size
@@ -1041,14 +1130,19 @@ def state_from_bytes(blob: bytes, params: RegulatorParams) -> RegulatorState:
                              f"regulator has {here}")
     w = np.frombuffer(blob, dtype="<f8", count=_N_ROWS * n, offset=_HEADER.size)
     w = w.astype(np.float64).reshape(_N_ROWS, n)  # owned, native-endian copy
-    scalars = (vx_at, vy_at, pd_x, pd_y, time_s)
+    scalars = (vx_at, vy_at, pd_x, pd_y, time_s, *stride)
     if not (np.all(np.isfinite(w)) and all(math.isfinite(v) for v in scalars)):
         raise StateError("state contains non-finite values")
     if last < -1 or n_calls < 0:
         raise StateError(f"state has invalid counters (last_step_index = {last}, "
                          f"n_calls = {n_calls})")
+    if not (0 <= boundaries <= _STRIDE_READY and stride_calls >= 0
+            and (boundaries == 0) == (stride_calls == 0)):
+        raise StateError(f"state has invalid stride counters (stride_boundaries = "
+                         f"{boundaries}, stride_calls = {stride_calls})")
     w.flags.writeable = False
-    return RegulatorState(w, last, vx_at, vy_at, pd_x, pd_y, n_calls, time_s, key)
+    return RegulatorState(w, last, vx_at, vy_at, pd_x, pd_y, n_calls, time_s, key,
+                          boundaries, stride_calls, *stride)
 
 
 # --------------------------------------------------------------------------------------

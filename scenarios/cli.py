@@ -3,7 +3,7 @@
     python -m scenarios list
     python -m scenarios validate FILE [FILE ...]
     python -m scenarios run NAME|FILE|all|paper [...] [--model M] [--out DIR]
-                            [--regulator fmu|inprocess] [--jobs N] [--fmu PATH]
+                            [--regulator fmu|native|inprocess] [--jobs N] [--fmu PATH]
                             [--duration S] [--rebuild-fmu] [--overwrite | --resume]
                             [--plant inprocess|fmu] [--plant-fmu PATH]
     python -m scenarios report DIR
@@ -43,6 +43,7 @@ from fmu_src.avr_errors import AvrError, ScenarioError
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_FMU = REPO_ROOT / "dist" / "AdaptiveVelocityRegulator.fmu"
+DEFAULT_NATIVE_FMU = REPO_ROOT / "dist" / "AdaptiveVelocityRegulatorNative_fmi2.fmu"
 DEFAULT_OUT = Path("runs")
 SHARED_MENAGERIE = REPO_ROOT.parent / "shared" / "cassie" / "menagerie"
 
@@ -67,21 +68,24 @@ def load_build_module():
     return module
 
 
-def ensure_fmu(fmu: Path | None, *, rebuild: bool = False) -> Path:
-    """The FMU to use; the default one is (re)built when missing, older than its sources
+def ensure_fmu(fmu: Path | None, *, rebuild: bool = False, native: bool = False) -> Path:
+    """The FMU to use: ``fmu`` if given, else the default one (the pythonfmu FMU, or with
+    ``native`` the native FMI 2.0 FMU), (re)built when missing, older than its sources
     (``fmu_src/``, ``build.py``: a stale FMU would silently run old code) or on ``rebuild``."""
     if fmu is not None:
         fmu = Path(fmu)
         if not fmu.is_file():
             raise AvrError(f"--fmu {fmu}: no such file")
         return fmu
-    sources = [*(REPO_ROOT / "fmu_src").rglob("*.py"), *(REPO_ROOT / "fmu_src").rglob("*.c"), REPO_ROOT / "build.py"]
-    stale = DEFAULT_FMU.is_file() and max(p.stat().st_mtime for p in sources) > DEFAULT_FMU.stat().st_mtime
-    if rebuild or stale or not DEFAULT_FMU.is_file():
-        log.info("building the FMU into %s%s", DEFAULT_FMU.parent, " (older than its sources)" if stale else "")
-        DEFAULT_FMU.parent.mkdir(parents=True, exist_ok=True)
-        return Path(load_build_module().build_fmu(DEFAULT_FMU.parent))
-    return DEFAULT_FMU
+    default = DEFAULT_NATIVE_FMU if native else DEFAULT_FMU
+    sources = [p for ext in ("py", "c", "h") for p in (REPO_ROOT / "fmu_src").rglob(f"*.{ext}")] + [REPO_ROOT / "build.py"]
+    stale = default.is_file() and max(p.stat().st_mtime for p in sources) > default.stat().st_mtime
+    if rebuild or stale or not default.is_file():
+        log.info("building %s%s", default, " (older than its sources)" if stale else "")
+        default.parent.mkdir(parents=True, exist_ok=True)
+        build = load_build_module()
+        return Path(build.build_native_fmu(2, default.parent) if native else build.build_fmu(default.parent))
+    return default
 
 
 # --------------------------------------------------------------------------- commands
@@ -172,9 +176,9 @@ def cmd_run(args) -> int:
             print(p, file=sys.stderr)
         return 2
     fmu_path = None
-    if args.regulator == "fmu":
+    if args.regulator in ("fmu", "native"):
         try:
-            fmu_path = str(ensure_fmu(args.fmu, rebuild=args.rebuild_fmu))
+            fmu_path = str(ensure_fmu(args.fmu, rebuild=args.rebuild_fmu, native=args.regulator == "native"))
         except Exception as exc:
             print(f"cannot get the FMU: {exc}", file=sys.stderr)
             return 1
@@ -374,8 +378,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("targets", nargs="+", metavar="NAME|FILE")
     sp.add_argument("--model", default=None, help="menagerie, osu or an MJCF path (overrides the files)")
     sp.add_argument("--out", default=str(DEFAULT_OUT), help="results folder (default: runs)")
-    sp.add_argument("--regulator", choices=("fmu", "inprocess"), default="fmu",
-                    help="the FMU through fmpy (default) or the regulator core in-process")
+    sp.add_argument("--regulator", choices=("fmu", "native", "inprocess"), default="fmu",
+                    help="the pythonfmu FMU through fmpy (default), the native (C) FMI 2.0 FMU through fmpy, "
+                         "or the regulator core in-process")
     sp.add_argument("--jobs", type=int, default=1, help="parallel worker processes (default 1)")
     sp.add_argument("--fmu", type=Path, default=None, help=f"FMU file (default {DEFAULT_FMU.relative_to(REPO_ROOT)}, "
                                                           "built if missing)")

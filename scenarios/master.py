@@ -53,7 +53,7 @@ DELTA_NAMES = (
 )
 #: Regulator inputs sensed on the plant (vx_des/vy_des come from the command schedule).
 SENSED_INPUTS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
-REGULATORS = ("fmu", "inprocess")
+REGULATORS = ("fmu", "native", "inprocess")
 _FMI_STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 _LOG_KEEP = 200
 
@@ -406,9 +406,9 @@ class FmuRegulator(RegulatorPath):
 def make_regulator(kind: str, fmu_path: str | Path | None = None, *,
                    unpack_dir: str | Path | None = None) -> RegulatorPath:
     """``unpack_dir``: where an FMU is extracted (see :class:`FmuRegulator`)."""
-    if kind == "fmu":
+    if kind in ("fmu", "native"):  # the pythonfmu or the native FMI 2.0 FMU: the same FMI path
         if fmu_path is None:
-            raise CosimError("the fmu regulator path needs an FMU file (fmu_path)")
+            raise CosimError(f"the {kind} regulator path needs an FMU file (fmu_path)")
         return FmuRegulator(fmu_path, unpack_dir=unpack_dir)
     if kind == "inprocess":
         return InProcessRegulator()

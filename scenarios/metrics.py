@@ -12,6 +12,10 @@ regulator action applied over ``[t, t+h)``); the columns the metrics use are
 - ``in_pitch``, ``in_roll``: torso angles (rad).
 
 Velocity error = step-averaged velocity - command (the quantity the paper regulates).
+Laterally the step average alternates with the left/right sway (the pelvis moves
+towards the stance foot every step), so the lateral metrics also come stride-averaged:
+the mean of the last two step averages (one left and one right step), the quantity the
+regulator's lateral networks learn from.
 """
 from __future__ import annotations
 
@@ -24,6 +28,8 @@ import numpy as np
 CONVERGENCE_TOL_MPS = 0.05
 #: The steady-state window at the end of a run (s).
 STEADY_WINDOW_S = 5.0
+#: Start-up excluded from the whole-run error (s): from rest to the first steady steps.
+STARTUP_S = 5.0
 #: A convergence must hold at least this long before the end of the run to count (s).
 MIN_HOLD_S = 1.0
 
@@ -75,11 +81,30 @@ def _stepavg_column(rows: np.ndarray, axis: str) -> np.ndarray:
     return step_average(rows[f"in_{axis}"], rows["in_step_index"])
 
 
+def stride_average(step_avg: np.ndarray, step_index: np.ndarray) -> np.ndarray:
+    """For each row, the mean of the last two step averages (a stride: one left, one
+    right step).  ``step_avg`` holds, per row, the average over the last completed step
+    (as :func:`step_average` gives); rows before the second completed step keep it."""
+    out = np.array(step_avg, dtype=float)
+    changes = np.nonzero(np.diff(np.asarray(step_index)))[0] + 1
+    bounds = list(changes) + [len(out)]
+    for j in range(1, len(changes)):
+        a, b = bounds[j], bounds[j + 1]
+        out[a:b] = 0.5 * (float(step_avg[changes[j - 1]]) + float(step_avg[a]))
+    return out
+
+
 def velocity_errors(rows: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(ex, ey): step-averaged velocity minus command, per row (m/s)."""
     ex = _stepavg_column(rows, "vx") - np.asarray(rows["cmd_vx_des"], dtype=float)
     ey = _stepavg_column(rows, "vy") - np.asarray(rows["cmd_vy_des"], dtype=float)
     return ex, ey
+
+
+def lateral_stride_error(rows: np.ndarray) -> np.ndarray:
+    """Stride-averaged lateral velocity minus command, per row (m/s)."""
+    vy = stride_average(_stepavg_column(rows, "vy"), rows["in_step_index"])
+    return vy - np.asarray(rows["cmd_vy_des"], dtype=float)
 
 
 def _last_window(rows: np.ndarray, window_s: float) -> np.ndarray:
@@ -89,21 +114,36 @@ def _last_window(rows: np.ndarray, window_s: float) -> np.ndarray:
 
 def steady_state_error(rows: np.ndarray, axis: str = "vx", *, window_s: float = STEADY_WINDOW_S,
                        fell: bool = False) -> float | None:
-    """Mean |step-averaged velocity error| over the last ``window_s`` of the run.
+    """Mean |step-averaged velocity error| over the last ``window_s`` of the run;
+    ``axis`` ``"vx"``, ``"vy"`` or ``"vy_stride"`` (the stride-averaged lateral error).
 
     ``None`` when the robot fell (a steady state was never reached) or there is no data.
     """
     if fell or len(rows) == 0:
         return None
     ex, ey = velocity_errors(rows)
-    e = ex if axis == "vx" else ey
+    e = {"vx": ex, "vy": ey}[axis] if axis != "vy_stride" else lateral_stride_error(rows)
     sel = _last_window(rows, window_s)
     return float(np.mean(np.abs(e[sel])))
 
 
+def run_error_vx(rows: np.ndarray, *, startup_s: float = STARTUP_S, fell: bool = False) -> float | None:
+    """Mean |step-averaged forward velocity error| over the whole run after ``startup_s``
+    (the terrain judgement: over uneven ground the last seconds alone compare two arms on
+    different ground); ``None`` if the robot fell or the run is no longer than start-up."""
+    if fell or len(rows) == 0:
+        return None
+    sel = np.asarray(rows["t"], dtype=float) >= startup_s - 1e-9
+    if not sel.any():
+        return None
+    ex, _ = velocity_errors(rows)
+    return float(np.mean(np.abs(ex[sel])))
+
+
 def convergence_time(rows: np.ndarray, *, t_from: float = 0.0, tol: float = CONVERGENCE_TOL_MPS,
                      min_hold_s: float = MIN_HOLD_S, fell: bool = False) -> float | None:
-    """Time from ``t_from`` after which |ex| and |ey| stay <= ``tol`` to the end of the run.
+    """Time from ``t_from`` after which |ex| (step-averaged) and |ey| (stride-averaged:
+    the step average's left/right sway is no error) stay <= ``tol`` to the end of the run.
 
     Returns ``t_c - t_from`` where ``t_c`` is the first row time >= ``t_from`` from which
     every later row is inside the band (0 if it never leaves the band after ``t_from``);
@@ -113,7 +153,8 @@ def convergence_time(rows: np.ndarray, *, t_from: float = 0.0, tol: float = CONV
     if fell or len(rows) == 0:
         return None
     t = np.asarray(rows["t"], dtype=float)
-    ex, ey = velocity_errors(rows)
+    ex, _ = velocity_errors(rows)
+    ey = lateral_stride_error(rows)
     inside = (np.abs(ex) <= tol) & (np.abs(ey) <= tol)
     after = t >= t_from - 1e-9
     if not after.any():
@@ -129,6 +170,22 @@ def convergence_time(rows: np.ndarray, *, t_from: float = 0.0, tol: float = CONV
     if end_time(rows) - t_c < min_hold_s - 1e-9:
         return None
     return max(0.0, t_c - t_from)
+
+
+def step_alternation(rows: np.ndarray, column: str, t0: float, t1: float) -> float | None:
+    """Step-to-step alternation amplitude of ``column`` in ``[t0, t1)``: half the mean
+    |difference| between its values at consecutive changes of ``in_step_index`` (a
+    signal that flips between +a and -a with the stance side gives a).  ``None`` with
+    fewer than three step changes in the window."""
+    if len(rows) == 0 or column not in rows.dtype.names:
+        return None
+    si = np.asarray(rows["in_step_index"])
+    changes = np.nonzero(np.diff(si))[0] + 1
+    t = np.asarray(rows["t"], dtype=float)[changes]
+    values = np.asarray(rows[column], dtype=float)[changes][(t >= t0 - 1e-9) & (t < t1 - 1e-9)]
+    if len(values) < 3:
+        return None
+    return float(np.mean(np.abs(np.diff(values))) / 2.0)
 
 
 def mean_last(rows: np.ndarray, column: str, *, window_s: float = STEADY_WINDOW_S) -> float | None:
@@ -152,6 +209,8 @@ def summarize_arm(rows: np.ndarray, *, fell: bool, t_fall_s: float | None, pertu
         "t_fall_s": None if t_fall_s is None else float(t_fall_s),
         "steady_state_error_vx": steady_state_error(rows, "vx", fell=fell),
         "steady_state_error_vy": steady_state_error(rows, "vy", fell=fell),
+        "steady_state_error_vy_stride": steady_state_error(rows, "vy_stride", fell=fell),
+        "run_error_vx": run_error_vx(rows, fell=fell),
         "convergence_time_s": convergence_time(rows, t_from=perturbation_t_s, fell=fell),
         "mean_vx_last_s": mean_last(rows, "tel_vx" if "tel_vx" in rows.dtype.names else "in_vx"),
         "mean_vy_last_s": mean_last(rows, "tel_vy" if "tel_vy" in rows.dtype.names else "in_vy"),

@@ -51,6 +51,9 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
             ax.plot(t, r.rows[raw], color=c, alpha=0.25, lw=0.6)
             e = metrics.velocity_errors(r.rows)[0 if axis == "vx" else 1]
             ax.plot(t, e + r.rows[f"cmd_{axis}_des"], color=c, lw=1.4, label=f"{r.arm}: step average")
+            if axis == "vy":  # the step average alternates with the sway; the stride does not
+                ax.plot(t, metrics.lateral_stride_error(r.rows) + r.rows["cmd_vy_des"], color=c, lw=1.4,
+                        ls="--", label=f"{r.arm}: stride (2-step) average")
             if r.fell:
                 ax.axvline(r.t_fall_s, color=c, ls=":", lw=1)
         ax.plot(results[0].rows["t"], results[0].rows[f"cmd_{axis}_des"], "k--", lw=1.2, label="command")
@@ -60,6 +63,7 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
         for ax in axes:
             ax.axvline(scenario.perturbation_t_s, color="grey", ls="-.", lw=0.8)
     axes[0].legend(loc="best", fontsize=8)
+    axes[1].legend(loc="best", fontsize=8)
     axes[0].set_title(f"{scenario.name}: velocity vs command (faint: instantaneous)", y=TITLE_Y)
     axes[-1].set_xlabel("t (s)")
     written.append(save("velocity.png", fig, left=0.08, right=0.98, bottom=0.09, top=0.94, hspace=0.08))

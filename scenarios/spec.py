@@ -91,6 +91,8 @@ CHECKABLE_METRICS = (
     "t_fall_s",
     "steady_state_error_vx",
     "steady_state_error_vy",
+    "steady_state_error_vy_stride",
+    "run_error_vx",
     "convergence_time_s",
     "mean_vx_last_s",
     "mean_vy_last_s",

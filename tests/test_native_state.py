@@ -56,19 +56,24 @@ def _corruptions(blob: bytes, other_blob: bytes):
         struct.pack_into(fmt, body, offset, value)
         return with_crc(body)
 
-    weights = 144 + 8 * n_vars
+    values = 208  # header (format version 2: with the stride accumulators at 144..207)
+    weights = values + 8 * n_vars
     yield "truncated", blob[:-1]
     yield "extended", blob + b"\0"
     yield "empty", b""
-    for offset in (0, 9, 20, 70, 100, 144, weights + 3, len(blob) - 2):
+    for offset in (0, 9, 20, 70, 100, 150, 170, values, weights + 3, len(blob) - 2):
         yield f"bit flip at {offset}", blob[:offset] + bytes([blob[offset] ^ 0x10]) + blob[offset + 1:]
     yield "other FMU's state (GUID)", other_blob
     yield "NaN weight, valid checksum", patched(weights + 8, "<d", math.nan)
     yield "NaN time, valid checksum", patched(72, "<d", math.nan)
-    yield "psi_limit out of range, valid checksum", patched(144 + 8 * 11, "<d", 7.0)
+    yield "psi_limit out of range, valid checksum", patched(values + 8 * 11, "<d", 7.0)
     yield "n_neurons not the weights', valid checksum", patched(80, "<I", 7)
     yield "unknown phase, valid checksum", patched(68, "<I", 64)
     yield "step index below -1, valid checksum", patched(88, "<q", -5)
+    yield "format version 1 (before the stride accumulators), valid checksum", patched(8, "<I", 1)
+    yield "stride boundaries beyond 4, valid checksum", patched(144, "<q", 5)
+    yield "negative stride calls, valid checksum", patched(152, "<q", -1)
+    yield "NaN stride mean, valid checksum", patched(184, "<d", math.nan)
 
 
 @FMI
@@ -86,7 +91,7 @@ def test_corrupted_or_foreign_blobs_are_refused_and_change_nothing(native_fmus, 
             s.deserialize(bad)
         assert info.value.status == 3, name
         refused.append(name)
-    assert len(refused) >= 15 and s.serialize(s.get_state()) == before  # nothing changed
+    assert len(refused) >= 21 and s.serialize(s.get_state()) == before  # nothing changed
     s.set_state(s.deserialize(blob))  # and the instance still works
     assert np.all(np.isfinite([s.step(k, u) for k, u in enumerate(seq[10:], start=10)]))
     for slave in (s, other):

@@ -272,6 +272,52 @@ def test_step_average_fallback_for_vy():
     assert ex.tolist() == [0.0] * 6 and ey.tolist() == avg.tolist()
 
 
+def test_stride_average_and_lateral_stride_metrics():
+    steps = np.array([0, 0, 1, 1, 2, 2, 3, 3])
+    step_avg = np.array([0.0, 0.0, 0.2, 0.2, -0.1, -0.1, 0.3, 0.3])
+    # before the second completed step: the step average; then the mean of the last two
+    assert metrics.stride_average(step_avg, steps).tolist() == pytest.approx(
+        [0.0, 0.0, 0.2, 0.2, 0.05, 0.05, 0.1, 0.1])
+    # a lateral step average alternating +-0.06 around the 0.1 command with the sway:
+    # outside the 0.05 band at every step, but the stride error is 0
+    t = np.arange(2000) * 0.005  # 10 s, a step every 0.4 s
+    si = (t // 0.4).astype(int)
+    vy = 0.1 + np.where(si % 2 == 0, 0.06, -0.06)
+    rows = rows_from(t, 0.5, 0.5, vy=vy, vy_des=0.1, step_index=si)
+    _, ey = metrics.velocity_errors(rows)
+    assert np.all(np.abs(ey[t > 1.0]) > 0.05)
+    assert np.all(np.abs(metrics.lateral_stride_error(rows)[t > 1.0]) < 1e-12)
+    assert metrics.steady_state_error(rows, "vy") == pytest.approx(0.06)
+    assert metrics.steady_state_error(rows, "vy_stride") == pytest.approx(0.0, abs=1e-12)
+    # convergence judges the lateral velocity at the stride: settled from the second
+    # completed step (t = 0.8 s) on, where the step average never would be
+    assert metrics.convergence_time(rows) == pytest.approx(0.8)
+    m = metrics.summarize_arm(rows, fell=False, t_fall_s=None)
+    assert m["steady_state_error_vy_stride"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_run_error_vx_after_startup():
+    t = np.arange(2000) * 0.005  # 10 s
+    rows = rows_from(t, np.where(t < 5.0, 0.0, np.where(t < 7.5, 0.6, 0.4)), 0.5)
+    assert metrics.run_error_vx(rows) == pytest.approx(0.1)  # start-up (error 0.5) excluded
+    assert metrics.run_error_vx(rows, startup_s=0.0) == pytest.approx(0.3)
+    assert metrics.run_error_vx(rows, fell=True) is None
+    assert metrics.run_error_vx(rows, startup_s=20.0) is None
+
+
+def test_step_alternation():
+    t = np.arange(12) * 0.5
+    steps = np.arange(12) // 2  # a step change every 2 rows, at t = 1, 2, ..., 5
+    psi = np.where(steps % 2 == 0, 0.1, -0.1) + 0.01 * t  # +-0.1 sway on a ramp
+    rows = rows_from(t, 0.5, 0.5, step_index=steps)
+    import numpy.lib.recfunctions as rfn
+    rows = rfn.append_fields(rows, "out_psi_y", psi, usemask=False)
+    # values at the changes: -0.09, 0.12, -0.07, 0.14, -0.05: |diffs| 0.21 0.19 0.21 0.19
+    assert metrics.step_alternation(rows, "out_psi_y", 0.0, 6.0) == pytest.approx(0.1)
+    assert metrics.step_alternation(rows, "out_psi_y", 0.0, 3.0) is None  # two changes only
+    assert metrics.step_alternation(rows, "out_psi_x", 0.0, 6.0) is None  # no such column
+
+
 def test_summarize_and_checks():
     t = np.arange(2000) * 0.005
     rows = rows_from(t, np.full(2000, 0.52), 0.5)

@@ -250,7 +250,11 @@ static void learn(AvrCore *core, const double *values, double dt, const double r
     int n = core->n;
     double alpha = -V(learning_rate) * dt / (double)n * INV_TAU_RC;
     double lim = V(psi_limit);
-    double err[AVR_N_ROWS] = {V(vx_des) - V(vx), V(vy_des) - V(vy), V(pitch_des) - V(pitch), V(roll_des) - V(roll)};
+    /* x and pitch: this call's error; y and roll: the stride error (avr_core._learning_errors) */
+    int ready = core->stride_boundaries >= AVR_STRIDE_READY;
+    double e_y = ready ? V(vy_des) - 0.5 * (core->vy_mean_prev + core->vy_mean_last) : 0.0;
+    double e_roll = ready ? V(roll_des) - 0.5 * (core->roll_mean_prev + core->roll_mean_last) : 0.0;
+    double err[AVR_N_ROWS] = {V(vx_des) - V(vx), e_y, V(pitch_des) - V(pitch), e_roll};
     for (int r = 0; r < AVR_N_ROWS; ++r) {
         int saturated_outward = (raw[r] >= lim || raw[r] <= -lim) && raw[r] * err[r] < 0.0;
         double coef = saturated_outward ? 0.0 : alpha * err[r];
@@ -293,6 +297,25 @@ static void clip_offsets(double *values, double limit) {
     }
 }
 
+/* The stride accumulators (avr_core._advance_stride): at a change of step_index the step
+ * that ends is closed if it was seen from its start; this call starts the new step's sums. */
+static void advance_stride(AvrCore *c, int64_t si, double vy, double roll) {
+    if (si == c->last_step_index) {
+        c->stride_calls += 1;
+        c->stride_sum_vy = c->stride_sum_vy + vy;
+        c->stride_sum_roll = c->stride_sum_roll + roll;
+        return;
+    }
+    if (c->stride_boundaries >= 2) {
+        double calls = (double)c->stride_calls;
+        c->vy_mean_prev = c->vy_mean_last, c->vy_mean_last = c->stride_sum_vy / calls;
+        c->roll_mean_prev = c->roll_mean_last, c->roll_mean_last = c->stride_sum_roll / calls;
+    }
+    if (c->stride_boundaries < AVR_STRIDE_READY) c->stride_boundaries += 1;
+    c->stride_calls = 1;
+    c->stride_sum_vy = vy, c->stride_sum_roll = roll;
+}
+
 void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) {
     double vx = V(vx), vy = V(vy);
     int64_t si = (int64_t)V(step_index);
@@ -303,6 +326,7 @@ void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) 
         core->pd_y = V(Kp_y) * (vy - V(vy_des)) + V(Kd_y) * (vy - vy_prev);
         core->vx_at_step = vx, core->vy_at_step = vy;
     }
+    advance_stride(core, si, vy, V(roll));
     double pd_pitch = V(Kp_pitch) * (V(pitch) - V(pitch_des)) + V(Kd_pitch) * V(pitch_rate);
     double pd_roll = V(Kp_roll) * (V(roll) - V(roll_des)) + V(Kd_roll) * V(roll_rate);
     double psi[AVR_N_ROWS] = {0.0, 0.0, 0.0, 0.0};

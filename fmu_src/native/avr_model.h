@@ -47,7 +47,14 @@ typedef struct {
     int64_t last_step_index; /* -1 before the first call */
     int64_t n_calls;
     double vx_at_step, vy_at_step, pd_x, pd_y, time_s;
+    /* Stride accumulators of the y and roll learning signal (avr_core.RegulatorState):
+     * step_index changes seen (the first call counts; saturates at AVR_STRIDE_READY),
+     * calls and sums of vy, roll in the current step, means of the last two complete steps. */
+    int64_t stride_boundaries, stride_calls;
+    double stride_sum_vy, stride_sum_roll, vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last;
 } AvrCore;
+
+#define AVR_STRIDE_READY 4 /* stride_boundaries once two steps are complete */
 
 /* SplitMix64 as documented in avr_core.SplitMix64. */
 uint64_t avr_splitmix64_mix(uint64_t z);

@@ -1,7 +1,8 @@
 /*
  * The FMU state of an instance as one self-checking blob (see avr_instance.h).
  *
- * FMU state blob, little-endian, format version 1 (offsets in bytes):
+ * FMU state blob, little-endian, format version 2 (offsets in bytes; version 1, without
+ * the stride accumulators, is refused naming both versions):
  *     0  "AVRNATIV"            magic
  *     8  u32 version           12  u32 total size in bytes
  *    16  GUID, NUL-padded to 48 bytes (a state of another FMU build is refused)
@@ -9,7 +10,10 @@
  *    80  u32 n_neurons of the weights (0: no networks yet)   84  u32 seed of the networks
  *    88  i64 last_step_index   96  i64 n_calls
  *   104  f64 vx_at_step, vy_at_step, pd_x, pd_y, time_s
- *   144  f64 value of every variable, in value-reference order
+ *   144  i64 stride_boundaries (0..4)   152  i64 stride_calls
+ *   160  f64 stride_sum_vy, stride_sum_roll, vy_mean_prev, vy_mean_last, roll_mean_prev,
+ *        roll_mean_last
+ *   208  f64 value of every variable, in value-reference order
  *        f64 weights (4 rows of n_neurons)
  *   end-4: u32 CRC-32 (zlib's) of every byte before it
  * A blob is refused unless its size, checksum, GUID and variable count match and every
@@ -27,10 +31,12 @@
 #include "avr_guid.h"
 
 #define BLOB_MAGIC "AVRNATIV"
-#define BLOB_VERSION 1u
+#define BLOB_VERSION 2u
 #define BLOB_GUID_BYTES 48
-#define BLOB_HEADER 144
+#define BLOB_HEADER 208
 #define N_CORE_DOUBLES 5
+#define STRIDE_OFFSET 144
+#define N_STRIDE_DOUBLES 6
 
 /* zlib's CRC-32 (reflected polynomial 0xEDB88320), table built on the stack per call. */
 static uint32_t crc32(const unsigned char *p, size_t n) {
@@ -108,6 +114,11 @@ static AvrBlob *state_get(const AvrInstance *inst, AvrBlob *reuse) {
         put_u64(p + 96, (uint64_t)c->n_calls);
         const double core[N_CORE_DOUBLES] = {c->vx_at_step, c->vy_at_step, c->pd_x, c->pd_y, c->time_s};
         for (int i = 0; i < N_CORE_DOUBLES; ++i) put_f64(p + 104 + 8 * i, core[i]);
+        put_u64(p + STRIDE_OFFSET, (uint64_t)c->stride_boundaries);
+        put_u64(p + STRIDE_OFFSET + 8, (uint64_t)c->stride_calls);
+        const double stride[N_STRIDE_DOUBLES] = {c->stride_sum_vy, c->stride_sum_roll, c->vy_mean_prev,
+                                                 c->vy_mean_last, c->roll_mean_prev, c->roll_mean_last};
+        for (int i = 0; i < N_STRIDE_DOUBLES; ++i) put_f64(p + STRIDE_OFFSET + 16 + 8 * i, stride[i]);
     }
     for (int vr = 0; vr < AVR_N_VARS; ++vr) put_f64(p + BLOB_HEADER + 8 * vr, inst->values[vr]);
     unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
@@ -128,7 +139,8 @@ static AvrStatus check_frame(const AvrInstance *inst, const char *call, const un
     if (p == NULL || size < blob_size(0) || memcmp(p, BLOB_MAGIC, 8) != 0)
         return avr_refuse(inst, call, "not a serialized state of this FMU (%zu bytes, bad header)", size);
     if (get_u32(p + 8) != BLOB_VERSION)
-        return avr_refuse(inst, call, "state format version %u, this FMU reads %u", (unsigned)get_u32(p + 8),
+        return avr_refuse(inst, call, "state format version %u, this FMU reads %u (version 1 states predate the "
+                          "stride-averaged lateral/roll learning and cannot be continued)", (unsigned)get_u32(p + 8),
                           BLOB_VERSION);
     if (get_u32(p + 12) != size) return avr_refuse(inst, call, "state is %zu bytes, its header says %u", size,
                                                    (unsigned)get_u32(p + 12));
@@ -163,7 +175,10 @@ static AvrStatus check_contents(const AvrInstance *inst, const char *call, const
         return avr_refuse(inst, call, "state's networks do not match its n_neurons and seed");
     if ((int64_t)get_u64(p + 88) < -1 || (int64_t)get_u64(p + 96) < 0)
         return avr_refuse(inst, call, "state has invalid counters");
-    if (!finite_doubles(p + 104, N_CORE_DOUBLES) || !finite_doubles(values + 8 * AVR_N_VARS, (size_t)AVR_N_ROWS * n))
+    int64_t boundaries = (int64_t)get_u64(p + STRIDE_OFFSET), stride_calls = (int64_t)get_u64(p + STRIDE_OFFSET + 8);
+    if (boundaries < 0 || boundaries > AVR_STRIDE_READY || stride_calls < 0 || (boundaries == 0) != (stride_calls == 0))
+        return avr_refuse(inst, call, "state has invalid stride counters");
+    if (!finite_doubles(p + 104, N_CORE_DOUBLES) || !finite_doubles(p + STRIDE_OFFSET + 16, N_STRIDE_DOUBLES) || !finite_doubles(values + 8 * AVR_N_VARS, (size_t)AVR_N_ROWS * n))
         return avr_refuse(inst, call, "state contains non-finite values");
     return AVR_OK;
 }
@@ -206,6 +221,11 @@ static AvrStatus state_set(AvrInstance *inst, const char *call, const AvrBlob *b
         core.n_calls = (int64_t)get_u64(p + 96);
         double *scalars[N_CORE_DOUBLES] = {&core.vx_at_step, &core.vy_at_step, &core.pd_x, &core.pd_y, &core.time_s};
         for (int i = 0; i < N_CORE_DOUBLES; ++i) *scalars[i] = get_f64(p + 104 + 8 * i);
+        core.stride_boundaries = (int64_t)get_u64(p + STRIDE_OFFSET);
+        core.stride_calls = (int64_t)get_u64(p + STRIDE_OFFSET + 8);
+        double *stride[N_STRIDE_DOUBLES] = {&core.stride_sum_vy, &core.stride_sum_roll, &core.vy_mean_prev,
+                                            &core.vy_mean_last, &core.roll_mean_prev, &core.roll_mean_last};
+        for (int i = 0; i < N_STRIDE_DOUBLES; ++i) *stride[i] = get_f64(p + STRIDE_OFFSET + 16 + 8 * i);
         const unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
         for (size_t i = 0; i < (size_t)AVR_N_ROWS * n; ++i) core.weights[i] = get_f64(w + 8 * i);
         avr_adopt(inst, net, &core);
