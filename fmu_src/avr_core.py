@@ -435,6 +435,15 @@ class RegulatorParams:
         return {s.name: getattr(self, s.name) for s in PARAM_SPECS}
 
 
+def params_from_overrides(overrides) -> RegulatorParams:
+    """The default parameters with ``overrides`` (name -> value) applied: the one place
+    that turns a scenario's, a master's or a slave's overrides into parameters.
+
+    Raises :class:`ParameterError` listing every unknown name and every bad value.
+    """
+    return RegulatorParams().replace(**dict(overrides))
+
+
 def validate_params(params: RegulatorParams) -> None:
     """Raise :class:`ParameterError` listing every invalid field of ``params``.
 

@@ -1,8 +1,8 @@
-"""The project's one exceptions module.
+"""The regulator FMU's exceptions (``fmu_src`` is self-contained: numpy only).
 
-It lives in ``fmu_src`` because the FMU must be self-contained (numpy only) and
-the regulator core raises these; ``plant`` and ``scenarios`` import from here too.
-Every error that reports bad input names the field and the allowed range.
+:class:`AvrError` is the base of every error this project raises on purpose;
+``plant.errors`` and ``scenarios.errors`` derive theirs from it, so a caller can catch
+one class.  Every error that reports bad input names the field and the allowed range.
 """
 
 
@@ -29,27 +29,3 @@ class InputError(AvrError, ValueError):
 
 class StateError(AvrError):
     """An FMU state blob cannot be restored (wrong format, size or version)."""
-
-
-class ModelError(AvrError):
-    """The Cassie model cannot be loaded or lacks a joint, actuator or body by name."""
-
-
-class PerturbationError(AvrError, ValueError):
-    """A plant perturbation (mass, COM offset, damping, push, terrain) is invalid."""
-
-
-class ScenarioError(AvrError, ValueError):
-    """A scenario file is invalid; ``problems`` lists every problem at once."""
-
-    def __init__(self, problems, source=None):
-        if isinstance(problems, str):
-            problems = [problems]
-        self.problems = list(problems)
-        self.source = source
-        head = f"{source}: " if source else ""
-        super().__init__(head + f"{len(self.problems)} problem(s):\n  - " + "\n  - ".join(self.problems))
-
-
-class CosimError(AvrError):
-    """The co-simulation master got a non-OK status from the FMU (message has its log)."""

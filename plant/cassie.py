@@ -35,7 +35,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from fmu_src.avr_errors import ModelError
+from plant.errors import ModelError
 
 log = logging.getLogger(__name__)
 

@@ -29,7 +29,8 @@ from typing import Mapping
 
 from fmu_src import avr_fmustate
 from fmu_src.avr_core import VarSpec
-from fmu_src.avr_errors import PerturbationError, StateError
+from fmu_src.avr_errors import StateError
+from plant.errors import PerturbationError
 from plant.controller import OFFSET_KEYS
 from plant.model import NOMINAL_PELVIS_MASS_KG, Perturbation, TerrainSpec, load_model
 from plant.sim import CassieWalker

@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
-from fmu_src.avr_errors import ModelError, PerturbationError
+from plant.errors import ModelError, PerturbationError
 
 log = logging.getLogger(__name__)
 

@@ -39,7 +39,8 @@ from functools import partial
 from pathlib import Path
 from typing import Any, Sequence
 
-from fmu_src.avr_errors import AvrError, ScenarioError
+from fmu_src.avr_errors import AvrError
+from scenarios.errors import ScenarioError
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_FMU = REPO_ROOT / "dist" / "AdaptiveVelocityRegulator.fmu"

@@ -41,7 +41,7 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from fmu_src.avr_errors import CosimError, ScenarioError
+from scenarios.errors import CosimError, ScenarioError
 from scenarios.spec import Arm, Scenario
 
 log = logging.getLogger(__name__)

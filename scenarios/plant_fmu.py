@@ -21,7 +21,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, Mapping
 
-from fmu_src.avr_errors import CosimError
+from scenarios.errors import CosimError
 from plant.controller import OFFSET_KEYS
 from plant.fmu_core import INPUT_NAMES, MODEL_FILES, PLANT_STEP_S, values_from_perturbation
 from scenarios.master import FmuRegulator, _LOG_ROUTES, _shared_callbacks

@@ -77,7 +77,7 @@ def _file_stamp(model: str) -> tuple | None:
 @functools.lru_cache(maxsize=16)
 def _base_model_check(model: str, stamp: tuple | None) -> tuple[float | None, str | None]:
     """(pelvis mass, None) when ``model`` loads as a Cassie, else (None, the reason)."""
-    from fmu_src.avr_errors import ModelError
+    from plant.errors import ModelError
     from plant.model import load_model, model_summary
 
     try:

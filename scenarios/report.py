@@ -16,7 +16,8 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from fmu_src.avr_errors import AvrError, ScenarioError
+from fmu_src.avr_errors import AvrError
+from scenarios.errors import ScenarioError
 from scenarios.output import TABLE_COLUMNS, fmt, incomplete_arms, table_rows
 from scenarios.output import verdict as output_verdict
 

@@ -77,7 +77,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
-from fmu_src.avr_errors import ScenarioError
+from scenarios.errors import ScenarioError
 
 #: The plant's integration step (Cassie's 2 kHz); the master re-checks it against
 #: ``plant.sim.SIM_DT_S`` when it runs.

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmu_src.avr_errors import ScenarioError
+from scenarios.errors import ScenarioError
 from scenarios import spec as scenario_spec
 from scenarios.campaign import analysis, sampling, spec, tomlw
 from scenarios.campaign.store import CampaignDir, CampaignDirError, TIMING_COLUMNS

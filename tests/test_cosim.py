@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmu_src.avr_errors import CosimError, ScenarioError
+from scenarios.errors import CosimError, ScenarioError
 from scenarios import master, spec
 
 REPO_ROOT = Path(__file__).resolve().parents[1]

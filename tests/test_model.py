@@ -5,7 +5,7 @@ import mujoco
 import numpy as np
 import pytest
 
-from fmu_src.avr_errors import ModelError, PerturbationError
+from plant.errors import ModelError, PerturbationError
 from plant.model import (
     ACTUATOR_NAMES, HOME_KEY, JOINT_NAMES, PELVIS_BODY, TERRAIN_GEOM, Perturbation,
     TerrainSpec, generate_terrain, load_model, model_summary, osu_model_path,

@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from fmu_src import avr_core
-from fmu_src.avr_errors import ScenarioError
+from scenarios.errors import ScenarioError
 from scenarios import metrics, output, report, spec
 
 REPO_ROOT = Path(__file__).resolve().parents[1]

@@ -13,7 +13,7 @@ import logging
 import sys
 from pathlib import Path
 
-from fmu_src.avr_errors import ScenarioError
+from scenarios.errors import ScenarioError
 
 log = logging.getLogger("scenarios.campaign")
 

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from fmu_src.avr_errors import ScenarioError
+from scenarios.errors import ScenarioError
 from scenarios import spec as scenario_spec
 from scenarios.campaign import factors as fx
 from scenarios.campaign import tomlw

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
 
-from fmu_src.avr_errors import ScenarioError
+from scenarios.errors import ScenarioError
 from scenarios import spec as scenario_spec
 from scenarios.campaign import factors as fx
 from scenarios.spec import _integer, _number, _Problems, _show, _string, _unknown_keys
