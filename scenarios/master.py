@@ -42,7 +42,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from scenarios.errors import CosimError, ScenarioError
-from scenarios.spec import Arm, Scenario
+from scenarios.scenario import Arm, Scenario
 
 log = logging.getLogger(__name__)
 

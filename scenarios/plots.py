@@ -12,7 +12,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from scenarios import metrics
-from scenarios.spec import Scenario
+from scenarios.scenario import Scenario
 
 PLOTS = ("velocity.png", "psi.png", "torso.png")
 PSI_NAMES = ("psi_x", "psi_y", "psi_pitch", "psi_roll")

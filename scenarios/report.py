@@ -18,10 +18,13 @@ from typing import Any
 
 from fmu_src.avr_errors import AvrError
 from scenarios.errors import ScenarioError
+from scenarios.formatting import show
 from scenarios.output import TABLE_COLUMNS, fmt, incomplete_arms, table_rows
 from scenarios.output import verdict as output_verdict
 
 log = logging.getLogger(__name__)
+#: Claim values in the report: 4 significant digits.
+REPORT_FLOAT_FORMAT = ".4g"
 
 
 def collect(out_dir: Path) -> list[tuple[str, dict[str, Any] | None, str | None]]:
@@ -65,11 +68,7 @@ def _md_escape(text: str) -> str:
 
 
 def _num(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    return "null" if v is None else str(v)
+    return show(v, REPORT_FLOAT_FORMAT, none="null", quote=False)
 
 
 def _plant_line(s: dict[str, Any]) -> str:

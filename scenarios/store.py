@@ -32,7 +32,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 from fmu_src.avr_errors import AvrError
 from scenarios import output
-from scenarios.spec import Scenario
+from scenarios.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
