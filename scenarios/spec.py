@@ -7,6 +7,10 @@ regulator parameter overrides (by FMU variable name), the arms to compare
 (e.g. ``adaptive`` vs ``pd_only``) and the paper's claim with machine-checkable
 checks for the report.
 
+The file is read by section parsers (:mod:`scenarios.sections`) into the model of
+:mod:`scenarios.scenario`. Each rule is checked in one place: regulator overrides by the
+regulator core (``params_from_overrides``), perturbation and terrain ranges by the
+plant (``Perturbation.problems``); the time grid, the schedule and the arms here.
 Every problem in a file is collected and reported at once (``ScenarioError.problems``),
 each naming its field, e.g. ``push[1].duration_s = -0.1: must be > 0``; a file that
 cannot be read (missing, a directory, not UTF-8) is one problem naming it. Scenario
@@ -76,7 +80,9 @@ from typing import Any, Mapping
 from scenarios import plantio, sections
 from scenarios.errors import ScenarioError
 from scenarios.fields import Problems, did_you_mean, number, on_grid
-from scenarios.scenario import Scenario
+# the scenario model is re-exported: callers build and read scenarios as spec.Scenario, spec.Push, ...
+from scenarios.scenario import (Arm, Claim, ClaimCheck, CommandPoint, Push, Scenario, Terrain,  # noqa: F401
+                                DEFAULT_COMM_STEP_S, BUILTIN_MODELS)
 from scenarios.sections import resolve_model
 
 SUITE_DIR = Path(__file__).resolve().parent / "suite"
