@@ -103,7 +103,7 @@ def header(doc: Mapping[str, Any], base_dir: Path | None, probs: Problems) -> tu
     out["comm_step_s"], out["duration_s"] = grid.h, grid.duration
     model = string(doc, "model", "model", probs, default=DEFAULT_MODEL)
     out["model"] = resolve_model(model, base_dir, probs) if isinstance(doc.get("model", ""), str) else model
-    out["seed"] = integer(doc, "seed", "seed", probs, required=True, default=0, ge=0)  # seeds are explicit
+    out["seed"] = integer(doc, "seed", "seed", probs, required=True, default=0)  # seeds are explicit; range: arms
     pert_t = number(doc, "perturbation_t_s", "perturbation_t_s", probs, default=0.0, ge=0.0)
     grid.check_before_end(pert_t, "perturbation_t_s", probs)
     out["perturbation_t_s"] = pert_t
@@ -216,14 +216,15 @@ def regulator_param_specs() -> dict[str, Any]:
 
 def overrides(raw: Any, field: str, probs: Problems) -> dict[str, Any]:
     """FMU parameter overrides checked by the regulator core, one by one so each problem
-    names its field; returns the core's normalised values of the good ones."""
+    names its field (``field.name``; ``name`` alone for top-level keys, ``field = ""``);
+    returns the core's normalised values of the good ones."""
     if not isinstance(raw, dict):
         probs.add(field, raw, "must be a table of FMU parameter overrides")
         return {}
     known = regulator_param_specs()
     out: dict[str, Any] = {}
     for key, v in raw.items():
-        f = f"{field}.{key}"
+        f = f"{field}.{key}" if field else key
         if key not in known:
             probs.note(f, "unknown regulator parameter" + did_you_mean(key, known, "; see the FMU's parameters "
                                                                                "(PARAM_SPECS)"))
@@ -250,8 +251,8 @@ def arms(doc: Mapping[str, Any], seed: int | None, probs: Problems) -> tuple[tup
     base = overrides(doc.get("regulator", {}), "regulator", probs)
     if "seed" in base and "seed" in doc:
         probs.note("regulator.seed", "the regulator's seed comes from the top-level `seed`; give it once")
-    if "seed" not in base and seed is not None:
-        base["seed"] = seed
+    if "seed" not in base and seed is not None:  # the top-level seed is the regulator's `seed`
+        base.update(overrides({"seed": seed}, "", probs))
     defined = _defined_arms(doc, base, probs)
     names = _compare(doc, defined, probs) if "compare" in doc else (list(defined) or ["adaptive"])
     builtin = {"adaptive": base, "pd_only": {**base, "adaptation_enabled": False}}

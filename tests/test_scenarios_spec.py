@@ -203,6 +203,21 @@ def test_perturbation_checked_by_the_plant_and_terrain():
     assert not any("max_height_m=" in p for p in probs)  # the missing key is reported once
 
 
+def test_plant_ranges_reported_with_every_other_problem():
+    # the plant's ranges are checked while the file is read, not only once it is otherwise valid
+    probs = problems_of("torso_mass_kg = 150.0\n" + GOOD.replace('name = "tiny"', 'name = "Bad"'))
+    assert any(p.startswith("name = 'Bad'") for p in probs)
+    assert any(p.startswith("perturbation: torso_mass_kg=150.0 is out of range (0, 100]") for p in probs)
+
+
+def test_seed_and_arm_names_checked_once_in_their_place():
+    # the top-level seed is the regulator's `seed`: the core's range, named as the file's field
+    assert problems_of(GOOD.replace("seed = 3", "seed = 3000000000")) == [
+        "seed = 3000000000: must be an integer in [0, 2147483647]"]
+    # an [[arm]] with an empty name is an error, not silently dropped
+    assert problems_of(GOOD + '[[arm]]\nname = ""\n') == ["arm[0].name = '': must match [a-z0-9][a-z0-9_-]*"]
+
+
 def test_model_path_and_missing_file(tmp_path):
     probs = problems_of('model = "no/such/model.xml"\n' + GOOD)
     assert any(p.startswith("model = 'no/such/model.xml'") for p in probs)
