@@ -1,16 +1,9 @@
 """The co-simulation master: the MuJoCo Cassie plant closed around the regulator.
 
-One loop (:func:`run_arm`) drives the plant and a :class:`RegulatorPath`; two paths
-implement that interface with the same data flow:
-
-- :class:`FmuRegulator`: the FMI 2.0 co-simulation FMU through fmpy's ``FMU2Slave``
-  (extract, read the model description, instantiate with a logger that collects the
-  FMU's messages, set parameters by name with type-correct calls, setupExperiment,
-  enter/exit initialization mode, doStep; terminate/freeInstance in ``finally``; any
-  non-OK status raises :class:`CosimError` carrying the FMU's log);
-- :class:`InProcessRegulator`: the numpy regulator core called directly.
-
-Both give bit-identical trajectories for the same scenario and seed.
+One loop (:func:`run_arm`) drives the plant and a
+:class:`~scenarios.regulators.RegulatorPath` (the FMU, or the core in-process: see
+:mod:`scenarios.regulators`; both give bit-identical trajectories for the same
+scenario and seed).
 
 Per communication step ``k`` (time ``t = t0 + k*h`` from the integer counter; never
 ``t += h``): the command schedule and the pushes in force over ``[t, t+h)`` are applied
@@ -27,13 +20,8 @@ the step).
 """
 from __future__ import annotations
 
-import abc
-import itertools
 import logging
 import math
-import os
-import shutil
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,381 +29,22 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from plant.constants import OFFSET_NAMES
 from scenarios.errors import CosimError, ScenarioError
-from scenarios.spec import Arm, Scenario
+# the regulator paths are re-exported: the benchmarks and tests know them as master.*
+from scenarios.regulators import FmuRegulator, InProcessRegulator, RegulatorPath, make_regulator  # noqa: F401
+from scenarios.scenario import Arm, Scenario
 
 log = logging.getLogger(__name__)
 
-#: The regulator outputs that go to the walker (virtual-constraint offsets, rad).
-DELTA_NAMES = (
-    "delta_swing_hip_pitch", "delta_swing_knee", "delta_swing_hip_roll",
-    "delta_stance_hip_roll", "delta_stance_hip_pitch", "delta_stance_knee",
-)
 #: Regulator inputs sensed on the plant (vx_des/vy_des come from the command schedule).
 SENSED_INPUTS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
-REGULATORS = ("fmu", "native", "inprocess")
-_FMI_STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
-_LOG_KEEP = 200
-
-# fmpy's native logger proxy (which formats the FMU's printf-style messages) keeps ONE
-# process-wide pointer to the Python logger it forwards to, whichever callbacks struct
-# was registered last; a per-instance logger that is garbage-collected leaves it dangling
-# and the next FMU message from any instance crashes the process.  So there is one
-# logger for the whole process, alive as long as the module, routing messages by
-# instance name; names it does not know are printed as fmpy's default logger does.
-_LOG_ROUTES: dict[str, list[str]] = {}
-_INSTANCE_IDS = itertools.count(1)
-_SHARED_CALLBACKS = None
+#: Progress is reported every this many communication steps.
+PROGRESS_EVERY = 200
+#: How close ``h / sim_dt`` must be to a whole number (in plant steps).
+WHOLE_STEPS_TOL = 1e-6
 
 
-def _route_fmu_message(component, instance_name, status, category, message) -> None:
-    label = _FMI_STATUS[status] if 0 <= status < len(_FMI_STATUS) else str(status)
-    name = instance_name.decode("utf-8", "replace") if isinstance(instance_name, bytes) else str(instance_name)
-    text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
-    cat = category.decode("utf-8", "replace") if isinstance(category, bytes) else str(category)
-    messages = _LOG_ROUTES.get(name)
-    if messages is None:
-        log.info("[%s] %s %s: %s", label, name, cat, text)
-        return
-    messages.append(f"[{label}] {cat}: {text}")
-    del messages[:-_LOG_KEEP]
-
-
-def _shared_callbacks():
-    """The process-lifetime fmi2CallbackFunctions with the routing logger."""
-    global _SHARED_CALLBACKS
-    if _SHARED_CALLBACKS is None:
-        from ctypes import byref
-
-        from fmpy import calloc, free
-        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                               fmi2CallbackLoggerTYPE)
-
-        callbacks = fmi2CallbackFunctions()
-        callbacks.logger = fmi2CallbackLoggerTYPE(_route_fmu_message)
-        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        try:
-            from fmpy.logging import addLoggerProxy
-
-            addLoggerProxy(byref(callbacks))
-        except Exception as exc:  # pragma: no cover - fmpy's native proxy is optional
-            log.warning("fmpy logger proxy unavailable (%s): FMU messages are not formatted", exc)
-        _SHARED_CALLBACKS = callbacks
-    return _SHARED_CALLBACKS
-
-
-# =========================================================================== regulator paths
-class RegulatorPath(abc.ABC):
-    """One way of running the regulator; the loop talks to nothing else.
-
-    Life cycle: ``start(parameters, t0, t_stop)`` once, ``step(t, h, inputs)`` per
-    communication step (``inputs`` keyed by the FMU input names, Real inputs as float,
-    ``step_index`` as int; returns every output by name), ``close()`` always.
-    """
-
-    kind: str = ""
-
-    @abc.abstractmethod
-    def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None: ...
-
-    @abc.abstractmethod
-    def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]: ...
-
-    @abc.abstractmethod
-    def output_names(self) -> tuple[str, ...]: ...
-
-    @abc.abstractmethod
-    def close(self) -> None: ...
-
-    def __enter__(self) -> "RegulatorPath":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-
-def _core():
-    from fmu_src import avr_core
-
-    return avr_core
-
-
-def _spec_type(spec) -> str:
-    kind = str(spec.type).lower()
-    return "Boolean" if kind.startswith("bool") else "Integer" if kind.startswith("int") else "Real"
-
-
-_CASTS: dict[str, Callable[[Any], Any]] = {"Real": float, "Integer": int, "Boolean": bool}
-
-
-class InProcessRegulator(RegulatorPath):
-    """The regulator core called directly, with the FMU's data flow and casts."""
-
-    kind = "inprocess"
-
-    def __init__(self) -> None:
-        self._core = _core()
-        self._input_types = [(s.name, _CASTS[_spec_type(s)]) for s in self._core.INPUT_SPECS]
-        self._outputs = tuple(s.name for s in self._core.OUTPUT_SPECS)
-        self._step_fn: Callable[[Any, float], dict] | None = None
-
-    def output_names(self) -> tuple[str, ...]:
-        return self._outputs
-
-    def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
-        core = self._core
-        types = {s.name: _CASTS[_spec_type(s)] for s in core.PARAM_SPECS}
-        unknown = sorted(set(parameters) - set(types))
-        if unknown:
-            raise CosimError(f"unknown regulator parameter(s): {', '.join(unknown)}")
-        values = {s.name: s.default for s in core.PARAM_SPECS}
-        values.update(parameters)
-        params = core.RegulatorParams(**{n: types[n](v) for n, v in values.items()})
-        core.validate_params(params)
-        self._step_fn = core.Regulator(params).step
-
-    def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
-        reg_in = self._core.RegulatorInputs(**{n: cast(inputs[n]) for n, cast in self._input_types})
-        out = self._step_fn(reg_in, float(h))
-        return {n: float(out[n]) for n in self._outputs}
-
-    def close(self) -> None:
-        self._step_fn = None
-
-
-class FmuRegulator(RegulatorPath):
-    """The FMU through fmpy's FMU2Slave; every FMI call's status is checked."""
-
-    kind = "fmu"
-
-    def __init__(self, fmu_path: str | Path, instance_name: str = "avr", *, unpack_dir: str | Path | None = None) -> None:
-        """``unpack_dir``: the folder under which :meth:`start` extracts the FMU (a fresh
-        subfolder, removed by :meth:`close`); None: the system temp folder."""
-        from fmpy import read_model_description
-
-        self.fmu_path = Path(fmu_path)
-        if not self.fmu_path.is_file():
-            raise CosimError(f"FMU not found: {self.fmu_path}")
-        self.instance_name = f"{instance_name}-{next(_INSTANCE_IDS)}"  # unique: log messages are routed by it
-        self.md = read_model_description(str(self.fmu_path))
-        if self.md.fmiVersion != "2.0" or self.md.coSimulation is None:
-            raise CosimError(f"{self.fmu_path}: not an FMI 2.0 co-simulation FMU")
-        self.vars = {v.name: v for v in self.md.modelVariables}
-        self._outputs = tuple(v.name for v in self.md.modelVariables if v.causality == "output")
-        self.messages: list[str] = []
-        self._fmu = None
-        self._unpack_dir = unpack_dir
-        self._unzip: str | None = None
-        self._instantiated = False
-        self._initialized = False
-        self._t: float | None = None  # the communication point being computed (for messages)
-
-    def output_names(self) -> tuple[str, ...]:
-        return self._outputs
-
-    # ---- logging and status
-    def log_text(self) -> str:
-        return "\n".join(self.messages) if self.messages else "(the FMU logged nothing)"
-
-    def _fail(self, what: str, detail: str) -> CosimError:
-        if self._t is not None:
-            what = f"{what} at t = {self._t!r} s"
-        return CosimError(f"{what} failed: {detail}\nFMU log ({self.fmu_path.name}):\n{self.log_text()}")
-
-    def _call(self, what: str, fn, *args):
-        from fmpy.fmi1 import FMICallException
-
-        try:
-            status = fn(*args)
-        except FMICallException as exc:
-            raise self._fail(what, str(exc)) from None
-        except CosimError:
-            raise
-        except Exception as exc:  # instantiate raises a bare Exception on NULL
-            raise self._fail(what, f"{type(exc).__name__}: {exc}") from None
-        if status:  # None (instantiate) or fmi2OK == 0 pass; Warning and worse do not
-            raise self._status_error(what, status)
-        return status
-
-    def _status_error(self, what: str, status: int) -> CosimError:
-        label = _FMI_STATUS[status] if 0 <= status < len(_FMI_STATUS) else str(status)
-        return self._fail(what, f"status {label}")
-
-    # ---- life cycle
-    def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
-        from ctypes import c_double, c_int
-
-        from fmpy import extract
-        from fmpy.fmi2 import FMU2Slave
-
-        problems = []
-        for name, value in parameters.items():
-            var = self.vars.get(name)
-            if var is None:
-                problems.append(f"{name}: the FMU has no such variable")
-            elif var.causality != "parameter":
-                problems.append(f"{name}: causality {var.causality}, not a parameter")
-        if problems:
-            raise CosimError("cannot set FMU parameters: " + "; ".join(problems))
-
-        # the folder is ours before anything is extracted: close() removes it whatever fails next
-        self._unzip = tempfile.mkdtemp(prefix="fmu-", dir=self._unpack_dir)
-        extract(str(self.fmu_path), self._unzip)
-        self._callbacks = _shared_callbacks()
-        _LOG_ROUTES[self.instance_name] = self.messages
-        cwd = os.getcwd()
-        try:
-            self._fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip,
-                                  modelIdentifier=self.md.coSimulation.modelIdentifier,
-                                  instanceName=self.instance_name)
-        finally:  # fmpy 0.3 changes into binaries/<platform> to load the library and stays there if that fails
-            os.chdir(cwd)
-        self._call("fmi2Instantiate", lambda: self._fmu.instantiate(callbacks=self._callbacks, loggingOn=True))
-        self._instantiated = True
-        comp = self._fmu.component
-
-        # parameters, grouped by type (value references from the model description)
-        by_type: dict[str, tuple[list[int], list[Any]]] = {"Real": ([], []), "Integer": ([], []), "Boolean": ([], [])}
-        for name, value in parameters.items():
-            var = self.vars[name]
-            vrs, vals = by_type[var.type]
-            vrs.append(var.valueReference)
-            vals.append(_CASTS[var.type](value))
-        self._set("fmi2SetReal (parameters)", "Real", *by_type["Real"])
-        self._set("fmi2SetInteger (parameters)", "Integer", *by_type["Integer"])
-        self._set("fmi2SetBoolean (parameters)", "Boolean", *by_type["Boolean"])
-
-        self._call("fmi2SetupExperiment", self._fmu.fmi2SetupExperiment, comp, 0, 0.0, float(t0), 1, float(t_stop))
-        self._call("fmi2EnterInitializationMode", self._fmu.fmi2EnterInitializationMode, comp)
-        self._call("fmi2ExitInitializationMode", self._fmu.fmi2ExitInitializationMode, comp)
-        self._initialized = True
-
-        # preallocated ctypes buffers for the per-step calls
-        inputs = [v for v in self.md.modelVariables if v.causality == "input"]
-        self._in_real = [v.name for v in inputs if v.type == "Real"]
-        self._in_int = [v.name for v in inputs if v.type == "Integer"]
-        self._in_bool = [v.name for v in inputs if v.type == "Boolean"]
-        if self._in_bool:
-            raise CosimError(f"unexpected Boolean inputs: {self._in_bool}")
-        self._vr_in_real = self._vr_array([self.vars[n].valueReference for n in self._in_real])
-        self._val_in_real = (c_double * len(self._in_real))()
-        self._vr_in_int = self._vr_array([self.vars[n].valueReference for n in self._in_int])
-        self._val_in_int = (c_int * len(self._in_int))()
-        outs = [self.vars[n] for n in self._outputs]
-        if any(v.type != "Real" for v in outs):
-            raise CosimError("every FMU output must be Real: " + ", ".join(v.name for v in outs if v.type != "Real"))
-        self._vr_out = self._vr_array([v.valueReference for v in outs])
-        self._val_out = (c_double * len(outs))()
-        self._first_step = True
-        self._bind_step_calls()
-
-    def _bind_step_calls(self) -> None:
-        """The four per-step FMI functions as ctypes prototypes on the loaded library,
-        called directly by :meth:`step`, which checks their statuses (fmpy's Python
-        wrapper around each call cost about 1.5 us, 5 us a step). :meth:`close` drops
-        them before the library is unloaded."""
-        from ctypes import CFUNCTYPE, POINTER, c_double, c_int, c_size_t, c_uint, c_void_p
-
-        dll = self._fmu.dll
-        reals = CFUNCTYPE(c_int, c_void_p, POINTER(c_uint), c_size_t, POINTER(c_double))
-        ints = CFUNCTYPE(c_int, c_void_p, POINTER(c_uint), c_size_t, POINTER(c_int))
-        self._set_real = reals(("fmi2SetReal", dll))
-        self._get_real = reals(("fmi2GetReal", dll))
-        self._set_int = ints(("fmi2SetInteger", dll))
-        self._do_step = CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_int)(("fmi2DoStep", dll))
-
-    @staticmethod
-    def _vr_array(vrs: list[int]):
-        from fmpy.fmi2 import fmi2ValueReference
-
-        return (fmi2ValueReference * len(vrs))(*vrs)
-
-    def _set(self, what: str, kind: str, vrs: list[int], vals: list[Any]) -> None:
-        if not vrs:
-            return
-        from ctypes import c_double, c_int
-
-        arr_vr = self._vr_array(vrs)
-        if kind == "Real":
-            self._call(what, self._fmu.fmi2SetReal, self._fmu.component, arr_vr, len(vrs), (c_double * len(vals))(*vals))
-        elif kind == "Integer":
-            self._call(what, self._fmu.fmi2SetInteger, self._fmu.component, arr_vr, len(vrs), (c_int * len(vals))(*vals))
-        else:
-            self._call(what, self._fmu.fmi2SetBoolean, self._fmu.component, arr_vr, len(vrs),
-                       (c_int * len(vals))(*[1 if v else 0 for v in vals]))
-
-    def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
-        comp = self._fmu.component
-        self._t = t
-        vals = self._val_in_real
-        for i, n in enumerate(self._in_real):
-            vals[i] = float(inputs[n])
-        int_changed = self._first_step
-        for i, n in enumerate(self._in_int):
-            v = int(inputs[n])
-            if v != self._val_in_int[i]:
-                self._val_in_int[i] = v
-                int_changed = True
-        try:
-            if self._in_real:
-                status = self._set_real(comp, self._vr_in_real, len(self._in_real), vals)
-                if status:
-                    raise self._status_error("fmi2SetReal (inputs)", status)
-            if self._in_int and int_changed:  # step_index changes once a walking step: FMU inputs keep their value
-                status = self._set_int(comp, self._vr_in_int, len(self._in_int), self._val_in_int)
-                if status:
-                    raise self._status_error("fmi2SetInteger (inputs)", status)
-            self._first_step = False
-            status = self._do_step(comp, t, h, 1)
-            if status:
-                raise self._status_error("fmi2DoStep", status)
-            status = self._get_real(comp, self._vr_out, len(self._outputs), self._val_out)
-            if status:
-                raise self._status_error("fmi2GetReal (outputs)", status)
-        except CosimError:
-            raise
-        except Exception as exc:  # a ctypes argument error: never a traceback without the FMU log
-            raise self._fail("FMI call", f"{type(exc).__name__}: {exc}") from None
-        return dict(zip(self._outputs, self._val_out))
-
-    def close(self) -> None:
-        fmu = self._fmu
-        self._fmu = None
-        self._set_real = self._get_real = self._set_int = self._do_step = None
-        try:
-            if fmu is not None and self._instantiated:
-                if self._initialized:
-                    try:
-                        fmu.fmi2Terminate(fmu.component)
-                    except Exception as exc:  # keep freeing: the instance must not leak
-                        log.warning("fmi2Terminate failed: %s", exc)
-                try:
-                    fmu.freeInstance()
-                except Exception as exc:
-                    log.warning("fmi2FreeInstance failed: %s", exc)
-        finally:
-            self._instantiated = self._initialized = False
-            if _LOG_ROUTES.get(self.instance_name) is self.messages:
-                del _LOG_ROUTES[self.instance_name]
-            if self._unzip is not None:
-                shutil.rmtree(self._unzip, ignore_errors=True)
-                self._unzip = None
-
-
-def make_regulator(kind: str, fmu_path: str | Path | None = None, *,
-                   unpack_dir: str | Path | None = None) -> RegulatorPath:
-    """``unpack_dir``: where an FMU is extracted (see :class:`FmuRegulator`)."""
-    if kind in ("fmu", "native"):  # the pythonfmu or the native FMI 2.0 FMU: the same FMI path
-        if fmu_path is None:
-            raise CosimError(f"the {kind} regulator path needs an FMU file (fmu_path)")
-        return FmuRegulator(fmu_path, unpack_dir=unpack_dir)
-    if kind == "inprocess":
-        return InProcessRegulator()
-    raise CosimError(f"regulator = {kind!r}: must be one of {', '.join(REGULATORS)}")
-
-
-# =========================================================================== the loop
 @dataclass(frozen=True, eq=False)
 class ArmResult:
     """One arm of one scenario: the trajectory and how the run ended.
@@ -461,7 +90,7 @@ TIMINGS = {
 def plant_steps_per_comm(h: float, sim_dt: float) -> int:
     """``h / sim_dt`` as an int; ScenarioError unless it is a whole number >= 1."""
     n = h / sim_dt
-    if not (math.isfinite(n) and n >= 1 - 1e-9 and abs(n - round(n)) < 1e-6):
+    if not (math.isfinite(n) and n >= 1 - 1e-9 and abs(n - round(n)) < WHOLE_STEPS_TOL):
         raise ScenarioError([f"comm_step_s = {h:g}: must be a whole multiple of the plant step {sim_dt:g} s"])
     return int(round(n))
 
@@ -536,7 +165,7 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     walker = CassieWalker(model) if plant is None else plant(scenario, model)  # its own copy of the model
     n_plant = plant_steps_per_comm(scenario.comm_step_s, float(walker.SIM_DT_S))
     outputs = regulator.output_names()
-    missing = [n for n in DELTA_NAMES if n not in outputs]
+    missing = [n for n in OFFSET_NAMES if n not in outputs]
     if missing:
         raise CosimError(f"the regulator has no output(s) {', '.join(missing)}")
     steps = _Steps()
@@ -550,8 +179,8 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
         regulator.close()
         if hasattr(walker, "close"):
             walker.close()
-    if progress is not None and steps.done % 200:
-        progress(steps.done % 200)
+    if progress is not None and steps.done % PROGRESS_EVERY:
+        progress(steps.done % PROGRESS_EVERY)
     rows = steps.recorder.rows(steps.done) if steps.recorder is not None else np.zeros(0, dtype=[("t", "f8")])
     _lap(timings, "finish_s", lap)
     wall = time.perf_counter() - wall0
@@ -598,7 +227,7 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
             c0 = clock()
             out = regulator.step(t, h, inputs)
             c1 = clock()
-            walker.set_offsets({n: out[n] for n in DELTA_NAMES})
+            walker.set_offsets({n: out[n] for n in OFFSET_NAMES})
             if table is None:
                 steps.recorder = _Recorder(n_steps, _row_dtype(outputs, sensed, tel))
                 table = steps.recorder.table
@@ -612,8 +241,8 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
             record_s += c3 - c2
             plant_s += c4 - c3
             steps.done += 1
-            if progress is not None and (steps.done % 200 == 0):
-                progress(200)
+            if progress is not None and (steps.done % PROGRESS_EVERY == 0):
+                progress(PROGRESS_EVERY)
             if walker.fell():
                 steps.fell, steps.t_fall = True, t0 + (k + 1) * h
                 steps.reason = str(getattr(walker, "fall_reason", "") or "") or None

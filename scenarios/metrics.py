@@ -24,6 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from scenarios.formatting import show
+
 #: Convergence band on the step-averaged velocity error (m/s).
 CONVERGENCE_TOL_MPS = 0.05
 #: The steady-state window at the end of a run (s).
@@ -266,7 +268,7 @@ def evaluate_check(check: dict[str, Any], arms: dict[str, dict[str, Any]]) -> di
     """
     arm, metric, op = check["arm"], check["metric"], check["op"]
     other = check.get("other_arm")
-    rhs_label = f"{other}.{metric}" if other else _show(check.get("value"))
+    rhs_label = f"{other}.{metric}" if other else show(check.get("value"), quote=False)
     text = f"{arm}.{metric} {op} {rhs_label}"
     lhs = arms.get(arm, {}).get(metric) if arm in arms else None
     if other:
@@ -280,10 +282,3 @@ def evaluate_check(check: dict[str, Any], arms: dict[str, dict[str, Any]]) -> di
     ok = bool(_OPS[op](lhs, rhs))
     return {"verdict": "pass" if ok else "miss", "lhs": lhs, "rhs": rhs, "text": text}
 
-
-def _show(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return f"{v:g}"
-    return str(v)

@@ -29,8 +29,9 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from scenarios import metrics
+from scenarios.formatting import YES_NO, is_number, show
 from scenarios.plots import PLOTS, write_plots
-from scenarios.spec import CHECK_OPS, CHECKABLE_METRICS, Scenario
+from scenarios.scenario import CHECK_OPS, CHECKABLE_METRICS, Scenario
 
 log = logging.getLogger(__name__)
 
@@ -240,13 +241,8 @@ def table_rows(summary: Mapping[str, Any]) -> list[dict[str, Any]]:
 
 
 def fmt(v: Any, digits: int = 3) -> str:
-    if v is None:
-        return "-"
-    if isinstance(v, bool):
-        return "yes" if v else "no"
-    if isinstance(v, float):
-        return f"{v:.{digits}f}"
-    return str(v)
+    """A table cell: ``digits`` decimals, yes/no, ``-`` for a missing value."""
+    return show(v, f".{digits}f", none="-", bools=YES_NO, quote=False)
 
 
 #: (summary key, column header, decimals) of the table printed by the CLI and the report.
@@ -286,11 +282,7 @@ class _Kind:
         self.ok, self.allowed, self.items, self.keys, self.required = ok, allowed, items, keys, required
 
 
-def _num(v: Any) -> bool:
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
-
-
-NUM = _Kind(_num, "a number")
+NUM = _Kind(is_number, "a number")
 INT = _Kind(lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer")
 STR = _Kind(lambda v: isinstance(v, str), "a string")
 ANY_OBJECT = _Kind(lambda v: isinstance(v, dict), "an object")
@@ -318,8 +310,8 @@ def _map(item: _Kind) -> _Kind:
     return _Kind(lambda v: isinstance(v, dict) and all(isinstance(k, str) for k in v), "an object", items=item)
 
 
-_METRIC = _Kind(lambda v: v is None or isinstance(v, bool) or _num(v), "a number, true/false or null")
-_VEC3 = _Kind(lambda v: isinstance(v, list) and len(v) == 3 and all(map(_num, v)), "a list of 3 numbers")
+_METRIC = _Kind(lambda v: v is None or isinstance(v, bool) or is_number(v), "a number, true/false or null")
+_VEC3 = _Kind(lambda v: isinstance(v, list) and len(v) == 3 and all(map(is_number, v)), "a list of 3 numbers")
 _ARM = _obj("status", status=_one_of(*ARM_STATUSES), error=_opt(STR), fall_reason=_opt(STR),
             **{k: _METRIC for k in (*CHECKABLE_METRICS, "wall_s", "realtime_factor", "sim_s")})
 #: What the CLI and the report read from a summary.json, key by key (the required ones
@@ -328,7 +320,7 @@ SUMMARY_SCHEMA = _obj(
     "scenario", "status", "arm_names", "arms",
     scenario=STR, description=_opt(STR), source=_opt(STR), tags=_list(STR), model=STR, regulator=STR,
     duration_s=NUM, comm_step_s=NUM, seed=INT, perturbation_t_s=NUM, arm_names=_list(STR),
-    commands=_list(_Kind(lambda v: isinstance(v, list) and len(v) == 3 and all(map(_num, v)),
+    commands=_list(_Kind(lambda v: isinstance(v, list) and len(v) == 3 and all(map(is_number, v)),
                          "a list [t_s, vx_des, vy_des] of numbers")),
     perturbation=_obj(torso_mass_kg=_opt(NUM), torso_added_mass_kg=_opt(NUM), torso_com_offset_m=_VEC3,
                       joint_damping_scale=NUM,

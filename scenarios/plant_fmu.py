@@ -16,15 +16,13 @@ go into the FMU (its models travel inside it) and is refused.
 """
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any, Mapping
 
 from scenarios.errors import CosimError
 from plant.controller import OFFSET_KEYS
 from plant.fmu_core import INPUT_NAMES, MODEL_FILES, PLANT_STEP_S, values_from_perturbation
-from scenarios.master import FmuRegulator, _LOG_ROUTES, _shared_callbacks
+from scenarios.fmi_host import FmuInstance
 
 REGULATOR_NAMES = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
 
@@ -39,7 +37,7 @@ def fmu_parameters(scenario, nominal_torso_mass_kg: float | None = None) -> dict
     return values_from_perturbation(scenario.model, build_perturbation(scenario, nominal_torso_mass_kg))
 
 
-class FmuPlant(FmuRegulator):
+class FmuPlant(FmuInstance):
     """The CassiePlant FMU as a walker (see the module docstring)."""
 
     kind = "fmu-plant"
@@ -56,33 +54,17 @@ class FmuPlant(FmuRegulator):
 
     # ---- life cycle: parameters of every type, outputs of every type
     def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
-        from fmpy import extract
-        from fmpy.fmi2 import FMU2Slave
-
         unknown = sorted(n for n in parameters if n not in self.vars or self.vars[n].causality != "parameter")
         if unknown:
             raise CosimError(f"CassiePlant has no parameter(s) {', '.join(unknown)}")
-        self._unzip = tempfile.mkdtemp(prefix="fmu-", dir=self._unpack_dir)  # close() removes it
-        extract(str(self.fmu_path), self._unzip)
-        _LOG_ROUTES[self.instance_name] = self.messages
-        cwd = os.getcwd()
-        try:
-            self._fmu = fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip,
-                                        modelIdentifier=self.md.coSimulation.modelIdentifier,
-                                        instanceName=self.instance_name)
-        finally:  # fmpy 0.3 changes into binaries/<platform> to load the library (see FmuRegulator.start)
-            os.chdir(cwd)
-        self._call("fmi2Instantiate", lambda: fmu.instantiate(callbacks=_shared_callbacks(), loggingOn=True))
-        self._instantiated = True
+        self._instantiate()
+        fmu = self._fmu
         for name, value in parameters.items():
             var = self.vars[name]
             setter = {"Real": fmu.setReal, "Integer": fmu.setInteger, "Boolean": fmu.setBoolean,
                       "String": fmu.setString}[var.type]
             self._call(f"fmi2Set{var.type} ({name})", setter, [var.valueReference], [value])
-        self._call("fmi2SetupExperiment", fmu.fmi2SetupExperiment, fmu.component, 0, 0.0, float(t0), 0, 0.0)
-        self._call("fmi2EnterInitializationMode", fmu.fmi2EnterInitializationMode, fmu.component)
-        self._call("fmi2ExitInitializationMode", fmu.fmi2ExitInitializationMode, fmu.component)
-        self._initialized = True
+        self._initialize(t0, None)  # no stop time: the master decides when to stop
         self.time_s = float(t0)
         self._prepare_buffers()
         self._read_outputs()
@@ -171,22 +153,3 @@ def plant_factory(fmu_path: str | Path, unpack_dir: str | Path | None = None):
             nominal = model_summary(load_model(scenario.model))["pelvis_mass_kg"]
         return FmuPlant(fmu_path, fmu_parameters(scenario, nominal), unpack_dir=unpack_dir)
     return make
-
-
-def ensure_plant_fmu(fmu: str | Path | None, *, rebuild: bool = False) -> Path:
-    """The plant FMU to use: ``fmu`` if given (must exist), else ``dist/CassiePlant.fmu``, (re)built
-    when missing, older than its sources (plant/, fmu_src/, build.py) or on ``rebuild``."""
-    from scenarios.cli import REPO_ROOT, load_build_module
-
-    if fmu is not None:
-        if not Path(fmu).is_file():
-            raise CosimError(f"--plant-fmu {fmu}: no such file")
-        return Path(fmu)
-    default = REPO_ROOT / "dist" / "CassiePlant.fmu"
-    sources = [REPO_ROOT / "build.py", *(REPO_ROOT / "plant").rglob("*.py"), *(REPO_ROOT / "plant" / "data").glob("*"),
-               *(REPO_ROOT / "fmu_src").rglob("*.py"), *(REPO_ROOT / "fmu_src").rglob("*.c")]
-    stale = default.is_file() and max(p.stat().st_mtime for p in sources) > default.stat().st_mtime
-    if rebuild or stale or not default.is_file():
-        default.parent.mkdir(parents=True, exist_ok=True)
-        return Path(load_build_module().build_plant_fmu(default.parent))
-    return default

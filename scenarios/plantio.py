@@ -8,44 +8,55 @@ from __future__ import annotations
 import functools
 import logging
 import os
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:  # pragma: no cover
     import mujoco
 
     from plant.model import Perturbation
-    from scenarios.spec import Scenario
+    from scenarios.scenario import Scenario
 
 log = logging.getLogger(__name__)
-
-#: Half-size of the terrain square (plant.model.TerrainSpec.size_m) unless the file says.
-DEFAULT_TERRAIN_SIZE_M = 20.0
 
 
 def build_perturbation(scenario: "Scenario", nominal_torso_mass_kg: float | None) -> "Perturbation | None":
     """The plant Perturbation of ``scenario`` (None when the plant is nominal).
 
     ``torso_added_mass_kg`` needs the model's own torso mass (``nominal_torso_mass_kg``);
-    when that is None (validation before loading) the plant's nominal 10.33 kg is used.
+    when that is None (validation before loading) the plant's nominal pelvis mass is used.
     """
+    t = scenario.terrain
+    terrain = None if t is None else dict(max_height_m=t.max_height_m, max_slope_deg=t.max_slope_deg,
+                                          seed=t.seed, size_m=t.size_m)
+    pert = _perturbation(scenario.torso_mass_kg, scenario.torso_added_mass_kg, scenario.torso_com_offset_m,
+                         scenario.joint_damping_scale, terrain, nominal_torso_mass_kg)
+    return None if pert.is_nominal else pert
+
+
+def perturbation_problems(torso_mass_kg: float | None, torso_added_mass_kg: float | None,
+                          torso_com_offset_m, joint_damping_scale: float,
+                          terrain: dict[str, Any] | None) -> list[str]:
+    """The plant's own problems with these perturbation values (``terrain``: the
+    TerrainSpec's fields), on the plant's nominal pelvis mass."""
+    return _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale,
+                         terrain, None).problems()
+
+
+def _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale, terrain,
+                  nominal_torso_mass_kg) -> "Perturbation":
+    """The one place that builds the plant's Perturbation (and TerrainSpec) from scenario values."""
     from plant.model import NOMINAL_PELVIS_MASS_KG, Perturbation, TerrainSpec
 
-    mass = scenario.torso_mass_kg
-    if scenario.torso_added_mass_kg is not None:
+    mass = torso_mass_kg
+    if torso_added_mass_kg is not None:
         base = NOMINAL_PELVIS_MASS_KG if nominal_torso_mass_kg is None else nominal_torso_mass_kg
-        mass = base + scenario.torso_added_mass_kg
-    terrain = None
-    if scenario.terrain is not None:
-        t = scenario.terrain
-        terrain = TerrainSpec(max_height_m=t.max_height_m, max_slope_deg=t.max_slope_deg, seed=t.seed,
-                              size_m=t.size_m)
-    pert = Perturbation(
+        mass = base + torso_added_mass_kg
+    return Perturbation(
         torso_mass_kg=mass,
-        torso_com_offset_m=tuple(scenario.torso_com_offset_m),
-        joint_damping_scale=scenario.joint_damping_scale,
-        terrain=terrain,
+        torso_com_offset_m=tuple(torso_com_offset_m),
+        joint_damping_scale=joint_damping_scale,
+        terrain=None if terrain is None else TerrainSpec(**terrain),
     )
-    return None if pert.is_nominal else pert
 
 
 def check_plant(scenario: "Scenario") -> list[tuple[str, str]]:

@@ -12,7 +12,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from scenarios import metrics
-from scenarios.spec import Scenario
+from scenarios.scenario import Scenario
 
 PLOTS = ("velocity.png", "psi.png", "torso.png")
 PSI_NAMES = ("psi_x", "psi_y", "psi_pitch", "psi_roll")
@@ -31,17 +31,20 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
     results = [r for r in results if len(r.rows)]
     if not results:
         return []
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     written = []
-
-    def save(name: str, fig, **margins: float) -> str:
+    for name, draw in zip(PLOTS, (_velocity, _psi, _torso)):
+        fig, margins = draw(plt, scenario, results, colors)
         # fixed margins (figure fractions): tight_layout measured every text twice, a third of the time
         fig.subplots_adjust(**margins)
         fig.savefig(out_dir / name, dpi=90)
         plt.close(fig)
-        return name
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+        written.append(name)
+    return written
 
-    # -- velocity vs command
+
+def _velocity(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
+    """Step-averaged (and, for vy, stride-averaged) velocity against the command."""
     fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
     for ax, axis in zip(axes, ("vx", "vy")):
         for i, r in enumerate(results):
@@ -66,9 +69,11 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
     axes[1].legend(loc="best", fontsize=8)
     axes[0].set_title(f"{scenario.name}: velocity vs command (faint: instantaneous)", y=TITLE_Y)
     axes[-1].set_xlabel("t (s)")
-    written.append(save("velocity.png", fig, left=0.08, right=0.98, bottom=0.09, top=0.94, hspace=0.08))
+    return fig, dict(left=0.08, right=0.98, bottom=0.09, top=0.94, hspace=0.08)
 
-    # -- Psi (network outputs) and the joint offsets they produce
+
+def _psi(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
+    """The networks' outputs (Psi) and the joint offsets they produce, one panel each."""
     deltas = [n[4:] for n in results[0].rows.dtype.names if n.startswith("out_delta_")]
     psis = [n for n in PSI_NAMES if f"out_{n}" in results[0].rows.dtype.names]
     panels = psis + deltas
@@ -88,10 +93,12 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
     if panels:
         axes[0][0].legend(fontsize=8)
     fig.suptitle(f"{scenario.name}: Psi outputs and joint offsets per arm")
-    written.append(save("psi.png", fig, left=0.075, right=0.985, bottom=0.8 / fig.get_figheight(),
-                        top=1 - 0.65 / fig.get_figheight(), hspace=0.32, wspace=0.2))
+    return fig, dict(left=0.075, right=0.985, bottom=0.8 / fig.get_figheight(), top=1 - 0.65 / fig.get_figheight(),
+                     hspace=0.32, wspace=0.2)
 
-    # -- torso angles
+
+def _torso(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
+    """Torso pitch and roll, degrees."""
     fig, axes = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
     for ax, name in zip(axes, ("pitch", "roll")):
         for i, r in enumerate(results):
@@ -101,5 +108,4 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
     axes[0].legend(fontsize=8)
     axes[0].set_title(f"{scenario.name}: torso angles", y=TITLE_Y)
     axes[-1].set_xlabel("t (s)")
-    written.append(save("torso.png", fig, left=0.08, right=0.98, bottom=0.1, top=0.93, hspace=0.08))
-    return written
+    return fig, dict(left=0.08, right=0.98, bottom=0.1, top=0.93, hspace=0.08)

@@ -18,10 +18,14 @@ from typing import Any
 
 from fmu_src.avr_errors import AvrError
 from scenarios.errors import ScenarioError
+from scenarios.formatting import show
+from scenarios.metrics import CONVERGENCE_TOL_MPS, STEADY_WINDOW_S
 from scenarios.output import TABLE_COLUMNS, fmt, incomplete_arms, table_rows
 from scenarios.output import verdict as output_verdict
 
 log = logging.getLogger(__name__)
+#: Claim values in the report: 4 significant digits.
+REPORT_FLOAT_FORMAT = ".4g"
 
 
 def collect(out_dir: Path) -> list[tuple[str, dict[str, Any] | None, str | None]]:
@@ -65,11 +69,7 @@ def _md_escape(text: str) -> str:
 
 
 def _num(v: Any) -> str:
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, float):
-        return f"{v:.4g}"
-    return "null" if v is None else str(v)
+    return show(v, REPORT_FLOAT_FORMAT, none="null", quote=False)
 
 
 def _plant_line(s: dict[str, Any]) -> str:
@@ -104,82 +104,95 @@ def _plant_line(s: dict[str, Any]) -> str:
 
 def render(out_dir: Path, entries: list | None = None) -> str:
     entries = collect(out_dir) if entries is None else entries
-    n_pass = n_miss = n_na = 0
     lines = ["# Scenario report", ""]
     lines.append(f"Results folder: `{Path(out_dir)}`. One section per scenario; every arm is listed. "
                  "Velocity errors are of the step-averaged velocity against the command: `sse_*` is the mean "
-                 "|error| over the last 5 s, `t_conv_s` the time from `perturbation_t_s` after which both errors "
-                 "stay within 0.05 m/s (null if never, or if the robot fell).")
+                 f"|error| over the last {STEADY_WINDOW_S:g} s, `t_conv_s` the time from `perturbation_t_s` after "
+                 f"which both errors stay within {CONVERGENCE_TOL_MPS:g} m/s (null if never, or if the robot fell).")
     lines.append("")
-    # ---- overview
-    lines += ["## Overview", "", "| scenario | status | regulator | model | verdict |", "|---|---|---|---|---|"]
+    lines += _overview(entries)
+    for name, s, problem in entries:
+        lines += _section(name, s, problem)
+    return "\n".join(lines) + "\n"
+
+
+def _overview(entries: list) -> list[str]:
+    """One row per scenario (status, regulator, model, verdict) and the verdict counts."""
+    counts = {"pass": 0, "miss": 0, "n/a": 0}
+    lines = ["## Overview", "", "| scenario | status | regulator | model | verdict |", "|---|---|---|---|---|"]
     for name, s, problem in entries:
         if s is None:
             lines.append(f"| {name} | {_md_escape(problem)} | - | - | n/a |")
-            n_na += 1
+            counts["n/a"] += 1
             continue
         verdict = output_verdict(s)["overall"]
-        n_pass += verdict == "pass"
-        n_miss += verdict == "miss"
-        n_na += verdict == "n/a"
+        counts[verdict] = counts.get(verdict, 0) + 1
         status = s["status"]
         if status != "complete":
             status = f"{status}: {_md_escape(_why_incomplete(s)[:120])}"
         lines.append(f"| [{name}](#{name}) | {status} | {s.get('regulator', '-')} | "
                      f"{_md_escape(Path(str(s.get('model', '-'))).name)} | **{verdict}** |")
-    lines += ["", f"Verdicts: {n_pass} pass, {n_miss} miss, {n_na} n/a (not run, failed or no checks).", ""]
+    return lines + ["", f"Verdicts: {counts['pass']} pass, {counts['miss']} miss, {counts['n/a']} n/a "
+                        "(not run, failed or no checks).", ""]
 
-    # ---- per scenario
-    for name, s, problem in entries:
-        lines += [f"## {name}", ""]
-        if s is None:
-            lines += [f"**Not available:** {problem}.", ""]
+
+def _section(name: str, s: dict[str, Any] | None, problem: str | None) -> list[str]:
+    """A scenario's section: set-up, plant, the arms' table, the claim and the plots."""
+    lines = [f"## {name}", ""]
+    if s is None:
+        return lines + [f"**Not available:** {problem}.", ""]
+    if s.get("description"):
+        lines += [_md_escape(s["description"]), ""]
+    lines.append(f"Model `{_md_escape(Path(str(s.get('model'))).name)}`, regulator `{s.get('regulator')}`, "
+                 f"duration {s.get('duration_s')} s, comm step {s.get('comm_step_s')} s, seed {s.get('seed')}, "
+                 f"perturbation from t = {s.get('perturbation_t_s')} s.")
+    lines.append("")
+    plant = _plant_line(s)
+    if plant:
+        lines += [plant, ""]
+    if s["status"] != "complete":
+        lines += [f"**Run {s['status']}:** `{_md_escape(_why_incomplete(s))}`", ""]
+    if s.get("arm_names") or s.get("arms"):
+        lines += _arm_table(s)
+    lines += _claim(s)
+    for plot in s.get("plots") or []:
+        lines += [f"![{name} {plot}]({name}/{plot})", ""]
+    return lines
+
+
+def _arm_table(s: dict[str, Any]) -> list[str]:
+    header = [h for _, h, _ in TABLE_COLUMNS[1:]]
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    for row in table_rows(s):
+        if row.get("status") != "complete":
+            lines.append(f"| {row.get('arm')} | {row.get('status')} |" + " |" * (len(header) - 2))
             continue
-        if s.get("description"):
-            lines += [_md_escape(s["description"]), ""]
-        lines.append(f"Model `{_md_escape(Path(str(s.get('model'))).name)}`, regulator `{s.get('regulator')}`, "
-                     f"duration {s.get('duration_s')} s, comm step {s.get('comm_step_s')} s, seed {s.get('seed')}, "
-                     f"perturbation from t = {s.get('perturbation_t_s')} s.")
+        cells = [fmt(row.get(k), d) for k, _, d in TABLE_COLUMNS[1:]]
+        if row.get("fell") and row.get("fall_reason"):
+            cells[1] = f"yes ({_md_escape(row['fall_reason'])})"
+        lines.append("| " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
+def _claim(s: dict[str, Any]) -> list[str]:
+    """The paper's claim, each check with both sides' values, and the verdict."""
+    claim = s.get("claim")
+    if not claim:
+        return ["_No claim given for this scenario._", ""]
+    lines = ["**Paper's claim:** " + _md_escape(claim.get("text", "")), ""]
+    if claim.get("source"):
+        lines += [f"_Source: {_md_escape(claim['source'])}_", ""]
+    verdict = output_verdict(s)
+    if verdict.get("why"):
+        lines += [f"_No verdict: {_md_escape(verdict['why'])}._", ""]
+    if verdict.get("checks"):
+        lines += ["| check | measured | reference | verdict |", "|---|---|---|---|"]
+        for c in verdict["checks"]:
+            why = f" ({c['why']})" if c.get("why") else ""
+            lines.append(f"| `{_md_escape(c['text'])}` | {_num(c.get('lhs'))} | {_num(c.get('rhs'))} | "
+                         f"**{c['verdict']}**{why} |")
         lines.append("")
-        plant = _plant_line(s)
-        if plant:
-            lines += [plant, ""]
-        if s["status"] != "complete":
-            lines += [f"**Run {s['status']}:** `{_md_escape(_why_incomplete(s))}`", ""]
-        if s.get("arm_names") or s.get("arms"):
-            header = [h for _, h, _ in TABLE_COLUMNS[1:]]
-            lines.append("| " + " | ".join(header) + " |")
-            lines.append("|" + "---|" * len(header))
-            for row in table_rows(s):
-                if row.get("status") != "complete":
-                    lines.append(f"| {row.get('arm')} | {row.get('status')} |" + " |" * (len(header) - 2))
-                    continue
-                cells = [fmt(row.get(k), d) for k, _, d in TABLE_COLUMNS[1:]]
-                if row.get("fell") and row.get("fall_reason"):
-                    cells[1] = f"yes ({_md_escape(row['fall_reason'])})"
-                lines.append("| " + " | ".join(cells) + " |")
-            lines.append("")
-        claim = s.get("claim")
-        if claim:
-            lines += ["**Paper's claim:** " + _md_escape(claim.get("text", "")), ""]
-            if claim.get("source"):
-                lines += [f"_Source: {_md_escape(claim['source'])}_", ""]
-            verdict = output_verdict(s)
-            if verdict.get("why"):
-                lines += [f"_No verdict: {_md_escape(verdict['why'])}._", ""]
-            if verdict.get("checks"):
-                lines += ["| check | measured | reference | verdict |", "|---|---|---|---|"]
-                for c in verdict["checks"]:
-                    why = f" ({c['why']})" if c.get("why") else ""
-                    lines.append(f"| `{_md_escape(c['text'])}` | {_num(c.get('lhs'))} | {_num(c.get('rhs'))} | "
-                                 f"**{c['verdict']}**{why} |")
-                lines.append("")
-            lines += [f"**Verdict: {verdict.get('overall', 'n/a')}**", ""]
-        else:
-            lines += ["_No claim given for this scenario._", ""]
-        for plot in s.get("plots") or []:
-            lines += [f"![{name} {plot}]({name}/{plot})", ""]
-    return "\n".join(lines) + "\n"
+    return lines + [f"**Verdict: {verdict.get('overall', 'n/a')}**", ""]
 
 
 def write_report(out_dir: Path) -> tuple[Path, list[str]]:

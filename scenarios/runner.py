@@ -36,7 +36,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from scenarios.output import ArmOutcome
-from scenarios.spec import Scenario
+from scenarios.scenario import Scenario
 
 log = logging.getLogger(__name__)
 

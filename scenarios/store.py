@@ -28,11 +28,11 @@ import signal
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Iterator, Sequence
 
 from fmu_src.avr_errors import AvrError
 from scenarios import output
-from scenarios.spec import Scenario
+from scenarios.scenario import Scenario
 
 log = logging.getLogger(__name__)
 
@@ -210,19 +210,6 @@ class ResultsDir:
                 else:
                     log.warning("restoring %s (a killed run had moved it aside)", original)
                     os.rename(entry, original)
-
-    def publish(self, name: str, write: Callable[[Path], Any], *, replace: bool) -> Any:
-        """Run ``write(folder)`` on a fresh staging folder, then rename it to ``root/name``;
-        return what ``write`` returns. If ``write`` raises, nothing in ``root`` changes.
-        An existing ``root/name`` is replaced only when ``replace`` is true."""
-        staged = self.stage(name)
-        try:
-            value = write(staged)
-        except BaseException:
-            self.discard(name)
-            raise
-        self.commit(name, replace=replace)
-        return value
 
     def stage(self, name: str) -> Path:
         """A fresh staging folder for ``name``'s results, to fill (in any process) and then

@@ -121,8 +121,9 @@ low = 0.5
 high = 1.0
 """)
     assert len(probs) == 3, probs
-    assert probs[0].startswith("factors.joint_damping_scale = 12: gives an invalid scenario: joint_damping_scale")
-    assert "factors.regulator.learning_rate = 0.5" in probs[1] and "out of range" in probs[1]
+    assert probs[0] == ("factors.joint_damping_scale = 12: gives an invalid scenario: perturbation: "
+                        "joint_damping_scale=12.0 is out of range [0, 10]")  # the plant's range
+    assert "factors.regulator.learning_rate = 0.5" in probs[1] and "must be a finite number in [" in probs[1]
     assert "factors.push_t_s: needs a base with a [[push]]" in probs[2]
 
 

@@ -202,8 +202,10 @@ def test_a_write_cut_short_changes_nothing_and_a_killed_swap_is_repaired(tmp_pat
         raise KeyboardInterrupt
 
     with ResultsDir(out) as rd:
+        staged = rd.stage("kept")  # as a run writes a scenario: staged, committed only when complete
         with pytest.raises(KeyboardInterrupt):
-            rd.publish("kept", half_then_ctrl_c, replace=True)
+            half_then_ctrl_c(staged)
+        rd.discard("kept")
         assert snapshot(out / "kept") == {"summary.json": b"old"}
         assert list((rd.scratch / "stage").iterdir()) == []
     # a run killed between its two renames: the old folder is aside, the new one not in place

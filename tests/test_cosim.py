@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 
 from scenarios.errors import CosimError, ScenarioError
+from plant.constants import OFFSET_NAMES
 from scenarios import master, spec
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -109,7 +110,7 @@ def test_nan_input_raises_cosim_error_with_the_fmu_log(fmu_path):
             "pitch_rate": 0.0, "roll_rate": 0.0, "step_index": 0}
     try:
         out = reg.step(0.0, 0.005, good)
-        assert set(master.DELTA_NAMES) <= set(out)
+        assert set(OFFSET_NAMES) <= set(out)
         with pytest.raises(CosimError) as info:
             reg.step(0.005, 0.005, {**good, "vx": math.nan})
     finally:
@@ -207,13 +208,13 @@ def test_cli_rebuilds_a_default_fmu_older_than_its_sources(tmp_path, monkeypatch
     import os
     import zipfile
 
-    from scenarios import cli
+    from scenarios import fmus
 
     stale = tmp_path / "AdaptiveVelocityRegulator.fmu"
     stale.write_bytes(b"an FMU built from older sources")
     os.utime(stale, (0, 0))  # 1970: older than every source file
-    monkeypatch.setattr(cli, "DEFAULT_FMU", stale)
-    path = cli.ensure_fmu(None)
+    monkeypatch.setattr(fmus, "DEFAULT_FMU", stale)
+    path = fmus.ensure_fmu(None)
     assert path == stale and zipfile.is_zipfile(path)  # rebuilt in place
     mtime = path.stat().st_mtime
-    assert cli.ensure_fmu(None) == stale and stale.stat().st_mtime == mtime  # fresh: kept
+    assert fmus.ensure_fmu(None) == stale and stale.stat().st_mtime == mtime  # fresh: kept

@@ -86,7 +86,7 @@ def test_suite_paper_values():
 def test_good_file_and_schedule():
     s = parse(GOOD + "\n[[command]]\nt_s = 1.0\nvx_des = 0.2\nvy_des = 0.1\n"
               "[[push]]\nt_s = 0.5\nforce_n = [10, 0, 0]\nduration_s = 0.1\n")
-    assert s.n_comm_steps == 400 and s.plant_steps_per_comm == 10
+    assert s.n_comm_steps == 400
     assert s.command_at_step(0) == (0.5, 0.0) and s.command_at_step(199) == (0.5, 0.0)
     assert s.command_at_step(200) == (0.2, 0.1)
     assert s.push_force_at_step(99) == (0.0, 0.0, 0.0)
@@ -127,7 +127,7 @@ Kp_xx = 1.0
     assert any(p.startswith("command[0].t_s") and "t_s = 0" in p for p in probs)
     assert "push[1].duration_s = -0.1: must be > 0" in text
     assert "seed: required" in probs  # seeds are explicit
-    assert any(p.startswith("regulator.learning_rate = -5") and "out of range" in p for p in probs)
+    assert any(p.startswith("regulator.learning_rate = -5: must be a finite number in [") for p in probs)
     assert any(p.startswith("regulator.Kp_xx") and "did you mean 'Kp_x'" in p for p in probs)
     assert len(probs) >= 9
     with pytest.raises(ScenarioError) as info:
@@ -146,7 +146,7 @@ def test_unknown_keys_did_you_mean():
 def test_comm_step_must_be_whole_plant_steps():
     probs = problems_of(GOOD.replace("comm_step_s = 0.005", "comm_step_s = 0.0052"))
     assert probs == ["comm_step_s = 0.0052: must be a whole multiple of the plant step 0.5 ms"]
-    assert parse(GOOD.replace("comm_step_s = 0.005", "comm_step_s = 0.0005")).plant_steps_per_comm == 1
+    assert parse(GOOD.replace("comm_step_s = 0.005", "comm_step_s = 0.0005")).n_comm_steps == 4000
     probs = problems_of(GOOD.replace("duration_s = 2.0", "duration_s = 2.0025"))
     assert any(p.startswith("duration_s = 2.0025") for p in probs)
 
@@ -156,9 +156,10 @@ def test_override_out_of_range_and_wrong_type():
     lr = spec_by["learning_rate"]
     too_big = (lr.max if lr.max is not None else 1e6) * 10 + 1
     probs = problems_of(GOOD + f"[regulator]\nlearning_rate = {too_big}\nn_neurons = 2.5\nadaptation_enabled = 1\n")
-    assert any(p.startswith(f"regulator.learning_rate = {too_big:g}: out of range") for p in probs)
-    assert any(p.startswith("regulator.n_neurons = 2.5: must be an integer") for p in probs)
-    assert any(p.startswith("regulator.adaptation_enabled = 1: must be a boolean") for p in probs)
+    # the core's own check (params_from_overrides), reported under the scenario's field
+    assert any(p.startswith(f"regulator.learning_rate = {too_big:g}: must be a finite number in [") for p in probs)
+    assert any(p.startswith("regulator.n_neurons = 2.5: must be an integer in [") for p in probs)
+    assert any(p.startswith("regulator.adaptation_enabled = 1: must be a bool") for p in probs)
 
 
 def test_arms_compare_and_named_arms():
@@ -188,11 +189,33 @@ def test_claim_checks_validated():
 def test_perturbation_checked_by_the_plant_and_terrain():
     probs = problems_of("torso_mass_kg = 250.0\njoint_damping_scale = 20.0\n" + GOOD +
                         "[terrain]\nmax_height_m = 0.4\nmax_slope_deg = 50\nseed = 1\n")
-    assert any(p.startswith("torso_mass_kg = 250: must be <= 200") for p in probs)
-    assert any(p.startswith("joint_damping_scale = 20") for p in probs)
-    assert any(p.startswith("terrain.max_slope_deg = 50") for p in probs)
-    probs = problems_of("torso_mass_kg = 150.0\n" + GOOD)  # our range allows it; the plant's does not
-    assert any(p.startswith("perturbation:") and "torso_mass_kg" in p for p in probs)
+    # the ranges are the plant's own (Perturbation / TerrainSpec), checked before any model loads
+    assert "perturbation: torso_mass_kg=250.0 is out of range (0, 100] kg (or None)" in probs
+    assert any(p.startswith("perturbation: joint_damping_scale=20") and "[0, 10]" in p for p in probs)
+    assert any(p.startswith("perturbation: terrain.max_slope_deg=50") and "(0, 45] deg" in p for p in probs)
+    probs = problems_of("torso_added_mass_kg = -20.0\ntorso_com_offset_m = [0.6, 0, 0]\n" + GOOD)
+    assert any(p.startswith("perturbation: torso_mass_kg=") for p in probs)  # nominal pelvis - 20 kg < 0
+    assert any(p.startswith("perturbation: torso_com_offset_m[x]=0.6") for p in probs)
+    probs = problems_of(GOOD + "[terrain]\nmax_slope_deg = 50\nseed = -1\n")  # every problem at once
+    assert "terrain.max_height_m: required" in probs
+    assert any(p.startswith("perturbation: terrain.max_slope_deg=50") for p in probs)
+    assert any(p.startswith("perturbation: terrain.seed=-1") for p in probs)
+    assert not any("max_height_m=" in p for p in probs)  # the missing key is reported once
+
+
+def test_plant_ranges_reported_with_every_other_problem():
+    # the plant's ranges are checked while the file is read, not only once it is otherwise valid
+    probs = problems_of("torso_mass_kg = 150.0\n" + GOOD.replace('name = "tiny"', 'name = "Bad"'))
+    assert any(p.startswith("name = 'Bad'") for p in probs)
+    assert any(p.startswith("perturbation: torso_mass_kg=150.0 is out of range (0, 100]") for p in probs)
+
+
+def test_seed_and_arm_names_checked_once_in_their_place():
+    # the top-level seed is the regulator's `seed`: the core's range, named as the file's field
+    assert problems_of(GOOD.replace("seed = 3", "seed = 3000000000")) == [
+        "seed = 3000000000: must be an integer in [0, 2147483647]"]
+    # an [[arm]] with an empty name is an error, not silently dropped
+    assert problems_of(GOOD + '[[arm]]\nname = ""\n') == ["arm[0].name = '': must match [a-z0-9][a-z0-9_-]*"]
 
 
 def test_model_path_and_missing_file(tmp_path):

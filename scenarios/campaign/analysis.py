@@ -15,7 +15,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Sequence
 
-from scenarios.campaign.store import COPY_NAME, CSV_NAME, MANIFEST_NAME, REPORT_NAME, read_rows
+from scenarios.campaign.store import CSV_NAME, MANIFEST_NAME, read_rows
 from scenarios.campaign.task import COMPLETE
 
 QUANTILES = (0.5, 0.9)

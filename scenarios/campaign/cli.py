@@ -119,7 +119,7 @@ def _fmu(args):
     """The FMU path for the fmu regulator (built when missing/stale), None in-process, False on error."""
     if args.regulator != "fmu":
         return None
-    from scenarios.cli import ensure_fmu
+    from scenarios.fmus import ensure_fmu
 
     try:
         return str(Path(ensure_fmu(args.fmu, rebuild=args.rebuild_fmu)).resolve())

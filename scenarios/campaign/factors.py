@@ -129,7 +129,7 @@ def lookup(name: str) -> FactorKind | None:
     if name in FACTORS:
         return FACTORS[name]
     if name.startswith(REGULATOR_PREFIX):
-        from scenarios.spec import regulator_param_specs
+        from scenarios.sections import regulator_param_specs
 
         spec = regulator_param_specs().get(name[len(REGULATOR_PREFIX):])
         if spec is None:
@@ -141,7 +141,7 @@ def lookup(name: str) -> FactorKind | None:
 
 
 def known_names() -> list[str]:
-    from scenarios.spec import regulator_param_specs
+    from scenarios.sections import regulator_param_specs
 
     return list(FACTORS) + [REGULATOR_PREFIX + p for p in regulator_param_specs()]
 

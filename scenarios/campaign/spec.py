@@ -28,7 +28,6 @@ format does not allow is reported once, against the factor.
 from __future__ import annotations
 
 import copy
-import difflib
 import math
 import tomllib
 from dataclasses import dataclass, field
@@ -38,7 +37,10 @@ from typing import Any, Mapping
 from scenarios.errors import ScenarioError
 from scenarios import spec as scenario_spec
 from scenarios.campaign import factors as fx
-from scenarios.spec import _integer, _number, _Problems, _show, _string, _unknown_keys
+from scenarios.fields import Problems, did_you_mean, integer, name as name_field, number, string, unknown_keys
+from scenarios.formatting import show
+from scenarios.scenario import BUILTIN_MODELS, DEFAULT_COMM_STEP_S
+from scenarios.sections import resolve_model
 
 CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
 TOP_KEYS = ("name", "description", "base", "duration_s", "compare", "samples", "seed",
@@ -81,7 +83,7 @@ class Campaign:
     retries: int = DEFAULT_RETRIES
     task_timeout_s: float | None = None
     source: str | None = None
-    comm_step_s: float = field(default=scenario_spec.DEFAULT_COMM_STEP_S)
+    comm_step_s: float = field(default=DEFAULT_COMM_STEP_S)
 
     @property
     def grid(self) -> tuple[Factor, ...]:
@@ -97,7 +99,7 @@ class Campaign:
 
 
 # --------------------------------------------------------------------------- factors
-def _check_values(tab: Mapping[str, Any], f: str, kind: str, probs: _Problems) -> tuple:
+def _check_values(tab: Mapping[str, Any], f: str, kind: str, probs: Problems) -> tuple:
     values = tab.get("values")
     if "values" not in tab:
         probs.note(f + ".values", "required")
@@ -115,7 +117,7 @@ def _check_values(tab: Mapping[str, Any], f: str, kind: str, probs: _Problems) -
     return tuple(values) if ok else ()
 
 
-def _check_weights(tab: Mapping[str, Any], f: str, n: int, probs: _Problems) -> tuple | None:
+def _check_weights(tab: Mapping[str, Any], f: str, n: int, probs: Problems) -> tuple | None:
     if "weights" not in tab:
         return None
     w = tab["weights"]
@@ -132,36 +134,35 @@ def _check_range(tab, f, kind, dist, probs) -> tuple[Any, Any, float | None]:
         if dist in ("uniform", "lhs"):
             probs.add(f + ".dist", dist, "an integer factor takes randint, choice or grid")
             return None, None, None
-        low = _integer(tab, "low", f + ".low", probs, required=True)
-        high = _integer(tab, "high", f + ".high", probs, required=True)
+        low = integer(tab, "low", f + ".low", probs, required=True)
+        high = integer(tab, "high", f + ".high", probs, required=True)
         if low is not None and high is not None and low > high:
             probs.add(f + ".high", high, f"must be >= low = {low}")
         return low, high, None
-    low = _number(tab, "low", f + ".low", probs, required=True)
-    high = _number(tab, "high", f + ".high", probs, required=True)
+    low = number(tab, "low", f + ".low", probs, required=True)
+    high = number(tab, "high", f + ".high", probs, required=True)
     if low is not None and high is not None and not low < high:
-        probs.add(f + ".high", high, f"must be > low = {_show(low)}")
-    step = _number(tab, "step", f + ".step", probs, gt=0.0)
+        probs.add(f + ".high", high, f"must be > low = {show(low)}")
+    step = number(tab, "step", f + ".step", probs, gt=0.0)
     return low, high, step
 
 
-def parse_factor(name: str, tab: Any, probs: _Problems) -> Factor | None:
+def parse_factor(name: str, tab: Any, probs: Problems) -> Factor | None:
     f = f"factors.{name}"
     kind = fx.lookup(name)
     if kind is None:
-        close = difflib.get_close_matches(name, fx.known_names(), n=1, cutoff=0.6)
-        hint = f"; did you mean {close[0]!r}?" if close else f"; known: {', '.join(fx.FACTORS)}, regulator.<param>"
+        hint = did_you_mean(name, fx.known_names(), f"; known: {', '.join(fx.FACTORS)}, regulator.<param>")
         probs.note(f, "unknown factor" + hint)
         return None
     if not isinstance(tab, dict):
         probs.add(f, tab, "must be a table ([factors.NAME] with dist = ...)")
         return None
-    dist = _string(tab, "dist", f + ".dist", probs, required=True)
+    dist = string(tab, "dist", f + ".dist", probs, required=True)
     if dist not in DISTS:
         if dist:
             probs.add(f + ".dist", dist, f"must be one of {', '.join(DISTS)}")
         return None
-    _unknown_keys(tab, DIST_KEYS[dist], f + ".", probs)
+    unknown_keys(tab, DIST_KEYS[dist], f + ".", probs)
     if dist in ("choice", "grid"):
         values = _check_values(tab, f, kind.kind, probs)
         weights = _check_weights(tab, f, len(values), probs) if dist == "choice" else None
@@ -179,7 +180,7 @@ def _read_toml(path: Path) -> dict[str, Any]:
         return tomllib.load(fh)
 
 
-def _resolve_base(raw: Any, base_dir: Path, probs: _Problems) -> tuple[str, dict | None, Path]:
+def _resolve_base(raw: Any, base_dir: Path, probs: Problems) -> tuple[str, dict | None, Path]:
     """(reference, scenario document, folder its relative paths resolve against)."""
     if isinstance(raw, dict):
         return "inline", copy.deepcopy(raw), base_dir
@@ -197,14 +198,13 @@ def _resolve_base(raw: Any, base_dir: Path, probs: _Problems) -> tuple[str, dict
         return raw, None, base_dir
     suite = {p.stem: p for p in scenario_spec.suite_files()}
     if raw not in suite:
-        close = difflib.get_close_matches(raw, list(suite), n=1, cutoff=0.5)
-        hint = f"; did you mean {close[0]!r}?" if close else f"; suite: {', '.join(suite)}"
+        hint = did_you_mean(raw, suite, f"; suite: {', '.join(suite)}", cutoff=scenario_spec.TARGET_HINT_CUTOFF)
         probs.add("base", raw, "no such suite scenario" + hint)
         return raw, None, base_dir
     return raw, _read_toml(suite[raw]), suite[raw].parent
 
 
-def _base_document(doc: Mapping[str, Any], name: str, base_dir: Path, probs: _Problems) -> tuple[str, dict | None]:
+def _base_document(doc: Mapping[str, Any], name: str, base_dir: Path, probs: Problems) -> tuple[str, dict | None]:
     """The base scenario with the campaign's duration/compare on top, checked as a scenario."""
     ref, base, bdir = _resolve_base(doc.get("base"), base_dir, probs)
     if base is None:
@@ -215,8 +215,8 @@ def _base_document(doc: Mapping[str, Any], name: str, base_dir: Path, probs: _Pr
         if key in doc:
             base[key] = copy.deepcopy(doc[key])
     model = base.get("model")
-    if isinstance(model, str) and model not in scenario_spec.BUILTIN_MODELS:
-        base["model"] = scenario_spec.resolve_model(model, bdir)  # samples live elsewhere
+    if isinstance(model, str) and model not in BUILTIN_MODELS:
+        base["model"] = resolve_model(model, bdir)  # samples live elsewhere
     try:
         scenario = scenario_spec.parse_scenario(base, source="base", base_dir=bdir)
     except ScenarioError as exc:
@@ -228,7 +228,7 @@ def _base_document(doc: Mapping[str, Any], name: str, base_dir: Path, probs: _Pr
     return ref, base
 
 
-def _probe_factors(factors: list[Factor], base: dict, base_dir: Path, probs: _Problems) -> None:
+def _probe_factors(factors: list[Factor], base: dict, base_dir: Path, probs: Problems) -> None:
     """Each factor at each extreme value on the base: the scenario rules, reported per factor."""
     for f in factors:
         kind = fx.lookup(f.name)
@@ -260,20 +260,18 @@ def _flatten_regulator(raw: dict[str, Any]) -> dict[str, Any]:
 def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_dir: Path | None = None) -> Campaign:
     """Validate a parsed campaign document; raise ScenarioError listing every problem."""
     base_dir = base_dir or Path.cwd()
-    probs = _Problems()
-    _unknown_keys(doc, TOP_KEYS, "", probs)
-    name = _string(doc, "name", "name", probs, required=True)
-    if name and not scenario_spec._NAME_RE.match(name):
-        probs.add("name", name, "must match [a-z0-9][a-z0-9_-]* (it names samples)")
-    description = _string(doc, "description", "description", probs)
-    samples = _integer(doc, "samples", "samples", probs, required=True, ge=1)
+    probs = Problems()
+    unknown_keys(doc, TOP_KEYS, "", probs)
+    name = name_field(doc, "name", "name", probs, " (it names samples)")
+    description = string(doc, "description", "description", probs)
+    samples = integer(doc, "samples", "samples", probs, required=True, ge=1)
     if samples is not None and samples > MAX_SAMPLES:
         probs.add("samples", samples, f"must be <= {MAX_SAMPLES}")
-    seed = _integer(doc, "seed", "seed", probs, required=True, ge=0)
-    retries = _integer(doc, "retries", "retries", probs, default=DEFAULT_RETRIES, ge=0)
+    seed = integer(doc, "seed", "seed", probs, required=True, ge=0)
+    retries = integer(doc, "retries", "retries", probs, default=DEFAULT_RETRIES, ge=0)
     if retries is not None and retries > MAX_RETRIES:
         probs.add("retries", retries, f"must be <= {MAX_RETRIES}")
-    timeout = _number(doc, "task_timeout_s", "task_timeout_s", probs, gt=0.0)
+    timeout = number(doc, "task_timeout_s", "task_timeout_s", probs, gt=0.0)
     if "base" not in doc:
         probs.note("base", "required: a suite scenario name, a scenario file or an inline [base] table")
     ref, base = _base_document(doc, name or "campaign", base_dir, probs) if "base" in doc else ("", None)
@@ -321,6 +319,6 @@ def resolve_campaign(target: str) -> Path:
         return path
     if target in builtin_campaigns():
         return CAMPAIGN_DIR / f"{target}.toml"
-    close = difflib.get_close_matches(target, builtin_campaigns(), n=1, cutoff=0.5)
-    hint = f"; did you mean {close[0]!r}?" if close else f"; built-in: {', '.join(builtin_campaigns())}"
+    hint = did_you_mean(target, builtin_campaigns(), f"; built-in: {', '.join(builtin_campaigns())}",
+                        cutoff=scenario_spec.TARGET_HINT_CUTOFF)
     raise ScenarioError([f"{target!r}: no such campaign file or built-in campaign{hint}"])
