@@ -32,7 +32,7 @@ import numpy as np
 from plant.constants import OFFSET_NAMES
 from scenarios.errors import CosimError, ScenarioError
 # the regulator paths are re-exported: the benchmarks and tests know them as master.*
-from scenarios.regulators import FmuRegulator, InProcessRegulator, RegulatorPath, make_regulator  # noqa: F401
+from scenarios.regulators import FmuRegulator, InProcessRegulator, RegulatorPath, arm_regulator, make_regulator  # noqa: F401
 from scenarios.scenario import Arm, Scenario
 
 log = logging.getLogger(__name__)
@@ -263,6 +263,6 @@ def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | 
     for arm in scenario.arms:
         if arms is not None and arm.name not in arms:
             continue
-        results.append(run_arm(scenario, arm, make_regulator(regulator, fmu_path), progress=progress,
+        results.append(run_arm(scenario, arm, arm_regulator(arm, regulator, fmu_path), progress=progress,
                                model=model, model_summary=summary, plant=plant))
     return results

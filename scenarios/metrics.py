@@ -30,6 +30,8 @@ from scenarios.formatting import show
 CONVERGENCE_TOL_MPS = 0.05
 #: The steady-state window at the end of a run (s).
 STEADY_WINDOW_S = 5.0
+#: Window at the end of each command level for ``level_errors_vx`` (s).
+LEVEL_WINDOW_S = 4.0
 #: Start-up excluded from the whole-run error (s): from rest to the first steady steps.
 STARTUP_S = 5.0
 #: A convergence must hold at least this long before the end of the run to count (s).
@@ -190,6 +192,29 @@ def step_alternation(rows: np.ndarray, column: str, t0: float, t1: float) -> flo
     return float(np.mean(np.abs(np.diff(values))) / 2.0)
 
 
+def level_errors_vx(rows: np.ndarray, *, window_s: float = LEVEL_WINDOW_S,
+                    fell: bool = False) -> list[dict[str, Any]]:
+    """Per command level (a run of rows with one ``cmd_vx_des``): its start ``t_s``,
+    ``vx_des`` and ``error_vx``, the mean |step-averaged forward error| over the level's
+    last ``window_s`` (m/s); ``None`` for a level shorter than the window and, when the
+    run ``fell``, for the level it fell in."""
+    if len(rows) == 0:
+        return []
+    t = np.asarray(rows["t"], dtype=float)
+    cmd = np.asarray(rows["cmd_vx_des"], dtype=float)
+    ex, _ = velocity_errors(rows)
+    starts = np.concatenate(([0], np.nonzero(np.diff(cmd))[0] + 1))
+    ends = np.concatenate((starts[1:], [len(t)]))
+    out = []
+    for a, b in zip(starts, ends):
+        t_end = t[b] if b < len(t) else end_time(rows)
+        window = (t[a:b] >= t_end - window_s - 1e-9)
+        ok = t_end - t[a] >= window_s - 1e-9 and window.any() and not (fell and b == len(t))
+        out.append({"t_s": float(t[a]), "vx_des": float(cmd[a]),
+                    "error_vx": float(np.mean(np.abs(ex[a:b][window]))) if ok else None})
+    return out
+
+
 def mean_last(rows: np.ndarray, column: str, *, window_s: float = STEADY_WINDOW_S) -> float | None:
     if len(rows) == 0 or column not in rows.dtype.names:
         return None
@@ -213,6 +238,7 @@ def summarize_arm(rows: np.ndarray, *, fell: bool, t_fall_s: float | None, pertu
         "steady_state_error_vy": steady_state_error(rows, "vy", fell=fell),
         "steady_state_error_vy_stride": steady_state_error(rows, "vy_stride", fell=fell),
         "run_error_vx": run_error_vx(rows, fell=fell),
+        "level_errors_vx": level_errors_vx(rows, fell=fell),
         "convergence_time_s": convergence_time(rows, t_from=perturbation_t_s, fell=fell),
         "mean_vx_last_s": mean_last(rows, "tel_vx" if "tel_vx" in rows.dtype.names else "in_vx"),
         "mean_vy_last_s": mean_last(rows, "tel_vy" if "tel_vy" in rows.dtype.names else "in_vy"),

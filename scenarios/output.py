@@ -172,19 +172,22 @@ def _json_default(o: Any) -> Any:
 
 def write_timeseries(path: Path, results: Sequence[Any]) -> None:
     """All arms in one CSV; the first column is ``arm``; floats round-trip exactly
-    (Python's repr: the shortest text that reads back to the same double)."""
+    (Python's repr: the shortest text that reads back to the same double).  The columns
+    are every arm's columns (the first arm's order, then any new ones); an arm without a
+    column (the ``rl_hzd`` policy has no ``psi_*`` outputs) leaves its cells empty."""
     results = [r for r in results if len(r.rows)]
     with open(path, "w", newline="") as fh:
         if not results:
             fh.write("arm\n")
             return
-        names = results[0].rows.dtype.names
+        names = list(results[0].rows.dtype.names)
+        for r in results[1:]:
+            names += [n for n in r.rows.dtype.names if n not in names]
         fh.write("arm," + ",".join(names) + "\n")
         for r in results:
-            if r.rows.dtype.names != names:
-                raise ValueError(f"arm {r.arm}: columns differ from arm {results[0].arm}")
             prefix = r.arm + ","
-            columns = [column_text(r.rows[n]) for n in names]
+            own = r.rows.dtype.names
+            columns = [column_text(r.rows[n]) if n in own else [""] * len(r.rows) for n in names]
             fh.write("".join([prefix + ",".join(cells) + "\n" for cells in zip(*columns)]))
 
 

@@ -74,8 +74,9 @@ def _velocity(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]
 
 def _psi(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
     """The networks' outputs (Psi) and the joint offsets they produce, one panel each."""
+    columns = {n for r in results for n in r.rows.dtype.names}  # the rl_hzd arm has no psi_*
     deltas = [n[4:] for n in results[0].rows.dtype.names if n.startswith("out_delta_")]
-    psis = [n for n in PSI_NAMES if f"out_{n}" in results[0].rows.dtype.names]
+    psis = [n for n in PSI_NAMES if f"out_{n}" in columns]
     panels = psis + deltas
     ncols = 2
     nrows = max(1, (len(panels) + ncols - 1) // ncols)
@@ -83,7 +84,8 @@ def _psi(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
     for idx, name in enumerate(panels):
         ax = axes[idx // ncols][idx % ncols]
         for i, r in enumerate(results):
-            ax.plot(r.rows["t"], r.rows[f"out_{name}"], color=colors[i % len(colors)], lw=0.9, label=r.arm)
+            if f"out_{name}" in r.rows.dtype.names:
+                ax.plot(r.rows["t"], r.rows[f"out_{name}"], color=colors[i % len(colors)], lw=0.9, label=r.arm)
         ax.set_title(name + (" (rad)" if name.startswith("delta_") else ""), fontsize=9, y=TITLE_Y)
         ax.grid(alpha=0.3)
     for idx in range(len(panels), nrows * ncols):

@@ -224,6 +224,50 @@ class FmuRegulator(FmuInstance, RegulatorPath):
         self._set_real = self._get_real = self._set_int = self._do_step = None
 
 
+class RlHzdRegulator(RegulatorPath):
+    """The fixed RL-HZD policy (:mod:`scenarios.rl_hzd.policy`) in-process: the six offsets."""
+
+    kind = "rl_hzd"
+
+    def __init__(self, policy_path: str | Path | None = None) -> None:
+        from plant.constants import OFFSET_NAMES
+        from scenarios.rl_hzd.policy import DEFAULT_POLICY
+
+        self._path = Path(policy_path or DEFAULT_POLICY)
+        self._outputs = OFFSET_NAMES
+        self._policy = None
+
+    def output_names(self) -> tuple[str, ...]:
+        return self._outputs
+
+    def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
+        from scenarios.rl_hzd.policy import load_policy
+
+        if parameters:
+            raise CosimError(f"the rl_hzd arm takes no regulator parameters, got {', '.join(sorted(parameters))}")
+        try:
+            self._policy = load_policy(self._path)
+        except (OSError, ValueError, KeyError) as exc:
+            raise CosimError(f"cannot load the RL-HZD policy {self._path}: {exc}") from exc
+
+    def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
+        from fmu_src.avr_core import RegulatorInputs
+
+        return self._policy.step(RegulatorInputs(**inputs), float(h))
+
+    def close(self) -> None:
+        self._policy = None
+
+
+def arm_regulator(arm, kind: str, fmu_path: str | Path | None = None, *,
+                  unpack_dir: str | Path | None = None) -> RegulatorPath:
+    """The path that drives ``arm``: the RL-HZD policy for an ``rl_hzd`` arm, else
+    :func:`make_regulator` of ``kind``."""
+    if getattr(arm, "controller", "regulator") == "rl_hzd":
+        return RlHzdRegulator()
+    return make_regulator(kind, fmu_path, unpack_dir=unpack_dir)
+
+
 def make_regulator(kind: str, fmu_path: str | Path | None = None, *,
                    unpack_dir: str | Path | None = None) -> RegulatorPath:
     """``unpack_dir``: where an FMU is extracted (see :class:`FmuRegulator`)."""

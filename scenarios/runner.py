@@ -84,7 +84,7 @@ def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
     """One scenario x arm (its own walker and regulator instance) as an outcome; the plant
     in-process, or the CassiePlant FMU at ``plant_fmu`` (``--plant fmu``). A complete
     arm's timings say when it ran (s since ``origin``, a ``perf_counter``)."""
-    from scenarios.master import make_regulator, run_arm
+    from scenarios.master import arm_regulator, run_arm
     from scenarios.plantio import load_plant_model
 
     if stop():
@@ -93,7 +93,7 @@ def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
     try:
         model, summary = load_plant_model(scenario, shared=True)
         model_s = time.perf_counter() - started
-        reg = make_regulator(regulator, fmu_path, unpack_dir=unpack_dir)
+        reg = arm_regulator(scenario.arm(arm), regulator, fmu_path, unpack_dir=unpack_dir)
         plant = None
         if plant_fmu is not None:
             from scenarios.plant_fmu import plant_factory

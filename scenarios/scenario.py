@@ -14,7 +14,10 @@ PLANT_DT_S = 0.0005
 DEFAULT_COMM_STEP_S = 0.005
 DEFAULT_MODEL = "menagerie"
 BUILTIN_MODELS = ("menagerie", "osu")
-BUILTIN_ARMS = ("adaptive", "pd_only")
+BUILTIN_ARMS = ("adaptive", "pd_only", "rl_hzd")
+#: What drives an arm: the regulator (FMU or core, per ``--regulator``) or the fixed
+#: RL-HZD policy (:mod:`scenarios.rl_hzd`, in-process whatever ``--regulator`` says).
+CONTROLLERS = ("regulator", "rl_hzd")
 #: Half-size of the terrain square, m (plant TerrainSpec.size_m), unless the file says.
 DEFAULT_TERRAIN_SIZE_M = 20.0
 #: Metrics a claim check may name (the keys of each arm in ``summary.json``).
@@ -69,12 +72,14 @@ class Arm:
     """One regulator configuration run over the same plant and command schedule.
 
     ``overrides`` are the final FMU parameter values for this arm (the scenario's
-    ``[regulator]`` table with the arm's own overrides on top), as sorted pairs.
+    ``[regulator]`` table with the arm's own overrides on top), as sorted pairs;
+    ``controller`` is one of ``CONTROLLERS`` (the ``rl_hzd`` arm has no overrides).
     """
 
     name: str
     overrides: tuple[tuple[str, Any], ...]
     description: str = ""
+    controller: str = "regulator"
 
     def overrides_dict(self) -> dict[str, Any]:
         return dict(self.overrides)

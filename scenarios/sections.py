@@ -43,7 +43,8 @@ MAX_COMM_STEP_S = 1.0
 MAX_ABS_VX_DES = 2.0
 MAX_ABS_VY_DES = 1.0
 MAX_PUSH_FORCE_N = 2000.0
-ARM_DESCRIPTIONS = {"adaptive": "all Psi outputs, adaptation on", "pd_only": "adaptation off (PD terms only)"}
+ARM_DESCRIPTIONS = {"adaptive": "all Psi outputs, adaptation on", "pd_only": "adaptation off (PD terms only)",
+                    "rl_hzd": "RL-HZD policy: ARS-trained on the nominal model, fixed (scenarios/rl_hzd)"}
 
 
 @dataclass(frozen=True)
@@ -255,9 +256,11 @@ def arms(doc: Mapping[str, Any], seed: int | None, probs: Problems) -> tuple[tup
         base.update(overrides({"seed": seed}, "", probs))
     defined = _defined_arms(doc, base, probs)
     names = _compare(doc, defined, probs) if "compare" in doc else (list(defined) or ["adaptive"])
-    builtin = {"adaptive": base, "pd_only": {**base, "adaptation_enabled": False}}
-    out = tuple(defined[n] if n in defined else Arm(n, tuple(sorted(builtin[n].items())), ARM_DESCRIPTIONS[n])
-                for n in names if n in defined or n in builtin)
+    builtin = {"adaptive": Arm("adaptive", tuple(sorted(base.items())), ARM_DESCRIPTIONS["adaptive"]),
+               "pd_only": Arm("pd_only", tuple(sorted({**base, "adaptation_enabled": False}.items())),
+                              ARM_DESCRIPTIONS["pd_only"]),
+               "rl_hzd": Arm("rl_hzd", (), ARM_DESCRIPTIONS["rl_hzd"], controller="rl_hzd")}
+    out = tuple(defined[n] if n in defined else builtin[n] for n in names if n in defined or n in builtin)
     for arm in out:
         try:
             avr_core.params_from_overrides(arm.overrides)
