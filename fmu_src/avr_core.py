@@ -86,9 +86,9 @@ class Regulator:
 
     def set_params(self, **changes) -> None:
         """Change tunable parameters (ParameterError for invalid or fixed ones)."""
-        fixed = [f"{k} = {v!r}: fixed parameter, cannot change after instantiation"
-                 for k, v in changes.items()
-                 if k in FIXED_PARAMS and v != getattr(self.params, k)]
+        fixed = [f"{name} = {value!r}: fixed parameter, cannot change after instantiation"
+                 for name, value in changes.items()
+                 if name in FIXED_PARAMS and value != getattr(self.params, name)]
         if fixed:
             raise ParameterError(fixed)
         self.params = self.params.replace(**changes)

@@ -138,12 +138,12 @@ class SplitMix64:
         self.next_index = 0
 
     @classmethod
-    def mix(cls, z: np.ndarray) -> np.ndarray:
-        """The SplitMix64 finaliser on a uint64 array ``z`` (wrapping arithmetic)."""
+    def mix(cls, bits: np.ndarray) -> np.ndarray:
+        """The SplitMix64 finaliser on a uint64 array (wrapping arithmetic)."""
         shift1, shift2, shift3 = cls._SHIFTS
-        z = (z ^ (z >> shift1)) * cls._M1
-        z = (z ^ (z >> shift2)) * cls._M2
-        return z ^ (z >> shift3)
+        bits = (bits ^ (bits >> shift1)) * cls._M1
+        bits = (bits ^ (bits >> shift2)) * cls._M2
+        return bits ^ (bits >> shift3)
 
     def uniform(self, count: int) -> np.ndarray:
         """The next ``count`` doubles in [0, 1) of this stream."""
@@ -153,28 +153,28 @@ class SplitMix64:
         return (self.mix(counters) >> self._MANTISSA_SHIFT).astype(np.float64) * self._ULP
 
 
-def sphere_encoders(stream: SplitMix64, n: int, d: int) -> np.ndarray:
-    """``n`` unit vectors uniform on the sphere in R^d, by rejection from the cube.
+def sphere_encoders(stream: SplitMix64, count: int, dims: int) -> np.ndarray:
+    """``count`` unit vectors uniform on the sphere in R^dims, by rejection from the cube.
 
-    Candidate j takes the next d uniforms u of ``stream``, ``v = 2 u - 1`` (exact);
+    Candidate j takes the next ``dims`` uniforms u of ``stream``, ``v = 2 u - 1`` (exact);
     ``r2 = (((v0 v0 + v1 v1) + v2 v2) + ...)`` in that order; it is accepted iff
     ``0 < r2 <= 1`` and becomes ``v / sqrt(r2)``.  Only correctly rounded IEEE
     operations, in a fixed order, so the C core gets the same bits.
     """
     accepted, have = [], 0
-    while have < n:  # acceptance 79% (d = 2) or 31% (d = 4): one batch, rarely two
+    while have < count:  # acceptance 79% (d = 2) or 31% (d = 4): one batch, rarely two
         # The field-0 stream serves the encoders only, so candidates drawn past the
         # last accepted one are simply never used: the accepted sequence is the one a
         # candidate-by-candidate loop (the C core's) finds.
-        n_candidates = (n - have) * _CANDIDATES_PER_ENCODER + _EXTRA_CANDIDATES
-        cube = 2.0 * stream.uniform(n_candidates * d).reshape(-1, d) - 1.0
+        n_candidates = (count - have) * _CANDIDATES_PER_ENCODER + _EXTRA_CANDIDATES
+        cube = 2.0 * stream.uniform(n_candidates * dims).reshape(-1, dims) - 1.0
         norm2 = cube[:, 0] * cube[:, 0]
-        for axis in range(1, d):
+        for axis in range(1, dims):
             norm2 = norm2 + cube[:, axis] * cube[:, axis]
-        take = np.flatnonzero((norm2 > 0.0) & (norm2 <= 1.0))[:n - have]
+        take = np.flatnonzero((norm2 > 0.0) & (norm2 <= 1.0))[:count - have]
         accepted.append(cube[take] / np.sqrt(norm2[take])[:, None])
         have += len(take)
-    return np.concatenate(accepted) if accepted else np.zeros((0, d))
+    return np.concatenate(accepted) if accepted else np.zeros((0, dims))
 
 
 #: Candidates drawn per missing encoder (and a few more) in one batch of

@@ -20,13 +20,13 @@ import numpy as np
 
 try:
     from .avr_errors import InputError, ParameterError, StateError
-    from .avr_network import INV_TAU_RC, lif_rates_times_tau_rc, readonly, scaled_inputs
+    from .avr_network import INV_TAU_RC, NETWORK_NAMES, lif_rates_times_tau_rc, readonly, scaled_inputs
     from .avr_params import network_key, validate_inputs
     from .avr_specs import (ANGLE_LIMIT_RAD, DELTA_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
                             VELOCITY_LIMIT_MPS)
 except ImportError:  # inside the FMU the modules are top-level
     from avr_errors import InputError, ParameterError, StateError
-    from avr_network import INV_TAU_RC, lif_rates_times_tau_rc, readonly, scaled_inputs
+    from avr_network import INV_TAU_RC, NETWORK_NAMES, lif_rates_times_tau_rc, readonly, scaled_inputs
     from avr_params import network_key, validate_inputs
     from avr_specs import (ANGLE_LIMIT_RAD, DELTA_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
                            VELOCITY_LIMIT_MPS)
@@ -40,6 +40,10 @@ WEIGHT_ROWS = ("x", "y", "pitch", "roll")
 N_WEIGHT_ROWS = len(WEIGHT_ROWS)
 #: stride_boundaries at which two steps are complete (the first call, then 3 changes)
 STRIDE_READY = 4
+#: stride_boundaries from which the step in progress began at a change of step_index
+#: (it is complete at the next change)
+_STEP_SEEN_FROM_START = 2
+_N_NETWORKS = len(NETWORK_NAMES)
 
 
 @dataclass(frozen=True, eq=False)
@@ -122,8 +126,8 @@ class RegulatorState:
     def __eq__(self, other):
         if not isinstance(other, RegulatorState):
             return NotImplemented
-        return all(np.array_equal(getattr(self, f.name), getattr(other, f.name))
-                   for f in fields(self))
+        return all(np.array_equal(getattr(self, item.name), getattr(other, item.name))
+                   for item in fields(self))
 
     __hash__ = None
 
@@ -246,7 +250,7 @@ def _advance_stride(state: RegulatorState, step_index: int, vy: float, roll: flo
     boundaries = state.stride_boundaries
     vy_means = (state.vy_mean_prev, state.vy_mean_last)
     roll_means = (state.roll_mean_prev, state.roll_mean_last)
-    if boundaries >= 2:  # the step that ends now began at a change of step_index: complete
+    if boundaries >= _STEP_SEEN_FROM_START:  # the step that ends now is complete
         calls = float(state.stride_calls)
         vy_means = (state.vy_mean_last, state.stride_sum_vy / calls)
         roll_means = (state.roll_mean_last, state.stride_sum_roll / calls)
@@ -264,7 +268,7 @@ def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, 
     scaled = np.array(scaled_inputs(vx, vx_des, vy, vy_des, pitch, roll, pitch_rate,
                                     roll_rate, params))
     # tau_rc * rates, (3, n): the factor 1 / tau_rc goes into scalars below
-    rates_tau = lif_rates_times_tau_rc(scaled @ networks.stacked).reshape(3, networks.n_neurons)
+    rates_tau = lif_rates_times_tau_rc(scaled @ networks.stacked).reshape(_N_NETWORKS, networks.n_neurons)
     # Psi_raw[j] = weights[j] . rates[net(j)]: the needed entries of the (4, 3) product
     # (one BLAS call beats gathering a (4, n) copy of the rates).
     products = (weights @ rates_tau.T).ravel().tolist()
@@ -277,9 +281,10 @@ def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, 
     return weights, psi
 
 
-#: Index, in the flattened (4, 3) product weights @ rates.T, of each weight row with its
-#: own network's rates: x with longitudinal, y with lateral, pitch and roll with torso.
-_ROW_NETWORK_PRODUCTS = (0, 4, 8, 11)
+#: The network each weight row reads: x longitudinal, y lateral, pitch and roll torso.
+_ROW_NETWORK = (0, 1, 2, 2)
+#: Index, in the flattened (4, 3) product weights @ rates.T, of each row with its network.
+_ROW_NETWORK_PRODUCTS = tuple(row * _N_NETWORKS + net for row, net in enumerate(_ROW_NETWORK))
 
 
 def _learning_errors(stride: dict, vx: float, vx_des: float, vy_des: float, pitch: float,
@@ -310,8 +315,8 @@ def _pes_update(weights, rates_tau, raw, errors, dt, params) -> np.ndarray:
     # (4, 3) @ (3, n) = each row's coefficient times its network's rates, exactly (the
     # zero terms add exact zeros); one BLAS call.  Setting 4 scalars is much cheaper
     # than np.array of a nested list.
-    select = np.zeros((N_WEIGHT_ROWS, 3))
-    select[0, 0], select[1, 1], select[2, 2], select[3, 2] = coefficients
+    select = np.zeros((N_WEIGHT_ROWS, _N_NETWORKS))
+    select[0, 0], select[1, 1], select[2, 2], select[3, 2] = coefficients  # (row, _ROW_NETWORK[row])
     new_weights = select @ rates_tau
     new_weights += weights
     return readonly(new_weights)

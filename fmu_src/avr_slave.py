@@ -66,9 +66,8 @@ except ImportError:  # pragma: no cover - exercised inside the built FMU
     from avr_statebytes import state_from_bytes, state_to_bytes
 
 _ALL_SPECS = (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)
-#: What deserializing a refused blob yields (then the reason, UTF-8); the guard reads it back
-#: and answers fmi2Error with the reason (see _fmu_state_from_bytes).
-REFUSED_STATE = b"\0AVR-REFUSED\0"
+#: What deserializing a refused blob yields (then the reason); see _fmu_state_from_bytes.
+REFUSED_STATE = fmustate.REFUSED_STATE
 
 
 class FmiCallError(AvrError):

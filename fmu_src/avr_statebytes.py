@@ -36,8 +36,9 @@ _VERSION = 2  # 2: the stride accumulators (version 1 had none)
 # stride_boundaries, stride_calls, stride_sum_vy, stride_sum_roll,
 # vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last
 _HEADER = struct.Struct("<8sHHII3dqq5dqq6d")
-#: The magic and the version: what can be read before the size is known.
+#: The magic and the version: what can be read before the size is known; then the counts.
 _PREFIX = struct.Struct("<8sH")
+_COUNTS = struct.Struct("<8sHHI")  # magic, version, n_rows, n_neurons
 _STRIDE_FLOATS = ("stride_sum_vy", "stride_sum_roll", "vy_mean_prev", "vy_mean_last",
                   "roll_mean_prev", "roll_mean_last")
 _CRC = struct.Struct("<I")
@@ -75,7 +76,7 @@ def state_from_bytes(blob: bytes, params) -> RegulatorState:
                             offset=_HEADER.size)
     weights = weights.astype(np.float64).reshape(N_WEIGHT_ROWS, n_neurons)  # owned, native-endian
     scalars = (vx_at, vy_at, pd_x, pd_y, time_s, *stride)
-    if not (np.all(np.isfinite(weights)) and all(math.isfinite(v) for v in scalars)):
+    if not (np.all(np.isfinite(weights)) and all(math.isfinite(value) for value in scalars)):
         raise StateError("state contains non-finite values")
     if last < -1 or n_calls < 0:
         raise StateError(f"state has invalid counters (last_step_index = {last}, "
@@ -105,7 +106,7 @@ def _checked_frame(blob) -> bytes:
                          f"lateral/roll learning and cannot be continued)")
     if len(blob) < _HEADER.size + _CRC.size:
         raise StateError(f"state blob too short ({len(blob)} bytes)")
-    _, _, n_rows, n_neurons = struct.unpack_from("<8sHHI", blob, 0)
+    _, _, n_rows, n_neurons = _COUNTS.unpack_from(blob, 0)
     if n_rows != N_WEIGHT_ROWS:
         raise StateError(f"state has {n_rows} weight rows, expected {N_WEIGHT_ROWS}")
     expected = _HEADER.size + _FLOAT64_BYTES * N_WEIGHT_ROWS * n_neurons + _CRC.size

@@ -154,6 +154,16 @@ def test_params_types_are_normalised_and_bools_are_not_numbers():
         RegulatorParams(n_neurons=10.0)
 
 
+def test_an_integer_beyond_float_range_is_a_parameter_problem_not_a_crash():
+    """float(10**400) overflows: the check once let that OverflowError escape."""
+    with pytest.raises(ParameterError) as exc:
+        RegulatorParams(Kp_x=10**400, psi_limit=-(10**400))
+    assert [p.split(": ", 1)[1] for p in exc.value.problems] == [
+        "must be a finite number in [-5, 5]", "must be a finite number in [0, 1]"]
+    with pytest.raises(InputError, match=r"vx = 1000.*: must be a finite number in \[-10, 10\] \(m/s\)"):
+        validate_inputs(RegulatorInputs(vx=10**400))
+
+
 def test_replace_validates_and_names_unknown_fields():
     p = RegulatorParams()
     q = p.replace(Kp_x=0.5)
