@@ -290,7 +290,10 @@ _ROW_NETWORK_PRODUCTS = tuple(row * _N_NETWORKS + net for row, net in enumerate(
 def _learning_errors(stride: dict, vx: float, vx_des: float, vy_des: float, pitch: float,
                      params) -> tuple[float, float, float, float]:
     """PES errors ``desired - actual`` (x, y, pitch, roll): instantaneous for x and pitch,
-    stride-averaged for y and roll (0, i.e. no learning, until two steps are complete)."""
+    stride-averaged for y and roll (0, i.e. no learning, until two steps are complete):
+    vy and roll sway with the stance side every step, which no offset can remove and
+    which PES would otherwise integrate without bound; the mean of the last two
+    completed steps (a left and a right one) cancels the sway."""
     if stride["stride_boundaries"] >= STRIDE_READY:
         e_y = vy_des - 0.5 * (stride["vy_mean_prev"] + stride["vy_mean_last"])
         e_roll = params.roll_des - 0.5 * (stride["roll_mean_prev"] + stride["roll_mean_last"])
