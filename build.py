@@ -39,7 +39,10 @@ from pathlib import Path
 REPO_ROOT = Path(__file__).resolve().parent
 FMU_SRC = REPO_ROOT / "fmu_src"
 SLAVE_SCRIPT = FMU_SRC / "avr_slave.py"
-PROJECT_FILES = (FMU_SRC / "avr_core.py", FMU_SRC / "avr_errors.py", FMU_SRC / "avr_fmustate.py")
+#: The regulator FMU's modules besides the slave script (flat in resources/); the plant FMU
+#: vendors them too (``_vendor_plant``): its slave uses avr_slavebase, its core avr_specs.
+PROJECT_FILES = tuple(FMU_SRC / f"avr_{name}.py" for name in (
+    "core", "errors", "fmustate", "network", "params", "regulator", "slavebase", "specs", "statebytes"))
 GUARD_DIR = FMU_SRC / "guard"
 #: The FMI guard's C sources (guard.h is included by each).
 GUARD_SOURCES = tuple(sorted(GUARD_DIR.glob("*.c")))
@@ -545,7 +548,7 @@ def _vendored_source(path: Path) -> tuple[str, list[Path]]:
 
 def _vendor_plant(lib: Path) -> None:
     """Copy plant/fmu_core.py and every project module it needs (imports made relative) to ``lib``."""
-    todo, done = [REPO_ROOT / PLANT_CORE], set()
+    todo, done = [REPO_ROOT / PLANT_CORE, *PROJECT_FILES], set()
     while todo:
         path = todo.pop()
         if path in done:

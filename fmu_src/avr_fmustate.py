@@ -7,6 +7,9 @@ Layout (little endian)::
     core    avr_core.state_to_bytes(...) (empty before initialization)
     u32     CRC-32 (zlib) of every byte before it
 
+``MAGIC``, ``VERSION``, ``HEADER``, ``CRC``, ``PHASES`` and ``REFUSED_STATE`` (what the
+regulator slave's deserialization yields for a blob it refuses) are also the C guard's.
+
 On linux64 the FMU's C guard wraps this blob in its own serialized form (GUID, fixed
 parameters, CRC-64) and checks all of that before Python sees a byte; this module is
 the second line of defence (and the only one where pythonfmu's library runs without the
@@ -33,6 +36,9 @@ HEADER = struct.Struct("<4sIII")
 CRC = struct.Struct("<I")
 #: FMI phases the slave tracks (FMI 2.0 section 4.2.4)
 PHASES = ("instantiated", "initializationMode", "stepComplete", "terminated")
+#: What the regulator slave's deserialization yields for a refused blob (then the reason,
+#: UTF-8); the guard reads it back and answers fmi2Error with the reason.
+REFUSED_STATE = b"\0AVR-REFUSED\0"
 
 
 @dataclass(frozen=True)
@@ -99,8 +105,8 @@ def decode(blob, specs) -> FmuStateParts:
     by_name = {spec.name: spec for spec in specs}
     problems = [f"unknown variable {name!r}" for name in sorted(set(values) - set(by_name))]
     problems += [f"lacks {name}" for name in by_name if name not in values]
-    problems += [p for name, spec in by_name.items() if name in values
-                 for p in [value_problem(spec, values[name])] if p]
+    problems += [problem for name, spec in by_name.items() if name in values
+                 for problem in [value_problem(spec, values[name])] if problem]
     if phase not in PHASES:
         problems.append(f"unknown FMI phase {phase!r}")
     elif (phase in ("stepComplete", "terminated")) != (n_core > 0):  # the core exists from initialization on

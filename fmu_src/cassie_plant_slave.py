@@ -19,6 +19,10 @@ for any call that logged an error.  That covers what only Python can check: the
 problem at once, each naming its field and range) in ``fmi2ExitInitializationMode``,
 which then stays in initialization mode, and the contents of an FMU state.
 
+The variables, typed get/set, phases and the checks of a set and of a doStep come from
+``fmu_src/avr_slavebase.py`` (shared with the regulator's slave); inside the FMU that
+module is loaded from this FMU's own copy in ``resources/cassie_plant_lib/fmu_src/``.
+
 FMU state: the regulator's blob format (``fmu_src/avr_fmustate.py``: every variable
 value, the FMI phase and time, CRC-32) with the walker's exact state (MuJoCo's
 integration state, servo gains, controller memory) as its core.  As for the regulator,
@@ -30,25 +34,20 @@ import dataclasses
 import hashlib
 import importlib
 import importlib.util
-import math
 import sys
 from pathlib import Path
 
-from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
 #: The folder in ``resources/`` that holds the plant package and the model files.
 LIB_DIR = "cassie_plant_lib"
-INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED = (
-    "instantiated", "initializationMode", "stepComplete", "terminated")
-TIME_MATCH_RTOL = 1e-9
-_KINDS = {"Real": (Real, float), "Integer": (Integer, int), "Boolean": (Boolean, bool), "String": (String, str)}
+#: Characters of the folder's sha256 in the private package name of a loaded copy.
+_PRIVATE_NAME_CHARS = 16
 
 
-def load_core(resources: str):
-    """``plant.fmu_core`` of the copy in ``resources/cassie_plant_lib``, under a private name."""
-    root = Path(resources) / LIB_DIR
-    name = "_cassie_plant_" + hashlib.sha256(str(root.resolve()).encode()).hexdigest()[:16]
+def _load_lib(root: Path):
+    """The package in ``root`` (a ``cassie_plant_lib`` folder), imported under a private name."""
+    name = "_cassie_plant_" + hashlib.sha256(str(root.resolve()).encode()).hexdigest()[:_PRIVATE_NAME_CHARS]
     if name not in sys.modules:
         spec = importlib.util.spec_from_file_location(name, root / "__init__.py",
                                                       submodule_search_locations=[str(root)])
@@ -59,10 +58,32 @@ def load_core(resources: str):
         except BaseException:
             del sys.modules[name]
             raise
-    return importlib.import_module(name + ".plant.fmu_core")
+    return sys.modules[name]
 
 
-class CassiePlant(Fmi2Slave):
+def load_core(resources: str):
+    """``plant.fmu_core`` of the copy in ``resources/cassie_plant_lib``, under a private name."""
+    return importlib.import_module(_load_lib(Path(resources) / LIB_DIR).__name__ + ".plant.fmu_core")
+
+
+def _slave_base():
+    """This FMU's own copy of ``avr_slavebase`` (the repository's when the FMU is being built)."""
+    lib = Path(__file__).resolve().parent / LIB_DIR
+    if lib.is_dir():  # inside the FMU: resources/cassie_plant_lib
+        return importlib.import_module(_load_lib(lib).__name__ + ".fmu_src.avr_slavebase")
+    try:  # pythonfmu's builder imports this script from the repository's fmu_src/
+        from . import avr_slavebase
+    except ImportError:
+        import avr_slavebase
+    return avr_slavebase
+
+
+_base = _slave_base()
+INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED = (
+    _base.INSTANTIATED, _base.INITIALIZATION_MODE, _base.STEP_COMPLETE, _base.TERMINATED)
+
+
+class CassiePlant(_base.SpecSlave):
     """MuJoCo Cassie with its nominal walking controller, started from rest."""
 
     author = "cassie-avr project"
@@ -74,129 +95,40 @@ class CassiePlant(Fmi2Slave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._core = core = load_core(self.resources)
-        self._specs = {s.name: s for s in core.SPECS}
-        self._values = {s.name: s.default for s in core.SPECS}
-        self._phase, self._time_s, self._walker = INSTANTIATED, 0.0, None
-        for spec in core.SPECS:
-            kind = _KINDS[spec.type][0]
-            extra = {} if spec.causality == "input" else {"initial": Fmi2Initial.exact}
-            self.register_variable(kind(spec.name, causality=getattr(Fmi2Causality, spec.causality),
-                                        variability=getattr(Fmi2Variability, spec.variability),
-                                        description=spec.description,
-                                        getter=lambda n=spec.name: self._values[n], **extra))
-        self._by_vr = [(v.name, self._specs[v.name].type) for v in self.vars.values()]
+        self._core = load_core(self.resources)
+        self._walker = None
+        self._init_variables(self._core.SPECS)
 
-    def _error(self, message: str) -> None:
-        """Log an Error: the guard then answers fmi2Error for the call."""
-        self.log(message, Fmi2Status.error)
-
-    # -- variables ---------------------------------------------------------------------
-    def _names(self, vrs, kind: str) -> list[str]:
-        names = []
-        for vr in vrs:
-            name, var_type = self._by_vr[vr]
-            if var_type != kind:
-                raise TypeError(f"valueReference {vr} ({name}) is not a {kind}")
-            names.append(name)
-        return names
-
-    def _get(self, vrs, kind):
-        cast = _KINDS[kind][1]
-        return [cast(self._values[n]) for n in self._names(vrs, kind)]
-
-    def get_real(self, vrs):
-        return self._get(vrs, "Real")
-
-    def get_integer(self, vrs):
-        return self._get(vrs, "Integer")
-
-    def get_boolean(self, vrs):
-        return self._get(vrs, "Boolean")
-
-    def get_string(self, vrs):
-        return self._get(vrs, "String")
-
-    def _set(self, vrs, values, kind) -> None:
-        cast = _KINDS[kind][1]
-        for name, value in zip(self._names(vrs, kind), values):
-            problem = self.set_problem(name, value)
-            if problem:
-                self._error(problem)
-            else:
-                self._values[name] = cast(value)
-
-    def set_real(self, vrs, values):
-        self._set(vrs, values, "Real")
-
-    def set_integer(self, vrs, values):
-        self._set(vrs, values, "Integer")
-
-    def set_boolean(self, vrs, values):
-        self._set(vrs, values, "Boolean")
-
-    def set_string(self, vrs, values):
-        self._set(vrs, values, "String")
-
-    def set_problem(self, name: str, value) -> str | None:
-        """Why setting ``name`` to ``value`` now is refused, or None (the guard checks the same first)."""
-        spec = self._specs[name]
-        if spec.causality == "output":
-            return f"{name} is an output and cannot be set"
-        if self._phase == TERMINATED:
-            return f"cannot set {name} after fmi2Terminate"
-        if spec.causality == "parameter" and self._phase == STEP_COMPLETE:
-            return f"{name} is a fixed parameter: set it before fmi2ExitInitializationMode"
-        if name == "model":
+    def _value_problem(self, spec, value) -> str | None:
+        if spec.name == "model":
             return self._core.model_problem(value)
-        if spec.type == "Real" and not math.isfinite(value):
-            return f"{name} = {value!r}: must be a finite number in [{spec.min}, {spec.max}]"
-        if spec.min is not None and (value < spec.min or value > spec.max):
-            return f"{name} = {value!r}: out of range [{spec.min}, {spec.max}]"
-        return None
+        return super()._value_problem(spec, value)
 
     # -- life cycle --------------------------------------------------------------------
-    def _allowed(self, call: str, *phases: str) -> bool:
-        if self._phase in phases:
-            return True
-        self._error(f"{call} is not allowed in state {self._phase} (allowed in: {', '.join(phases)})")
-        return False
-
-    def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        if self._allowed("fmi2SetupExperiment", INSTANTIATED):
-            self._time_s = float(start_time)
-
-    def enter_initialization_mode(self):
-        if self._allowed("fmi2EnterInitializationMode", INSTANTIATED):
-            self._phase = INITIALIZATION_MODE
-
     def exit_initialization_mode(self):
         """Build the walker; on invalid parameters log every problem and stay in initialization mode."""
-        if not self._allowed("fmi2ExitInitializationMode", INITIALIZATION_MODE):
+        if not self._in_phase("fmi2ExitInitializationMode", INITIALIZATION_MODE):
             return
         try:
-            walker = self._core.start(self._params(), Path(self.resources) / LIB_DIR / "models")
+            walker = self._start_walker()
         except Exception as exc:  # noqa: BLE001 - reported as fmi2Error, the instance stays usable
             for problem in getattr(exc, "problems", None) or [str(exc)]:
-                self._error(f"fmi2ExitInitializationMode refused: {problem}")
+                self._refuse(f"fmi2ExitInitializationMode refused: {problem}")
             return
         self._walker = walker
         self._values.update(self._core.outputs(walker))
         self._phase = STEP_COMPLETE
 
-    def _params(self) -> dict:
-        return {s.name: self._values[s.name] for s in self._core.PARAM_SPECS}
-
-    def terminate(self):
-        if self._allowed("fmi2Terminate", STEP_COMPLETE):
-            self._phase = TERMINATED
+    def _start_walker(self):
+        params = {spec.name: self._values[spec.name] for spec in self._core.PARAM_SPECS}
+        return self._core.start(params, Path(self.resources) / LIB_DIR / "models")
 
     def do_step(self, current_time, step_size):
-        problem = self._step_problem(current_time, step_size)
+        problem = self._step_problem(current_time, step_size) or self._core.step_problem(step_size)
         if problem:
-            self._error(f"fmi2DoStep refused: {problem}")
+            self._refuse(f"fmi2DoStep refused: {problem}")
             return True  # nothing done; the guard reports the logged error as fmi2Error
-        inputs = {n: self._values[n] for n in self._core.INPUT_NAMES}
+        inputs = {name: self._values[name] for name in self._core.INPUT_NAMES}
         try:
             out = self._core.advance(self._walker, inputs, self._core.plant_steps(step_size))
         except Exception as exc:  # noqa: BLE001 - MuJoCo or the controller failed: the step could not be done
@@ -208,15 +140,6 @@ class CassiePlant(Fmi2Slave):
         self._time_s = float(current_time) + float(step_size)
         return True
 
-    def _step_problem(self, current_time, step_size) -> str | None:
-        if self._phase != STEP_COMPLETE:
-            return f"not allowed in state {self._phase} (allowed in: {STEP_COMPLETE})"
-        tolerance = TIME_MATCH_RTOL * max(1.0, abs(self._time_s))
-        if not abs(current_time - self._time_s) <= tolerance:
-            return (f"currentCommunicationPoint = {current_time!r}: must equal the end of the last step "
-                    f"({self._time_s!r})")
-        return self._core.step_problem(step_size)
-
     # -- FMU state ---------------------------------------------------------------------
     def _get_fmu_state(self):
         return self._core.encode_fmu_state(self._values, self._phase, self._time_s, self._walker)
@@ -225,7 +148,7 @@ class CassiePlant(Fmi2Slave):
         try:
             parts, walker = self._restore(bytes(state))
         except Exception as exc:  # noqa: BLE001 - a bad state is refused (fmi2Error), the instance unchanged
-            self._error(f"fmi2SetFMUstate refused: {exc}")
+            self._refuse(f"fmi2SetFMUstate refused: {exc}")
             return
         self._values, self._phase, self._time_s, self._walker = parts.values, parts.phase, parts.time_s, walker
 
@@ -233,21 +156,12 @@ class CassiePlant(Fmi2Slave):
         """The state's parts, checked, and a walker in the saved state (the current one if the state
         carries walker bytes and the instance has one; fixed parameters must equal the instance's)."""
         parts = self._core.decode_fmu_state(blob)
-        values = {n: _KINDS[self._specs[n].type][1](v) for n, v in parts.values.items()}
-        differ = [f"{n} = {values[n]!r} (this instance: {self._values[n]!r})"
-                  for n in self._params() if values[n] != self._values[n]]
-        if differ:
-            raise ValueError("the state was saved with other fixed parameters: " + ", ".join(differ) +
-                             ". Set them to the state's values before restoring it")
+        values = self._typed_values(parts.values)
         walker = None
         if parts.core:
-            walker = self._walker or self._core.start(self._params(), Path(self.resources) / LIB_DIR / "models")
+            walker = self._walker or self._start_walker()
             self._core.state_from_bytes(walker, parts.core)  # all or nothing
         return dataclasses.replace(parts, values=values), walker
-
-    @staticmethod
-    def _fmu_state_to_bytes(state) -> bytes:
-        return bytes(state)
 
     @staticmethod
     def _fmu_state_from_bytes(state: bytes):

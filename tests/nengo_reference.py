@@ -13,7 +13,8 @@ synapse=None)`` whose error Node replays the regulator's ``E = desired - actual`
 import nengo
 import numpy as np
 
-from fmu_src.avr_core import build_networks, network_inputs
+from fmu_src.avr_core import build_networks
+from reference_regulator import network_inputs
 
 
 def build_reference(params, inputs, dt):

@@ -17,13 +17,14 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fmu_src import avr_core as core
+from fmu_src import avr_statebytes
 from fmu_src.avr_core import (
     INPUT_SPECS, OUTPUT_JOINTS, OUTPUT_SPECS, PARAM_SPECS, Regulator, RegulatorInputs,
     RegulatorParams, RegulatorState, build_networks, initial_state, lif_gain_bias,
-    network_inputs, neuron_rates, state_from_bytes, state_to_bytes, step,
-    validate_inputs, validate_params,
+    state_from_bytes, state_to_bytes, step, validate_inputs, validate_params,
 )
 from fmu_src.avr_errors import InputError, ParameterError, StateError
+from reference_regulator import network_inputs, neuron_rates
 
 DT = 0.005
 HYP = settings(derandomize=True, deadline=None, max_examples=40,
@@ -151,6 +152,16 @@ def test_params_types_are_normalised_and_bools_are_not_numbers():
         RegulatorParams(Kp_x=True)
     with pytest.raises(ParameterError, match=r"n_neurons = 10.0: must be an integer"):
         RegulatorParams(n_neurons=10.0)
+
+
+def test_an_integer_beyond_float_range_is_a_parameter_problem_not_a_crash():
+    """float(10**400) overflows: the check once let that OverflowError escape."""
+    with pytest.raises(ParameterError) as exc:
+        RegulatorParams(Kp_x=10**400, psi_limit=-(10**400))
+    assert [p.split(": ", 1)[1] for p in exc.value.problems] == [
+        "must be a finite number in [-5, 5]", "must be a finite number in [0, 1]"]
+    with pytest.raises(InputError, match=r"vx = 1000.*: must be a finite number in \[-10, 10\] \(m/s\)"):
+        validate_inputs(RegulatorInputs(vx=10**400))
 
 
 def test_replace_validates_and_names_unknown_fields():
@@ -588,7 +599,7 @@ def test_state_round_trip_is_bit_exact_and_continues_identically():
 def test_property_any_state_round_trips(w, last, n_calls, scalars):
     p = RegulatorParams(n_neurons=7, seed=123)
     s = RegulatorState(np.array(w).reshape(4, 7), last, *scalars[:4], n_calls,
-                       abs(scalars[4]), core._network_key(p))
+                       abs(scalars[4]), core.network_key(p))
     r = state_from_bytes(state_to_bytes(s), p)
     assert r == s and state_to_bytes(r) == state_to_bytes(s)
 
@@ -606,7 +617,7 @@ def test_bad_blobs_raise_state_error(case):
     run(reg, random_inputs(np.random.default_rng(0), 10))
     blob = state_to_bytes(reg.state)
     body = blob[:-4]
-    h = core._HEADER
+    h = avr_statebytes._HEADER
     fields_ = list(h.unpack_from(body))
     if case == "magic":
         bad = _recrc(b"NOTSTATE" + body[8:])

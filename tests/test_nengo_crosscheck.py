@@ -31,9 +31,10 @@ import pytest
 nengo = pytest.importorskip("nengo")
 
 from fmu_src.avr_core import (  # noqa: E402
-    Regulator, RegulatorInputs, RegulatorParams, build_networks, neuron_rates,
+    Regulator, RegulatorInputs, RegulatorParams, build_networks,
 )
 from nengo_reference import build_reference  # noqa: E402
+from reference_regulator import neuron_rates  # noqa: E402
 
 RTOL, ATOL = 1e-9, 1e-10
 

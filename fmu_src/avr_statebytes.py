@@ -1,0 +1,133 @@
+"""The regulator state as bytes: :func:`state_to_bytes` and its checked inverse.
+
+Deterministic (identical states give identical bytes), no pickle, format version 2.
+Layout (little-endian): header ``_HEADER`` (magic ``b"AVRSTATE"``, format version
+uint16, number of weight rows (4) uint16, n_neurons uint32, then the network key:
+seed uint32 and the three input scales float64 (NaN = unknown), then
+last_step_index int64, n_calls int64, vx_at_step, vy_at_step, pd_x, pd_y, time_s
+float64, stride_boundaries int64, stride_calls int64, stride_sum_vy,
+stride_sum_roll, vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last
+float64), the weights as 4*n float64 in C order, then a CRC-32 (uint32) of
+everything before it.
+"""
+from __future__ import annotations
+
+import math
+import struct
+import zlib
+
+import numpy as np
+
+try:
+    from .avr_errors import StateError
+    from .avr_params import network_key
+    from .avr_regulator import N_WEIGHT_ROWS, STRIDE_READY, RegulatorState
+except ImportError:  # inside the FMU the modules are top-level
+    from avr_errors import StateError
+    from avr_params import network_key
+    from avr_regulator import N_WEIGHT_ROWS, STRIDE_READY, RegulatorState
+
+__all__ = ["state_to_bytes", "state_from_bytes"]
+
+_MAGIC = b"AVRSTATE"
+_VERSION = 2  # 2: the stride accumulators (version 1 had none)
+# magic, version, n_rows, n_neurons, seed, velocity/angle/rate scales,
+# last_step_index, n_calls, vx_at_step, vy_at_step, pd_x, pd_y, time_s,
+# stride_boundaries, stride_calls, stride_sum_vy, stride_sum_roll,
+# vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last
+_HEADER = struct.Struct("<8sHHII3dqq5dqq6d")
+#: The magic and the version: what can be read before the size is known; then the counts.
+_PREFIX = struct.Struct("<8sH")
+_COUNTS = struct.Struct("<8sHHI")  # magic, version, n_rows, n_neurons
+_STRIDE_FLOATS = ("stride_sum_vy", "stride_sum_roll", "vy_mean_prev", "vy_mean_last",
+                  "roll_mean_prev", "roll_mean_last")
+_CRC = struct.Struct("<I")
+_FLOAT64_BYTES = 8
+_UNKNOWN_SCALES = (math.nan,) * 3
+
+
+def state_to_bytes(state: RegulatorState) -> bytes:
+    """Serialise ``state`` (layout: the module docstring)."""
+    if state.network_key is not None:
+        seed, *scales = state.network_key
+    else:
+        seed, scales = 0, _UNKNOWN_SCALES
+    head = _HEADER.pack(_MAGIC, _VERSION, N_WEIGHT_ROWS, state.n_neurons, seed, *scales,
+                        state.last_step_index, state.n_calls, state.vx_at_step,
+                        state.vy_at_step, state.pd_x, state.pd_y, state.time_s,
+                        state.stride_boundaries, state.stride_calls,
+                        *(getattr(state, name) for name in _STRIDE_FLOATS))
+    body = head + state.weights.astype("<f8", copy=False).tobytes(order="C")
+    return body + _CRC.pack(zlib.crc32(body))
+
+
+def state_from_bytes(blob: bytes, params) -> RegulatorState:
+    """Inverse of :func:`state_to_bytes` for a regulator with ``params``.
+
+    Raises :class:`StateError` on a non-bytes blob, bad magic, unknown version, wrong
+    size or checksum, an n_neurons (or, when recorded, seed or input scale) different
+    from ``params``, or invalid contents (non-finite values, step index < -1).
+    """
+    blob = _checked_frame(blob)
+    (_, _, _, n_neurons, seed, velocity_scale, angle_scale, rate_scale, last, n_calls, vx_at,
+     vy_at, pd_x, pd_y, time_s, boundaries, stride_calls, *stride) = _HEADER.unpack_from(blob, 0)
+    key = _checked_key(n_neurons, seed, (velocity_scale, angle_scale, rate_scale), params)
+    weights = np.frombuffer(blob, dtype="<f8", count=N_WEIGHT_ROWS * n_neurons,
+                            offset=_HEADER.size)
+    weights = weights.astype(np.float64).reshape(N_WEIGHT_ROWS, n_neurons)  # owned, native-endian
+    scalars = (vx_at, vy_at, pd_x, pd_y, time_s, *stride)
+    if not (np.all(np.isfinite(weights)) and all(math.isfinite(value) for value in scalars)):
+        raise StateError("state contains non-finite values")
+    if last < -1 or n_calls < 0:
+        raise StateError(f"state has invalid counters (last_step_index = {last}, "
+                         f"n_calls = {n_calls})")
+    if not (0 <= boundaries <= STRIDE_READY and stride_calls >= 0
+            and (boundaries == 0) == (stride_calls == 0)):
+        raise StateError(f"state has invalid stride counters (stride_boundaries = "
+                         f"{boundaries}, stride_calls = {stride_calls})")
+    weights.flags.writeable = False
+    return RegulatorState(weights, last, vx_at, vy_at, pd_x, pd_y, n_calls, time_s, key,
+                          boundaries, stride_calls, *stride)
+
+
+def _checked_frame(blob) -> bytes:
+    """``blob`` as bytes once its type, magic, version, row count, size and CRC are right."""
+    if not isinstance(blob, (bytes, bytearray, memoryview)):
+        raise StateError(f"state blob must be bytes, got {type(blob).__name__}")
+    blob = bytes(blob)
+    if len(blob) < _PREFIX.size + _CRC.size:
+        raise StateError(f"state blob too short ({len(blob)} bytes)")
+    magic, version = _PREFIX.unpack_from(blob, 0)
+    if magic != _MAGIC:
+        raise StateError(f"not a regulator state (magic {magic!r}, expected {_MAGIC!r})")
+    if version != _VERSION:
+        raise StateError(f"unsupported state format version {version} (this build reads "
+                         f"{_VERSION}; version 1 states predate the stride-averaged "
+                         f"lateral/roll learning and cannot be continued)")
+    if len(blob) < _HEADER.size + _CRC.size:
+        raise StateError(f"state blob too short ({len(blob)} bytes)")
+    _, _, n_rows, n_neurons = _COUNTS.unpack_from(blob, 0)
+    if n_rows != N_WEIGHT_ROWS:
+        raise StateError(f"state has {n_rows} weight rows, expected {N_WEIGHT_ROWS}")
+    expected = _HEADER.size + _FLOAT64_BYTES * N_WEIGHT_ROWS * n_neurons + _CRC.size
+    if len(blob) != expected:
+        raise StateError(f"state blob has {len(blob)} bytes, expected {expected} "
+                         f"for n_neurons = {n_neurons}")
+    (crc,) = _CRC.unpack_from(blob, len(blob) - _CRC.size)
+    if zlib.crc32(blob[:-_CRC.size]) != crc:
+        raise StateError("state blob checksum mismatch (corrupted)")
+    return blob
+
+
+def _checked_key(n_neurons: int, seed: int, scales: tuple, params):
+    """The state's network key (None if unrecorded), refused if it is not ``params``'."""
+    if n_neurons != params.n_neurons:
+        raise StateError(f"state has n_neurons = {n_neurons}, regulator has {params.n_neurons}")
+    if all(math.isnan(scale) for scale in scales):
+        return None
+    if seed != params.seed:
+        raise StateError(f"state was saved with seed = {seed}, regulator has {params.seed}")
+    here = network_key(params)[1:]
+    if scales != here:
+        raise StateError(f"state was saved with input scales {scales}, regulator has {here}")
+    return (seed, *scales)
