@@ -67,6 +67,8 @@ def check_mjcf_file(path: pathlib.Path) -> None:
 
 
 def spec_from_file(path: pathlib.Path, what: str) -> mujoco.MjSpec:
+    """``path`` checked by :func:`check_mjcf_file` and parsed; ModelError names the file and,
+    for a missing one, the fix (``what`` is the model's kind: Menagerie, OSU or MJCF)."""
     if not path.is_file():
         hint = (" Fix: set CASSIE_OSU_XML to OSU's cassie.xml" if what == "OSU"
                 else " Fix: pass an existing MJCF file, 'menagerie' or 'osu'")

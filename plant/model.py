@@ -123,6 +123,22 @@ def _check_names(model: mujoco.MjModel, source: str) -> None:
                          f"missing {', '.join(missing)}")
 
 
+def _source_spec(src: str) -> mujoco.MjSpec:
+    """The checked, parsed MJCF of ``src``: ``menagerie``, ``osu`` or a file path."""
+    if src == "menagerie":
+        return spec_from_file(menagerie_xml_path(), "Menagerie")
+    if src == "osu":
+        return spec_from_file(osu_model_path(), "OSU")
+    return spec_from_file(pathlib.Path(src).expanduser(), "MJCF")
+
+
+def _compile(spec: mujoco.MjSpec, src: str, when: str = "") -> mujoco.MjModel:
+    try:
+        return spec.compile()
+    except Exception as e:  # mujoco raises ValueError with the compiler's message
+        raise ModelError(f"cannot compile model {src!r}{when}: {e}") from e
+
+
 def load_model(source: str | os.PathLike = "menagerie",
                perturbation: Perturbation | None = None) -> mujoco.MjModel:
     """Compile the Cassie model with an optional perturbation.
@@ -147,16 +163,8 @@ def load_model(source: str | os.PathLike = "menagerie",
                 f"perturbation={perturbation!r} must be a Perturbation or None")
         perturbation.validate()
     src = os.fspath(source)
-    if src == "menagerie":
-        spec = spec_from_file(menagerie_xml_path(), "Menagerie")
-    elif src == "osu":
-        spec = spec_from_file(osu_model_path(), "OSU")
-    else:
-        spec = spec_from_file(pathlib.Path(src).expanduser(), "MJCF")
-    try:
-        model = spec.compile()
-    except Exception as e:
-        raise ModelError(f"cannot compile model {src!r}: {e}") from e
+    spec = _source_spec(src)
+    model = _compile(spec, src)
     _check_names(model, repr(src))
 
     edit_spec = False
@@ -167,10 +175,7 @@ def load_model(source: str | os.PathLike = "menagerie",
         add_terrain(spec, perturbation.terrain)
         edit_spec = True
     if edit_spec:
-        try:
-            model = spec.compile()
-        except Exception as e:
-            raise ModelError(f"cannot compile model {src!r} after edits: {e}") from e
+        model = _compile(spec, src, " after edits")
         key = model.key(HOME_KEY)
         if key.qpos.shape != (model.nq,):
             raise ModelError(f"{HOME_KEY!r} keyframe has {key.qpos.size} qpos, model nq={model.nq}")
