@@ -39,8 +39,6 @@ from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
-os.environ.setdefault("MENAGERIE_ROOT", str(REPO_ROOT.parent / "shared" / "cassie" / "menagerie"))
-os.environ["MENAGERIE_ROOT"] = str(Path(os.environ["MENAGERIE_ROOT"]).resolve())
 
 SMOKE = REPO_ROOT / "scenarios" / "campaigns" / "smoke.toml"
 #: (file, function) under cProfile -> the part of a task it measures

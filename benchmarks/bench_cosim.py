@@ -33,7 +33,6 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
-import os
 import subprocess
 import sys
 import tempfile
@@ -43,7 +42,6 @@ from typing import Any, Mapping
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
-os.environ.setdefault("MENAGERIE_ROOT", str(REPO_ROOT.parent / "shared" / "cassie" / "menagerie"))
 
 from scenarios import master, spec  # noqa: E402
 from ctypes import c_double as c_double_t  # noqa: E402

@@ -18,19 +18,14 @@ and the Python controller rate.  Best of ``--repeat`` runs (machine is shared).
 from __future__ import annotations
 
 import argparse
-import os
-import pathlib
 import time
 
 import mujoco
 
-os.environ.setdefault("MENAGERIE_ROOT", str(pathlib.Path(__file__).resolve().parents[2]
-                                            / "shared" / "cassie" / "menagerie"))
-
-from fmu_src.avr_core import Regulator  # noqa: E402
-from plant.make_gaits import COMM_STEPS, PD_ONLY_PARAMS  # noqa: E402
-from plant.model import load_model  # noqa: E402
-from plant.sim import CassieWalker, apply_regulator  # noqa: E402
+from fmu_src.avr_core import Regulator
+from plant.make_gaits import COMM_STEPS, PD_ONLY_PARAMS
+from plant.model import load_model
+from plant.sim import CassieWalker, apply_regulator
 
 
 def bench_bare(model, sim_s: float) -> float:

@@ -33,7 +33,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import re
 import resource
 import subprocess
@@ -46,7 +45,6 @@ from typing import Any
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
 sys.path.insert(0, str(REPO_ROOT))
-os.environ.setdefault("MENAGERIE_ROOT", str(REPO_ROOT.parent / "shared" / "cassie" / "menagerie"))
 
 import bench_cosim  # noqa: E402
 from scenarios import master, spec  # noqa: E402

@@ -35,31 +35,11 @@ from dataclasses import dataclass
 import mujoco
 import numpy as np
 
+from plant.constants import HOME_KEY, MOTOR_JOINTS, PASSIVE_JOINTS, PELVIS_BODY, SIDES
 from plant.errors import ModelError
+from plant.terrain import GroundHeight
 
 log = logging.getLogger(__name__)
-
-SIDES = ("left", "right")
-#: Motor joints of one leg, in actuator order used throughout the package.
-MOTOR_JOINTS = ("hip-roll", "hip-yaw", "hip-pitch", "knee", "foot")
-#: Passive joints of one leg.
-PASSIVE_JOINTS = ("shin", "tarsus", "heel-spring")
-PELVIS_BODY = "cassie-pelvis"
-
-#: Standing pose per leg used when the model has no ``home`` keyframe (rad), the
-#: values of Menagerie's ``home`` keyframe: hip roll is +0.0045 left / -0.0045 right.
-STANDING_JOINTS_RAD = {
-    "hip-roll": 0.00449956,
-    "hip-yaw": 0.0,
-    "hip-pitch": 0.497301,
-    "knee": -1.1997,
-    "shin": 0.0,
-    "tarsus": 1.42671,
-    "heel-spring": 0.0,
-    "foot": -1.59681,
-}
-#: Pelvis height of the standing pose (m); the feet then just touch a z=0 floor.
-STANDING_PELVIS_HEIGHT_M = 1.0059301
 
 #: Fall thresholds.  Nominal walking keeps the pelvis 0.85-1.0 m above the ground
 #: and within ~0.2 rad of level; 0.55 m means the knees have folded or the robot is
@@ -81,6 +61,14 @@ class LegIds:
     foot_jid: int
     foot_body: int
     foot_geoms: tuple
+
+
+def quat_to_euler_zyx(w: float, x: float, y: float, z: float) -> tuple[float, float, float]:
+    """(yaw, pitch, roll) ZYX Euler angles (rad) of the unit quaternion (w, x, y, z)."""
+    yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
+    roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+    return yaw, pitch, roll
 
 
 def _id(model, objtype, name):
@@ -133,14 +121,13 @@ class CassiePhysics:
             (s, j): float(m.actuator_gear[a, 0] * max(abs(m.actuator_ctrlrange[a, 0]),
                                                          abs(m.actuator_ctrlrange[a, 1])))
             for s in SIDES for j, a in self.legs[s].act.items()}
-        # Static ground geoms (world body) for ground_height_m().
-        ground_types = (int(mujoco.mjtGeom.mjGEOM_PLANE), int(mujoco.mjtGeom.mjGEOM_HFIELD))
-        self._ground_geoms = [g for g in range(m.ngeom) if m.geom_bodyid[g] == 0
-                              and int(m.geom_type[g]) in ground_types
-                              and (m.geom_contype[g] or m.geom_conaffinity[g])]
-        self._plane_type = int(mujoco.mjtGeom.mjGEOM_PLANE)
+        #: The ground height under a world point (m), see :meth:`ground_height_m`.
+        self.ground = GroundHeight(m)
         self._force6 = np.zeros(6)
-        self.home_key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "home")
+        self.home_key = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, HOME_KEY)
+        if self.home_key < 0:
+            raise ModelError(f"Cassie model has no {HOME_KEY!r} keyframe; load it with "
+                             "plant.model.load_model, which adds one")
         self.reset_standing()
 
     def _floating_base_adr(self, m):
@@ -164,22 +151,10 @@ class CassiePhysics:
 
     # ------------------------------------------------------------------ set-up
     def reset_standing(self) -> None:
-        """Put the robot in the ``home`` standing pose at rest.
-
-        Uses the model's ``home`` keyframe if present, else :data:`STANDING_JOINTS_RAD`
-        with the pelvis at :data:`STANDING_PELVIS_HEIGHT_M` above the ground.
-        """
+        """Put the robot at rest in the model's ``home`` standing pose, on the ground under it."""
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
-        if self.home_key >= 0:
-            mujoco.mj_resetDataKeyframe(m, d, self.home_key)
-        else:
-            q = d.qpos
-            q[self.free_qadr:self.free_qadr + 7] = [0, 0, STANDING_PELVIS_HEIGHT_M, 1, 0, 0, 0]
-            for s in SIDES:
-                sign = 1.0 if s == "left" else -1.0
-                for j, v in STANDING_JOINTS_RAD.items():
-                    q[self.legs[s].qadr[j]] = sign * v if j == "hip-roll" else v
+        mujoco.mj_resetDataKeyframe(m, d, self.home_key)
         d.qvel[:] = 0.0
         # Terrain: stand on the ground under the pelvis.
         mujoco.mj_kinematics(m, d)
@@ -193,7 +168,7 @@ class CassiePhysics:
         Each actuator becomes ``force = ctrl - kp*q - kd*qdot`` (gain 1, affine bias,
         gear 1 so force is the joint torque in N m) with ``forcerange`` equal to the
         original ``gear * ctrlrange``: the controller writes ``ctrl = kp*q_des +
-        kd*qdot_des + tau_ff`` and the gains with :meth:`set_pd`.
+        kd*qdot_des + tau_ff`` and the gains into ``biasprm`` (``-kp``, ``-kd``).
         """
         m = self.model
         for s in SIDES:
@@ -212,12 +187,6 @@ class CassiePhysics:
         # (actuator length/moment are recomputed from the gear at every step; no
         # mj_setConst, which would overwrite the state.)
         self.data.ctrl[:] = 0.0
-
-    def set_pd(self, side: str, joint: str, kp: float, kd: float) -> None:
-        """Set the servo gains (N m/rad, N m s/rad) of one motor joint."""
-        a = self.legs[side].act[joint]
-        self.model.actuator_biasprm[a, 1] = -kp
-        self.model.actuator_biasprm[a, 2] = -kd
 
     # ------------------------------------------------------------------ state
     #: MuJoCo's full integration state: restoring it makes the following steps identical
@@ -271,18 +240,9 @@ class CassiePhysics:
         """World position of the pelvis body frame origin (m), shape (3,)."""
         return self.data.qpos[self.free_qadr:self.free_qadr + 3].copy()
 
-    def pelvis_quat(self) -> np.ndarray:
-        """Pelvis orientation quaternion (w, x, y, z)."""
-        return self.data.qpos[self.free_qadr + 3:self.free_qadr + 7].copy()
-
     def euler_zyx(self) -> tuple[float, float, float]:
         """Pelvis (yaw, pitch, roll) ZYX Euler angles (rad)."""
-        w, x, y, z = self.data.qpos[self.free_qadr + 3:self.free_qadr + 7]
-        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-        sp = max(-1.0, min(1.0, 2.0 * (w * y - z * x)))
-        pitch = math.asin(sp)
-        roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
-        return yaw, pitch, roll
+        return quat_to_euler_zyx(*self.data.qpos[self.free_qadr + 3:self.free_qadr + 7].tolist())
 
     def heading_yaw(self) -> float:
         """Pelvis yaw (rad), the rotation of the heading frame about world z."""
@@ -299,17 +259,13 @@ class CassiePhysics:
     def heading_state(self) -> tuple:
         """(yaw, pitch, roll, vx, vy, roll_rate, pitch_rate, yaw_rate), Python floats.
 
-
         Angles rad (ZYX Euler); vx, vy m/s and the rates rad/s in the heading frame.
         Same values as the individual accessors, computed without numpy temporaries
         (the controller calls this at 1 kHz).
         """
         d = self.data
         qa, da = self.free_qadr, self.free_dadr
-        w, x, y, z = d.qpos[qa + 3:qa + 7].tolist()
-        yaw = math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
-        pitch = math.asin(max(-1.0, min(1.0, 2.0 * (w * y - z * x))))
-        roll = math.atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y))
+        yaw, pitch, roll = quat_to_euler_zyx(*d.qpos[qa + 3:qa + 7].tolist())
         v0, v1, _v2, a0, a1, a2 = d.qvel[da:da + 6].tolist()
         r = d.xmat[self.pelvis_body].tolist()
         wx = r[0] * a0 + r[1] * a1 + r[2] * a2
@@ -318,10 +274,6 @@ class CassiePhysics:
         c, sn = math.cos(yaw), math.sin(yaw)
         return (yaw, pitch, roll, c * v0 + sn * v1, -sn * v0 + c * v1,
                 c * wx + sn * wy, -sn * wx + c * wy, wz)
-
-    def pelvis_velocity_world(self) -> np.ndarray:
-        """Pelvis linear velocity in the world frame (m/s), shape (3,)."""
-        return self.data.qvel[self.free_dadr:self.free_dadr + 3].copy()
 
     def pelvis_velocity_heading(self) -> np.ndarray:
         """Pelvis linear velocity in the heading frame (m/s): (forward, left, up)."""
@@ -395,33 +347,8 @@ class CassiePhysics:
 
     # ------------------------------------------------------------- terrain/fall
     def ground_height_m(self, x: float, y: float) -> float:
-        """Height of the highest static plane/height field under (x, y) (m); 0 if none.
-
-        Planes are taken as horizontal at their z; a height field is interpolated
-        bilinearly in its grid (``hfield_size`` = half-x, half-y, z-scale, base).
-        """
-        m, d = self.model, self.data
-        best = None
-        for g in self._ground_geoms:
-            if int(m.geom_type[g]) == self._plane_type:
-                h = float(m.geom_pos[g][2])  # world geoms: model pose is the world pose
-            else:
-                hid = m.geom_dataid[g]
-                sx, sy, sz, _base = m.hfield_size[hid]
-                nr, nc = m.hfield_nrow[hid], m.hfield_ncol[hid]
-                pos = m.geom_pos[g]
-                u = (x - pos[0] + sx) / (2 * sx) * (nc - 1)
-                v = (y - pos[1] + sy) / (2 * sy) * (nr - 1)
-                if not (0 <= u <= nc - 1 and 0 <= v <= nr - 1):
-                    continue
-                adr = m.hfield_adr[hid]
-                i0, j0 = min(int(v), nr - 2), min(int(u), nc - 2)
-                fv, fu = v - i0, u - j0
-                z = m.hfield_data[adr:adr + nr * nc].reshape(nr, nc)
-                h = float(pos[2] + sz * ((1 - fv) * ((1 - fu) * z[i0, j0] + fu * z[i0, j0 + 1])
-                                         + fv * ((1 - fu) * z[i0 + 1, j0] + fu * z[i0 + 1, j0 + 1])))
-            best = h if best is None else max(best, h)
-        return 0.0 if best is None else best
+        """Height of the ground under the world point (x, y) (m): :class:`plant.terrain.GroundHeight`."""
+        return self.ground(x, y)
 
     def pelvis_height_above_ground_m(self) -> float:
         """Pelvis height above the ground directly under it (m)."""

@@ -87,189 +87,58 @@ already holds the torso).  These are ``fmu_src.avr_core.RegulatorParams``'
 defaults; the gait calibration, the walking tests and the plant benchmark run
 that core in-process with ``adaptation_enabled=False`` through
 :func:`plant.sim.apply_regulator`.
+
+Layout: the parameters are :class:`plant.controller_params.ControllerParams`, the leg
+geometry and the Bezier curves :mod:`plant.kinematics`, the gaits :mod:`plant.gaits`.
+This module is longer than 400 lines because this docstring is the controller's
+reference (method, offset signs, regulator inputs); :meth:`NominalController.update`
+is made of small steps: sense, phase, standing / stance / swing targets, servo writes.
 """
 from __future__ import annotations
 
 import logging
 import math
 from dataclasses import dataclass, field
-from typing import Mapping
+from typing import Mapping, NamedTuple
 
-import mujoco
 import numpy as np
 
-from plant.cassie import MOTOR_JOINTS, SIDES, CassiePhysics
+from plant.cassie import CassiePhysics
+from plant.constants import MOTOR_JOINTS, OFFSET_NAMES, SIDES
+from plant.controller_params import ControllerParams
+from plant.gaits import GaitLibrary, GaitParams
+from plant.kinematics import LegKinematics, bezier  # noqa: F401  (re-exported)
 
 log = logging.getLogger(__name__)
 
-OFFSET_KEYS = (
-    "delta_swing_hip_pitch",
-    "delta_swing_knee",
-    "delta_swing_hip_roll",
-    "delta_stance_hip_roll",
-    "delta_stance_hip_pitch",
-    "delta_stance_knee",
-)
+#: The regulator's joint offsets the controller takes (``plant.constants.OFFSET_NAMES``).
+OFFSET_KEYS = OFFSET_NAMES
 
+#: The neutral-point landing angle asin(v T / 2L) takes its argument clipped to +-this:
+#: at most 30 degrees from vertical, beyond any speed the gait library covers.
+MAX_STEP_SINE = 0.5
+#: The swing leg length is the vertical hip-to-ankle drop over cos(pitch) cos(roll) of the
+#: leg, that product floored here (leg angles beyond 60 degrees would stretch the leg).
+MIN_LEG_COS = 0.5
+#: The weight shift reaches its full distance after this fraction of ``shift_time_s``
+#: (a smoothstep), then holds it until the first step.
+SHIFT_RAMP_FRACTION = 0.7
+#: Shortest weight-shift ramp, s (keeps the ramp finite for ``shift_time_s = 0``).
+MIN_SHIFT_RAMP_S = 1e-3
+#: Shortest step (s) counted for the step-averaged speed ``vx_step_avg``.
+MIN_STEP_DURATION_S = 1e-6
 
-def bezier(coeffs, s: float) -> float:
-    """Bezier polynomial ``sum_i a_i C(n,i) s^i (1-s)^(n-i)`` at ``s`` clipped to [0, 1]."""
-    s = 0.0 if s < 0.0 else (1.0 if s > 1.0 else s)
-    n = len(coeffs) - 1
-    t = 1.0 - s
-    # de Casteljau: stable and short.
-    b = list(coeffs)
-    for r in range(1, n + 1):
-        for i in range(n - r + 1):
-            b[i] = t * b[i] + s * b[i + 1]
-    return float(b[0])
-
-
-@dataclass(frozen=True)
-class GaitParams:
-    """Gait parameters for one commanded speed (one row of the gait library).
-
-    Angles in rad, lengths in m, times in s.  Forward leg angle is the angle of
-    the hip-to-ankle line from vertical in the heading frame, positive forward;
-    lateral leg angle likewise, positive toward +y.
-    """
-
-    step_time_s: float = 0.4
-    #: Landing leg angle = asin(vx_des*T/(2L)) + leg_angle_offset_rad (+ regulator offset).
-    leg_angle_offset_rad: float = 0.0
-    #: Landing lateral angle = asin(vy_des*T/(2L)) + lateral_offset_rad + side*step_width_rad.
-    lateral_offset_rad: float = 0.0
-    step_width_rad: float = 0.0
-    torso_pitch_des_rad: float = 0.0
-    #: Bezier shape (0 -> 1) of the swing angles vs tau/swing_end_tau.
-    swing_shape: tuple = (0.0, 0.0, 1.0, 1.0, 1.0)
-    swing_end_tau: float = 0.8
-    #: Bezier of the swing ankle height above its standing height (m) vs tau/height_end_tau;
-    #: ends negative so the foot keeps pressing down until contact (no late touchdown).
-    swing_height: tuple = (0.0, 0.2, 0.2, -0.03, -0.03, -0.03)
-    height_end_tau: float = 0.85
-
-
-@dataclass(frozen=True)
-class ControllerParams:
-    """Parameters of the nominal controller (gains N m/rad and N m s/rad)."""
-
-    #: Joint PD for roll, yaw, pitch, knee, foot (Gong et al. 2019 style).
-    kp: tuple = (400.0, 200.0, 500.0, 500.0, 30.0)
-    kd: tuple = (10.0, 4.0, 15.0, 15.0, 2.0)
-    #: Stance torso PD through hip pitch (pitch) and hip roll (roll).
-    torso_pitch_kp: float = 500.0
-    torso_pitch_kd: float = 20.0
-    torso_roll_kp: float = 300.0
-    torso_roll_kd: float = 15.0
-    stance_leg_length_m: float = 0.86
-    stance_knee_ff_nm: float = 110.0
-    #: Single-support hip-roll gravity feedforward (N m; + on the left leg, - on the right).
-    stance_hip_roll_ff_nm: float = 50.0
-    #: Python layer runs every this many plant steps (4 -> every 2 ms, 500 Hz, at the
-    #: 0.5 ms plant step); the joint PD servos run inside MuJoCo at every step.
-    control_substeps: int = 4
-    #: Phase switching.
-    switch_min_tau: float = 0.6
-    switch_max_tau: float = 1.1
-    touchdown_force_n: float = 200.0
-    #: Start-up from rest.
-    stand_time_s: float = 0.3
-    shift_time_s: float = 0.5
-    shift_distance_m: float = 0.06
-    first_stance: str = "left"
-    #: Standing COM feedback through the foot torques (N m/m, N m s/m, per foot).
-    stand_com_kp: float = 600.0
-    stand_com_kd: float = 60.0
-    #: Standing lateral COM feedback through both hip rolls (rad/m, rad s/m).
-    stand_lat_kp: float = 3.0
-    stand_lat_kd: float = 0.5
-    #: Low-pass time constant of the lateral velocity signal given to the regulator.
-    vy_filter_tau_s: float = 0.1
-    swing_leg_min_length_m: float = 0.55
-    #: Landing leg angle uses the speed v_des + blend*(vx_filt - v_des) in its
-    #: neutral-point term asin(v T / 2L): 0 = pure time-based gait (v_des only),
-    #: 1 = neutral point of the measured speed (speed-neutral gait, the regulator
-    #: supplies the correction).  Proportional only: no integral action.
-    neutral_point_blend: float = 1.0
-    vx_filter_tau_s: float = 0.05
-    #: Lateral landing-angle feedback on the filtered lateral speed error (rad per
-    #: m/s), continuous (the foot lands where the latest vy asks): stabilises the
-    #: lateral sway; the regulator's held-per-step lateral PD only trims the drift.
-    lateral_speed_gain: float = 0.3
-    #: Rate limit of the gait speed toward the command (m/s^2).
-    accel_limit_mps2: float = 0.5
-
-    def __post_init__(self):
-        if not (isinstance(self.control_substeps, int) and self.control_substeps >= 1):
-            raise ValueError(f"control_substeps must be an int >= 1, got {self.control_substeps!r}")
-        if self.first_stance not in SIDES:
-            raise ValueError(f"first_stance must be one of {SIDES}, got {self.first_stance!r}")
-    swing_leg_max_length_m: float = 0.93
-
-
-def _horner(coeffs, x: float) -> float:
-    r = 0.0
-    for c in coeffs:
-        r = r * x + c
-    return r
-
-
-class LegKinematics:
-    """Rigid-spring sagittal leg kinematics fitted on the model itself.
-
-    With the shin and heel springs at rest the tarsus follows the knee
-    (``tarsus = tarsus_offset - knee``, 0.2269 rad for Cassie); the hip-pitch
-    pivot to ankle distance ``L(knee)`` and the angle ``g(knee)`` of that line
-    from the thigh's zero are sampled on a grid and fitted by polynomials.
-    Absolute leg angle (forward positive) = ``hip_pitch + g(knee) - pelvis_pitch``.
-    """
-
-    def __init__(self, phys: CassiePhysics, side: str = "left", tarsus_offset: float | None = None):
-        m = phys.model
-        d = mujoco.MjData(m)
-        d.qpos[:] = phys.data.qpos
-        legs = phys.legs[side]
-        qa = legs.qadr
-        fq = phys.free_qadr
-        if tarsus_offset is None:
-            tarsus_offset = float(d.qpos[qa["tarsus"]] + d.qpos[qa["knee"]])
-        self.tarsus_offset = tarsus_offset
-        d.qpos[fq + 3:fq + 7] = [1, 0, 0, 0]
-        for j in ("hip-roll", "hip-yaw", "hip-pitch", "shin", "heel-spring"):
-            d.qpos[qa[j]] = 0.0
-        knees = np.linspace(-2.6, -0.7, 40)
-        L, g = [], []
-        for kn in knees:
-            d.qpos[qa["knee"]] = kn
-            d.qpos[qa["tarsus"]] = tarsus_offset - kn
-            mujoco.mj_kinematics(m, d)
-            v = d.xanchor[legs.foot_jid] - d.xanchor[legs.hip_pitch_jid]
-            L.append(math.hypot(v[0], v[2]))
-            g.append(math.atan2(v[0], -v[2]))
-        # Polynomial coefficients, highest power first, as Python floats (Horner below).
-        self._L = tuple(float(c) for c in np.polyfit(knees, L, 5))
-        self._g = tuple(float(c) for c in np.polyfit(knees, g, 5))
-        self._kn = tuple(float(c) for c in np.polyfit(L, knees, 5))
-        self.L_range = (min(L), max(L))
-        self.max_fit_error_m = float(np.max(np.abs(np.polyval(self._L, knees) - L)))
-
-    def length(self, knee: float) -> float:
-        """Hip-pitch pivot to ankle distance (m) for a knee angle (rad)."""
-        return _horner(self._L, knee)
-
-    def angle_offset(self, knee: float) -> float:
-        """g(knee) (rad): leg line angle at zero hip pitch and level pelvis."""
-        return _horner(self._g, knee)
-
-    def knee_for_length(self, length_m: float) -> float:
-        """Knee angle (rad) giving leg length ``length_m`` (clipped to the fitted range)."""
-        lo, hi = self.L_range
-        return _horner(self._kn, min(max(length_m, lo), hi))
+#: Share of the torso PD and of the feedforwards each leg carries: both legs in double
+#: support (standing, weight shift), the stance leg alone in single support.
+DOUBLE_SUPPORT_SHARE = 0.5
+SINGLE_SUPPORT_SHARE = 1.0
 
 
 @dataclass
 class _Targets:
+    """Servo targets keyed by (side, motor joint): position (rad), velocity (rad/s),
+    feedforward torque (N m) and gains (N m/rad, N m s/rad)."""
+
     q: dict = field(default_factory=dict)
     qd: dict = field(default_factory=dict)
     ff: dict = field(default_factory=dict)
@@ -277,21 +146,33 @@ class _Targets:
     kd: dict = field(default_factory=dict)
 
 
+class _Sensed(NamedTuple):
+    """What one update measures: time (s), pelvis angles (rad) and rates (rad/s) in the
+    heading frame, the heading error (rad), joint positions and velocities per side."""
+
+    t: float
+    pitch: float
+    roll: float
+    roll_rate: float
+    pitch_rate: float
+    yaw_rate: float
+    yaw_err: float
+    q: dict
+    qd: dict
+
+
 _Q_NAMES = MOTOR_JOINTS + ("tarsus",)
 
 
-def joint_pd_torque(kp, kd, q_des, qd_des, tau_ff, q, qd, limit):
-    """Reference joint PD law (N m) that the MuJoCo servos implement, clipped to +-limit."""
-    tau = kp * (q_des - q) + kd * (qd_des - qd) + tau_ff
-    return min(max(tau, -limit), limit)
+def _low_pass(filtered: float, value: float, dt: float, tau_s: float) -> float:
+    """One step of a first-order low-pass filter with time constant ``tau_s`` over ``dt``."""
+    a = dt / (tau_s + dt) if dt > 0 else 0.0
+    return filtered + a * (value - filtered)
 
 
-class _Uniform:
-    def __init__(self, g):
-        self.g = g
-
-    def lookup(self, vx, vy):
-        return self.g
+def _neutral_angle(speed_mps: float, step_time_s: float, leg_length_m: float) -> float:
+    """Leg angle (rad) of the neutral point asin(v T / 2L), its argument clipped."""
+    return math.asin(max(-MAX_STEP_SINE, min(MAX_STEP_SINE, speed_mps * step_time_s / (2 * leg_length_m))))
 
 
 class NominalController:
@@ -301,12 +182,11 @@ class NominalController:
         self.phys = phys
         self.p = params or ControllerParams()
         self.kin = {s: LegKinematics(phys, s) for s in SIDES}
-        d, legs = phys.data, phys.legs
-        la = legs["left"].qadr
+        legs = phys.legs
+        qpos, la = phys.data.qpos, legs["left"].qadr
         #: Foot-level constant: hip pitch + knee + tarsus + foot at the standing pose.
-        self.foot_flat_sum = float(d.qpos[la["hip-pitch"]] + d.qpos[la["knee"]]
-                                   + d.qpos[la["tarsus"]] + d.qpos[la["foot"]])
-        self.home_q = {s: {j: phys.joint_pos_rad(s, j) for j in MOTOR_JOINTS} for s in SIDES}
+        self.foot_flat_sum = float(qpos[la["hip-pitch"]] + qpos[la["knee"]]
+                                   + qpos[la["tarsus"]] + qpos[la["foot"]])
         # Ankle height above ground when standing (m).
         self.ankle_height0 = float(np.mean([phys.foot_position(s)[2] for s in SIDES]))
         self.offsets = {k: 0.0 for k in OFFSET_KEYS}
@@ -315,14 +195,13 @@ class NominalController:
         self.vx_des = 0.0
         self.vy_des = 0.0
         self.cmd_vx = self.cmd_vy = 0.0
-        self._gaits = _Uniform(GaitParams())
+        self._gaits = GaitLibrary.uniform(GaitParams())
         self.mode = "stand"
         self.stance = self.p.first_stance
         self.step_index = 0
         self.t_step_start = 0.0
         self.tau = 0.0
         self.vx_step_avg = 0.0
-        self.vy_step_avg = 0.0
         self.vy_filt = 0.0
         self.vx_filt = 0.0
         self._step_start_xy = phys.pelvis_position()[:2]
@@ -330,7 +209,6 @@ class NominalController:
         self._last_t = phys.time_s
         #: Heading held by the hip yaw joints (rad): the pelvis yaw at start.
         self.yaw_ref = phys.heading_yaw()
-        legs = phys.legs
         self._act_ids = np.array([legs[s].act[j] for s in SIDES for j in MOTOR_JOINTS])
         self._q_idx = np.array([legs[s].qadr[j] for s in SIDES for j in _Q_NAMES])
         self._qd_idx = np.array([legs[s].dadr[j] for s in SIDES for j in MOTOR_JOINTS])
@@ -349,7 +227,7 @@ class NominalController:
     #: Everything the controller carries from one update to the next (the rest is fixed
     #: at construction from the model and the standing pose); the FMU state holds these.
     MEMORY_FIELDS = ("offsets", "vx_des", "vy_des", "cmd_vx", "cmd_vy", "mode", "stance", "step_index",
-                     "t_step_start", "tau", "vx_step_avg", "vy_step_avg", "vy_filt", "vx_filt",
+                     "t_step_start", "tau", "vx_step_avg", "vy_filt", "vx_filt",
                      "_step_start_xy", "_swing_start", "_last_t", "yaw_ref")
 
     def memory(self) -> dict:
@@ -423,165 +301,191 @@ class NominalController:
     def swing(self) -> str:
         return "right" if self.stance == "left" else "left"
 
-    # ------------------------------------------------------------- helpers
+    # ------------------------------------------------------------- phase
     def _leg_angles(self, side, yaw):
         """Measured (forward, lateral) absolute leg angles (rad) in the heading frame."""
-        ph = self.phys
-        v = ph.foot_position(side) - ph.hip_position(side)
+        phys = self.phys
+        v = phys.foot_position(side) - phys.hip_position(side)
         c, s = math.cos(yaw), math.sin(yaw)
         fx, fy = c * v[0] + s * v[1], -s * v[0] + c * v[1]
         return math.atan2(fx, -v[2]), math.atan2(fy, -v[2])
 
     def _start_step(self, t, yaw, new_stance):
-        ph = self.phys
-        xy = ph.pelvis_position()[:2]
+        """End the current step at time ``t`` (s): its average forward speed, a new stance."""
+        xy = self.phys.pelvis_position()[:2]
         dt = t - self.t_step_start
-        if self.mode == "walk" and dt > 1e-6:
+        if self.mode == "walk" and dt > MIN_STEP_DURATION_S:
             dx, dy = xy - self._step_start_xy
-            c, s = math.cos(yaw), math.sin(yaw)
-            self.vx_step_avg = (c * dx + s * dy) / dt
-            self.vy_step_avg = (-s * dx + c * dy) / dt
+            self.vx_step_avg = (math.cos(yaw) * dx + math.sin(yaw) * dy) / dt
             self.step_index += 1
         self._step_start_xy = xy
         self.t_step_start = t
         self.stance = new_stance
         self._swing_start = self._leg_angles(self.swing, yaw)
 
-    # -------------------------------------------------------------- update
-    def update(self) -> None:
-        """Refresh phase and servo targets from the current state (call every substep block)."""
-        ph, p = self.phys, self.p
-        d = ph.data
-        t = ph.time_s
-        yaw, pitch, roll, vx_h, vy_h, roll_rate, pitch_rate, yaw_rate = ph.heading_state()
-        yaw_err = math.remainder(yaw - self.yaw_ref, math.tau)
-        dt = max(t - self._last_t, 0.0)
-        self._last_t = t
-        a = dt / (p.vy_filter_tau_s + dt) if dt > 0 else 0.0
-        self.vy_filt += a * (vy_h - self.vy_filt)
-        ax = dt / (p.vx_filter_tau_s + dt) if dt > 0 else 0.0
-        self.vx_filt += ax * (vx_h - self.vx_filt)
-
-        self._refresh_gait(dt)
-        g = self.gait
-        # ---------------- phase / mode machine
+    def _advance_phase(self, t: float, yaw: float) -> None:
+        """Stand, shift the weight, then walk: the phase ``tau`` and the stance switches."""
+        p = self.p
         if self.mode == "stand" and t >= p.stand_time_s:
             self.mode = "shift"
         if self.mode == "shift" and t >= p.stand_time_s + p.shift_time_s:
             self._start_step(t, yaw, p.first_stance)
             self.mode = "walk"
-        if self.mode == "walk":
-            T = g.step_time_s
-            self.tau = (t - self.t_step_start) / T
-            touchdown = False
-            if self.tau > p.switch_min_tau:
-                # Contact forces only when a touchdown can end the step (saves time).
-                fl, fr = ph.foot_normal_forces_n()
-                touchdown = (fl if self.swing == "left" else fr) > p.touchdown_force_n
-            if touchdown or self.tau >= p.switch_max_tau:
-                self._start_step(t, yaw, self.swing)
-                self.tau = 0.0
-        else:
+        if self.mode != "walk":
+            self.tau = 0.0
+            return
+        self.tau = (t - self.t_step_start) / self.gait.step_time_s
+        touchdown = False
+        if self.tau > p.switch_min_tau:
+            # Contact forces only when a touchdown can end the step (saves time).
+            fl, fr = self.phys.foot_normal_forces_n()
+            touchdown = (fl if self.swing == "left" else fr) > p.touchdown_force_n
+        if touchdown or self.tau >= p.switch_max_tau:
+            self._start_step(t, yaw, self.swing)
             self.tau = 0.0
 
-        qv = d.qpos[self._q_idx].tolist()
-        qdv = d.qvel[self._qd_idx].tolist()
+    # -------------------------------------------------------------- update
+    def update(self) -> None:
+        """Refresh phase and servo targets from the current state (call every substep block)."""
+        sensed, yaw = self._sense()
+        self._advance_phase(sensed.t, yaw)
+        targets = self._default_targets(sensed)
+        if self.mode in ("stand", "shift"):
+            self._standing_targets(targets, sensed, yaw)
+        else:
+            self._walking_targets(targets, sensed)
+        self._write_servos(targets)
+
+    def _sense(self) -> tuple[_Sensed, float]:
+        """Measure the pelvis and the joints, update the speed filters and the gait."""
+        phys, p = self.phys, self.p
+        t = phys.time_s
+        yaw, pitch, roll, vx_h, vy_h, roll_rate, pitch_rate, yaw_rate = phys.heading_state()
+        yaw_err = math.remainder(yaw - self.yaw_ref, math.tau)
+        dt = max(t - self._last_t, 0.0)
+        self._last_t = t
+        self.vy_filt = _low_pass(self.vy_filt, vy_h, dt, p.vy_filter_tau_s)
+        self.vx_filt = _low_pass(self.vx_filt, vx_h, dt, p.vx_filter_tau_s)
+        self._refresh_gait(dt)
+        qv = phys.data.qpos[self._q_idx].tolist()
+        qdv = phys.data.qvel[self._qd_idx].tolist()
         n6, n5 = len(_Q_NAMES), len(MOTOR_JOINTS)
         q = {"left": dict(zip(_Q_NAMES, qv[:n6])), "right": dict(zip(_Q_NAMES, qv[n6:]))}
         qd = {"left": dict(zip(MOTOR_JOINTS, qdv[:n5])), "right": dict(zip(MOTOR_JOINTS, qdv[n5:]))}
-        T_ = _Targets(q={k: q[k[0]][k[1]] for k in self._keys}, qd=dict(self._zeros),
-                      ff=dict(self._zeros), kp=dict(self._kp_all), kd=dict(self._kd_all))
-        kp, kd = self._kp, self._kd
-        o = self.offsets
+        return _Sensed(t, pitch, roll, roll_rate, pitch_rate, yaw_rate, yaw_err, q, qd), yaw
 
-        def stance_leg(s, share, shift_roll=0.0):
-            # Torso pitch constraint through hip pitch.
-            T_.q[s, "hip-pitch"] = q[s]["hip-pitch"] - (pitch - g.torso_pitch_des_rad) - o["delta_stance_hip_pitch"]
-            T_.qd[s, "hip-pitch"] = qd[s]["hip-pitch"] - pitch_rate
-            T_.kp[s, "hip-pitch"] = p.torso_pitch_kp * share
-            T_.kd[s, "hip-pitch"] = p.torso_pitch_kd * share
-            T_.q[s, "hip-roll"] = q[s]["hip-roll"] + roll + o["delta_stance_hip_roll"] + shift_roll
-            T_.qd[s, "hip-roll"] = qd[s]["hip-roll"] + roll_rate
-            T_.kp[s, "hip-roll"] = p.torso_roll_kp * share
-            T_.kd[s, "hip-roll"] = p.torso_roll_kd * share
-            if share == 1.0:
-                # Gravity feedforward: the pelvis hangs inboard of the stance hip.
-                T_.ff[s, "hip-roll"] = p.stance_hip_roll_ff_nm * (1.0 if s == "left" else -1.0)
-            T_.q[s, "knee"] = self._stance_knee[s] + o["delta_stance_knee"]
-            T_.ff[s, "knee"] = p.stance_knee_ff_nm * share
-            # Heading hold: hip yaw axes point up, so with the foot fixed the pelvis
-            # yaw falls as the hip yaw rises.
-            T_.q[s, "hip-yaw"] = q[s]["hip-yaw"] + yaw_err
-            T_.qd[s, "hip-yaw"] = qd[s]["hip-yaw"] + yaw_rate
-            T_.q[s, "foot"] = q[s]["foot"]
-            T_.kp[s, "foot"] = 0.0
-            T_.kd[s, "foot"] = 0.0
+    def _default_targets(self, sensed: _Sensed) -> _Targets:
+        """Hold every joint where it is, with the default gains and no feedforward."""
+        q = sensed.q
+        return _Targets(q={k: q[k[0]][k[1]] for k in self._keys}, qd=dict(self._zeros),
+                        ff=dict(self._zeros), kp=dict(self._kp_all), kd=dict(self._kd_all))
 
-        if self.mode in ("stand", "shift"):
-            com = ph.center_of_mass()
-            vcom = d.subtree_linvel[ph.pelvis_body]
-            feet = 0.5 * (ph.foot_center("left") + ph.foot_center("right"))
-            c, s_ = math.cos(yaw), math.sin(yaw)
-            ex = c * (com[0] - feet[0]) + s_ * (com[1] - feet[1])
-            evx = c * vcom[0] + s_ * vcom[1]
-            shift = 0.0
-            if self.mode == "shift":
-                r = min(1.0, (t - p.stand_time_s) / max(p.shift_time_s * 0.7, 1e-3))
-                side = 1.0 if p.first_stance == "left" else -1.0
-                shift = side * p.shift_distance_m * (3 * r * r - 2 * r * r * r)
-            ey = -s_ * (com[0] - feet[0]) + c * (com[1] - feet[1])
-            evy = -s_ * vcom[0] + c * vcom[1]
-            # Lateral COM position feedback: both hip rolls decrease to move the pelvis +y.
-            shift_roll = -(p.stand_lat_kp * (shift - ey) - p.stand_lat_kd * evy)
-            for s in SIDES:
-                stance_leg(s, 0.5, shift_roll=shift_roll)
-                # Foot: level + COM feedback (toe down when COM ahead).
-                T_.q[s, "foot"] = self.foot_flat_sum + pitch - q[s]["hip-pitch"] - q[s]["knee"] - q[s]["tarsus"]
-                T_.kp[s, "foot"] = kp["foot"]
-                T_.kd[s, "foot"] = kd["foot"]
-                T_.ff[s, "foot"] = -(p.stand_com_kp * ex + p.stand_com_kd * evx)
-        else:
-            st, sw = self.stance, self.swing
-            stance_leg(st, 1.0)
-            T = g.step_time_s
-            L = p.stance_leg_length_m
-            b = bezier(g.swing_shape, self.tau / g.swing_end_tau)
-            v_np = self.vx_des + p.neutral_point_blend * (self.vx_filt - self.vx_des)
-            th_f = (math.asin(max(-0.5, min(0.5, v_np * T / (2 * L)))) + g.leg_angle_offset_rad
-                    + o["delta_swing_hip_pitch"])
-            side = 1.0 if sw == "left" else -1.0
-            ph_f = (math.asin(max(-0.5, min(0.5, self.vy_des * T / (2 * L)))) + g.lateral_offset_rad
-                    + side * g.step_width_rad + o["delta_swing_hip_roll"]
-                    + p.lateral_speed_gain * (self.vy_filt - self.vy_des))
-            th0, ph0 = self._swing_start
-            th = th0 + (th_f - th0) * b
-            phi = ph0 + (ph_f - ph0) * b
-            # Swing foot height -> leg length (world-frame target).
-            h = bezier(g.swing_height, self.tau / g.height_end_tau)
-            hip = ph.hip_position(sw)
-            ground = ph.ground_height_m(hip[0], hip[1])
-            z_ankle = ground + self.ankle_height0 + h
-            Ld = (hip[2] - z_ankle) / max(math.cos(th) * math.cos(phi), 0.5)
-            Ld = min(max(Ld, p.swing_leg_min_length_m), p.swing_leg_max_length_m)
-            kin = self.kin[sw]
-            kn = kin.knee_for_length(Ld)
-            # The knee offset is not compensated at the hip: + extends the shank
-            # forward, so the foot lands further forward (and lower/earlier).
-            T_.q[sw, "knee"] = kn + o["delta_swing_knee"] * b
-            T_.q[sw, "hip-pitch"] = th + pitch - kin.angle_offset(kn)
-            T_.q[sw, "hip-roll"] = phi - roll
-            T_.q[sw, "hip-yaw"] = -yaw_err  # swing foot lands along the reference heading
-            T_.q[sw, "foot"] = self.foot_flat_sum + pitch - q[sw]["hip-pitch"] - q[sw]["knee"] - q[sw]["tarsus"]
+    def _level_foot(self, q_leg: dict, pitch: float) -> float:
+        """Foot joint target (rad) that keeps the foot level."""
+        return self.foot_flat_sum + pitch - q_leg["hip-pitch"] - q_leg["knee"] - q_leg["tarsus"]
 
-        # ---------------- write servo commands (one vectorised write each)
-        keys = self._keys
-        Tkp, Tkd, Tq, Tqd, Tff = T_.kp, T_.kd, T_.q, T_.qd, T_.ff
-        kps = [-Tkp[k] for k in keys]  # bias = -kp q - kd qdot
-        kds = [-Tkd[k] for k in keys]
-        ctrl = [Tkp[k] * Tq[k] + Tkd[k] * Tqd[k] + Tff[k] for k in keys]
-        m = ph.model
-        m.actuator_biasprm[self._act_ids, 1] = kps
-        m.actuator_biasprm[self._act_ids, 2] = kds
-        d.ctrl[self._act_ids] = ctrl
-        self.targets = T_
+    def _stance_targets(self, targets: _Targets, sensed: _Sensed, side: str, share: float,
+                        shift_roll: float = 0.0) -> None:
+        """Stance leg ``side`` carrying ``share`` of the torso: torso pitch and roll through
+        the hip, leg length through the knee, heading through the hip yaw, passive foot."""
+        p, gait, offsets = self.p, self.gait, self.offsets
+        q, qd, s = sensed.q[side], sensed.qd[side], side
+        targets.q[s, "hip-pitch"] = (q["hip-pitch"] - (sensed.pitch - gait.torso_pitch_des_rad)
+                                     - offsets["delta_stance_hip_pitch"])
+        targets.qd[s, "hip-pitch"] = qd["hip-pitch"] - sensed.pitch_rate
+        targets.kp[s, "hip-pitch"] = p.torso_pitch_kp * share
+        targets.kd[s, "hip-pitch"] = p.torso_pitch_kd * share
+        targets.q[s, "hip-roll"] = q["hip-roll"] + sensed.roll + offsets["delta_stance_hip_roll"] + shift_roll
+        targets.qd[s, "hip-roll"] = qd["hip-roll"] + sensed.roll_rate
+        targets.kp[s, "hip-roll"] = p.torso_roll_kp * share
+        targets.kd[s, "hip-roll"] = p.torso_roll_kd * share
+        if share == SINGLE_SUPPORT_SHARE:
+            # Gravity feedforward: the pelvis hangs inboard of the stance hip.
+            targets.ff[s, "hip-roll"] = p.stance_hip_roll_ff_nm * (1.0 if s == "left" else -1.0)
+        targets.q[s, "knee"] = self._stance_knee[s] + offsets["delta_stance_knee"]
+        targets.ff[s, "knee"] = p.stance_knee_ff_nm * share
+        # Heading hold: hip yaw axes point up, so with the foot fixed the pelvis
+        # yaw falls as the hip yaw rises.
+        targets.q[s, "hip-yaw"] = q["hip-yaw"] + sensed.yaw_err
+        targets.qd[s, "hip-yaw"] = qd["hip-yaw"] + sensed.yaw_rate
+        targets.q[s, "foot"] = q["foot"]
+        targets.kp[s, "foot"] = 0.0
+        targets.kd[s, "foot"] = 0.0
 
+    def _standing_targets(self, targets: _Targets, sensed: _Sensed, yaw: float) -> None:
+        """Both legs in stance; the COM held over the feet (forward: foot torques; lateral:
+        both hip rolls), shifted over the first stance foot during the weight shift."""
+        phys, p = self.phys, self.p
+        com = phys.center_of_mass()
+        vcom = phys.data.subtree_linvel[phys.pelvis_body]
+        feet = 0.5 * (phys.foot_center("left") + phys.foot_center("right"))
+        c, s_ = math.cos(yaw), math.sin(yaw)
+        ex = c * (com[0] - feet[0]) + s_ * (com[1] - feet[1])
+        evx = c * vcom[0] + s_ * vcom[1]
+        shift = 0.0
+        if self.mode == "shift":
+            r = min(1.0, (sensed.t - p.stand_time_s) / max(p.shift_time_s * SHIFT_RAMP_FRACTION,
+                                                            MIN_SHIFT_RAMP_S))
+            side = 1.0 if p.first_stance == "left" else -1.0
+            shift = side * p.shift_distance_m * (3 * r * r - 2 * r * r * r)  # smoothstep
+        ey = -s_ * (com[0] - feet[0]) + c * (com[1] - feet[1])
+        evy = -s_ * vcom[0] + c * vcom[1]
+        # Lateral COM position feedback: both hip rolls decrease to move the pelvis +y.
+        shift_roll = -(p.stand_lat_kp * (shift - ey) - p.stand_lat_kd * evy)
+        for s in SIDES:
+            self._stance_targets(targets, sensed, s, DOUBLE_SUPPORT_SHARE, shift_roll=shift_roll)
+            # Foot: level + COM feedback (toe down when COM ahead).
+            targets.q[s, "foot"] = self._level_foot(sensed.q[s], sensed.pitch)
+            targets.kp[s, "foot"] = self._kp["foot"]
+            targets.kd[s, "foot"] = self._kd["foot"]
+            targets.ff[s, "foot"] = -(p.stand_com_kp * ex + p.stand_com_kd * evx)
+
+    def _landing_angles(self) -> tuple[float, float]:
+        """Where the swing leg lands: (forward, lateral) absolute leg angles (rad)."""
+        p, gait, offsets = self.p, self.gait, self.offsets
+        step_time_s, leg_length_m = gait.step_time_s, p.stance_leg_length_m
+        v_np = self.vx_des + p.neutral_point_blend * (self.vx_filt - self.vx_des)
+        theta = (_neutral_angle(v_np, step_time_s, leg_length_m) + gait.leg_angle_offset_rad
+                 + offsets["delta_swing_hip_pitch"])
+        side = 1.0 if self.swing == "left" else -1.0
+        phi = (_neutral_angle(self.vy_des, step_time_s, leg_length_m) + gait.lateral_offset_rad
+               + side * gait.step_width_rad + offsets["delta_swing_hip_roll"]
+               + p.lateral_speed_gain * (self.vy_filt - self.vy_des))
+        return theta, phi
+
+    def _walking_targets(self, targets: _Targets, sensed: _Sensed) -> None:
+        """Stance leg as in :meth:`_stance_targets`; the swing leg follows its Bezier
+        virtual constraints from lift-off to :meth:`_landing_angles`."""
+        phys, p, gait, offsets = self.phys, self.p, self.gait, self.offsets
+        sw = self.swing
+        self._stance_targets(targets, sensed, self.stance, SINGLE_SUPPORT_SHARE)
+        b = bezier(gait.swing_shape, self.tau / gait.swing_end_tau)
+        theta_f, phi_f = self._landing_angles()
+        theta0, phi0 = self._swing_start
+        theta = theta0 + (theta_f - theta0) * b
+        phi = phi0 + (phi_f - phi0) * b
+        # Swing foot height -> leg length (world-frame target).
+        height = bezier(gait.swing_height, self.tau / gait.height_end_tau)
+        hip = phys.hip_position(sw)
+        z_ankle = phys.ground_height_m(hip[0], hip[1]) + self.ankle_height0 + height
+        length = (hip[2] - z_ankle) / max(math.cos(theta) * math.cos(phi), MIN_LEG_COS)
+        length = min(max(length, p.swing_leg_min_length_m), p.swing_leg_max_length_m)
+        kin = self.kin[sw]
+        knee = kin.knee_for_length(length)
+        # The knee offset is not compensated at the hip: + extends the shank
+        # forward, so the foot lands further forward (and lower/earlier).
+        targets.q[sw, "knee"] = knee + offsets["delta_swing_knee"] * b
+        targets.q[sw, "hip-pitch"] = theta + sensed.pitch - kin.angle_offset(knee)
+        targets.q[sw, "hip-roll"] = phi - sensed.roll
+        targets.q[sw, "hip-yaw"] = -sensed.yaw_err  # swing foot lands along the reference heading
+        targets.q[sw, "foot"] = self._level_foot(sensed.q[sw], sensed.pitch)
+
+    def _write_servos(self, targets: _Targets) -> None:
+        """Servo gains and commands, one vectorised write each (bias = -kp q - kd qdot)."""
+        keys, kp, kd = self._keys, targets.kp, targets.kd
+        ctrl = [kp[k] * targets.q[k] + kd[k] * targets.qd[k] + targets.ff[k] for k in keys]
+        biasprm = self.phys.model.actuator_biasprm
+        biasprm[self._act_ids, 1] = [-kp[k] for k in keys]
+        biasprm[self._act_ids, 2] = [-kd[k] for k in keys]
+        self.phys.data.ctrl[self._act_ids] = ctrl
+        self.targets = targets

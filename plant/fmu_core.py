@@ -5,7 +5,7 @@ module knows nothing of FMI.  It wraps :class:`plant.sim.CassieWalker` (MuJoCo a
 0.5 ms step with the nominal controller, starting from rest in the ``home`` pose):
 
 * :data:`PARAM_SPECS` are fixed parameters: the model (``menagerie`` or ``osu``) and the
-  perturbation, mapped onto :class:`plant.model.Perturbation` by
+  perturbation, mapped onto :class:`plant.perturbation.Perturbation` by
   :func:`perturbation_from_values`, whose ``problems()`` are the one validation (the
   scenario files run the same one): every message names the field and its range.
 * :data:`INPUT_SPECS` carry the command, the regulator's six joint offsets (the names
@@ -30,10 +30,12 @@ from typing import Mapping
 from fmu_src import avr_fmustate
 from fmu_src.avr_core import VarSpec
 from fmu_src.avr_errors import StateError
+from plant.constants import NOMINAL_PELVIS_MASS_KG, OFFSET_NAMES, SIDES
 from plant.errors import PerturbationError
-from plant.controller import OFFSET_KEYS
-from plant.model import NOMINAL_PELVIS_MASS_KG, Perturbation, TerrainSpec, load_model
+from plant.model import load_model
+from plant.perturbation import MAX_COM_OFFSET_M, MAX_DAMPING_SCALE, MAX_TORSO_MASS_KG, Perturbation
 from plant.sim import CassieWalker
+from plant.terrain import MAX_HEIGHT_M, MAX_SLOPE_DEG, SIZE_RANGE_M, TerrainSpec
 
 MODEL_IDENTIFIER = "CassiePlant"
 #: The plant step (s) of both models; communication steps must be whole multiples of it.
@@ -63,28 +65,30 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
     _p("model", "menagerie", None, None, "",
        "Cassie model: 'menagerie' (MuJoCo Menagerie's agility_cassie) or 'osu' (Oregon State's "
        "cassie-mujoco-sim model); both travel in the FMU's resources", type="String"),
-    _p("torso_mass_kg", NOMINAL_PELVIS_MASS_KG, 0.0, 100.0, "kg",
-       "Torso (pelvis) mass, kg, in (0, 100]; the nominal 10.33 kg leaves the model as it is; the "
-       "pelvis inertia scales with it"),
-    _p("torso_com_offset_x_m", 0.0, -0.5, 0.5, "m", "Torso COM offset, pelvis frame x (forward), m, in [-0.5, 0.5]"),
-    _p("torso_com_offset_y_m", 0.0, -0.5, 0.5, "m", "Torso COM offset, pelvis frame y (left), m, in [-0.5, 0.5]"),
-    _p("torso_com_offset_z_m", 0.0, -0.5, 0.5, "m", "Torso COM offset, pelvis frame z (up), m, in [-0.5, 0.5]"),
-    _p("joint_damping_scale", 1.0, 0.0, 10.0, "1", "Multiplies every joint damping, in [0, 10]"),
-    _p("terrain_max_height_m", 0.0, 0.0, 1.0, "m",
-       "Uneven terrain: highest bump, m, in (0, 1]; 0 keeps the flat floor (the other terrain_* "
-       "parameters are then unused)"),
-    _p("terrain_max_slope_deg", 10.0, 0.0, 45.0, "deg", "Uneven terrain: steepest slope, deg, in (0, 45]"),
+    _p("torso_mass_kg", NOMINAL_PELVIS_MASS_KG, 0.0, MAX_TORSO_MASS_KG, "kg",
+       f"Torso (pelvis) mass, kg, in (0, {MAX_TORSO_MASS_KG:g}]; the nominal {NOMINAL_PELVIS_MASS_KG:g} kg "
+       "leaves the model as it is; the pelvis inertia scales with it"),
+    *(_p(f"torso_com_offset_{axis}_m", 0.0, -MAX_COM_OFFSET_M, MAX_COM_OFFSET_M, "m",
+         f"Torso COM offset, pelvis frame {axis} ({where}), m, in [{-MAX_COM_OFFSET_M:g}, {MAX_COM_OFFSET_M:g}]")
+      for axis, where in (("x", "forward"), ("y", "left"), ("z", "up"))),
+    _p("joint_damping_scale", 1.0, 0.0, MAX_DAMPING_SCALE, "1",
+       f"Multiplies every joint damping, in [0, {MAX_DAMPING_SCALE:g}]"),
+    _p("terrain_max_height_m", 0.0, 0.0, MAX_HEIGHT_M, "m",
+       f"Uneven terrain: highest bump, m, in (0, {MAX_HEIGHT_M:g}]; 0 keeps the flat floor (the other "
+       "terrain_* parameters are then unused)"),
+    _p("terrain_max_slope_deg", 10.0, 0.0, MAX_SLOPE_DEG, "deg",
+       f"Uneven terrain: steepest slope, deg, in (0, {MAX_SLOPE_DEG:g}]"),
     _p("terrain_seed", 0, 0, 2**31 - 1, "1", "Uneven terrain: seed of the random field, >= 0", type="Integer"),
-    _p("terrain_size_m", 20.0, 2.0, 100.0, "m",
-       "Uneven terrain: half-length of the square field around the start, m, in [2, 100] (at most "
-       "2001 samples per side at 0.05 m, so at most 50 m); no ground beyond it"),
+    _p("terrain_size_m", 20.0, *SIZE_RANGE_M, "m",
+       f"Uneven terrain: half-length of the square field around the start, m, in [{SIZE_RANGE_M[0]:g}, "
+       f"{SIZE_RANGE_M[1]:g}] (at most 2001 samples per side at 0.05 m, so at most 50 m); no ground beyond it"),
 )
 
 INPUT_SPECS: tuple[VarSpec, ...] = (
     _i("vx_des", -3.0, 3.0, "m/s", "Commanded forward speed (heading frame), m/s; selects the gait"),
     _i("vy_des", -3.0, 3.0, "m/s", "Commanded lateral speed (heading frame), m/s; selects the gait"),
     *(_i(k, -1.5, 1.5, "rad", f"Regulator offset {k[6:]} added to the virtual constraint, rad "
-         "(signs in plant/controller.py)") for k in OFFSET_KEYS),
+         "(signs in plant/controller.py)") for k in OFFSET_NAMES),
     _i("push_fx", -5000.0, 5000.0, "N", "External force on the pelvis COM, world x, N"),
     _i("push_fy", -5000.0, 5000.0, "N", "External force on the pelvis COM, world y, N"),
     _i("push_fz", -5000.0, 5000.0, "N", "External force on the pelvis COM, world z, N"),
@@ -99,15 +103,12 @@ OUTPUT_SPECS: tuple[VarSpec, ...] = (
     _o("pitch_rate", "rad/s", "Torso pitch rate (heading frame), rad/s"),
     _o("roll_rate", "rad/s", "Torso roll rate (heading frame), rad/s"),
     _o("step_index", "1", "Completed walking steps (the regulator's step_index)", type="Integer"),
-    _o("pelvis_x", "m", "Pelvis position, world x, m"),
-    _o("pelvis_y", "m", "Pelvis position, world y, m"),
-    _o("pelvis_z", "m", "Pelvis position, world z, m"),
+    *(_o(f"pelvis_{axis}", "m", f"Pelvis position, world {axis}, m") for axis in "xyz"),
     _o("pelvis_vx", "m/s", "Instantaneous forward pelvis speed (heading frame), m/s"),
     _o("pelvis_vy", "m/s", "Instantaneous lateral pelvis speed (heading frame), m/s"),
     _o("stance", "1", "Stance leg: 0 left, 1 right", type="Integer"),
     _o("gait_phase", "1", "Phase of the current walking step, 0 at touch-down (0 while standing)"),
-    _o("left_foot_force", "N", "Contact normal force on the left foot, N"),
-    _o("right_foot_force", "N", "Contact normal force on the right foot, N"),
+    *(_o(f"{side}_foot_force", "N", f"Contact normal force on the {side} foot, N") for side in SIDES),
     _o("plant_time", "s", "MuJoCo's simulated time (the sum of its 0.5 ms steps), s"),
     _o("fell", "1", "True once the robot has fallen (pelvis below 0.55 m above the ground or tilted "
        "beyond 0.7 rad); latched; the simulation goes on", type="Boolean"),
@@ -203,7 +204,7 @@ def apply_inputs(walker: CassieWalker, inputs: Mapping) -> None:
     vx, vy = float(inputs["vx_des"]), float(inputs["vy_des"])
     if (vx, vy) != (walker.vx_des_mps, walker.vy_des_mps):
         walker.set_command(vx, vy)
-    walker.set_offsets({k: inputs[k] for k in OFFSET_KEYS})
+    walker.set_offsets({k: inputs[k] for k in OFFSET_NAMES})
     force = [inputs["push_fx"], inputs["push_fy"], inputs["push_fz"]]
     ph = walker.physics
     if force != ph.data.xfrc_applied[ph.pelvis_body, :3].tolist():

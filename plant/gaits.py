@@ -1,7 +1,7 @@
 """Gait library: calibrated gait parameters per commanded (forward, lateral) speed.
 
 Each grid point of ``plant/data/gait_library.json`` holds the numeric fields of
-:class:`plant.controller.GaitParams` (step time, landing leg-angle offset,
+:class:`GaitParams` (step time, landing leg-angle offset,
 lateral offset, step width, torso pitch) found by ``python -m plant.make_gaits``
 on the nominal Menagerie model; the Bezier shapes are shared by all points.
 :meth:`GaitLibrary.lookup` interpolates bilinearly in (vx, vy) and clamps to the
@@ -15,14 +15,37 @@ import logging
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-from plant.controller import GaitParams
-
 log = logging.getLogger(__name__)
 
 DEFAULT_LIBRARY_PATH = Path(__file__).resolve().parent / "data" / "gait_library.json"
 #: GaitParams fields interpolated over the grid (the rest are shared shapes).
 NUMERIC_FIELDS = ("step_time_s", "leg_angle_offset_rad", "lateral_offset_rad",
                   "step_width_rad", "torso_pitch_des_rad")
+
+
+@dataclass(frozen=True)
+class GaitParams:
+    """Gait parameters for one commanded speed (one row of the gait library).
+
+    Angles in rad, lengths in m, times in s.  Forward leg angle is the angle of
+    the hip-to-ankle line from vertical in the heading frame, positive forward;
+    lateral leg angle likewise, positive toward +y.
+    """
+
+    step_time_s: float = 0.4
+    #: Landing leg angle = asin(vx_des*T/(2L)) + leg_angle_offset_rad (+ regulator offset).
+    leg_angle_offset_rad: float = 0.0
+    #: Landing lateral angle = asin(vy_des*T/(2L)) + lateral_offset_rad + side*step_width_rad.
+    lateral_offset_rad: float = 0.0
+    step_width_rad: float = 0.0
+    torso_pitch_des_rad: float = 0.0
+    #: Bezier shape (0 -> 1) of the swing angles vs tau/swing_end_tau.
+    swing_shape: tuple = (0.0, 0.0, 1.0, 1.0, 1.0)
+    swing_end_tau: float = 0.8
+    #: Bezier of the swing ankle height above its standing height (m) vs tau/height_end_tau;
+    #: ends negative so the foot keeps pressing down until contact (no late touchdown).
+    swing_height: tuple = (0.0, 0.2, 0.2, -0.03, -0.03, -0.03)
+    height_end_tau: float = 0.85
 
 
 def _bracket(grid, x):

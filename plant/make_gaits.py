@@ -19,15 +19,14 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import os
 import time
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from fmu_src.avr_core import Regulator, RegulatorParams
-from plant.controller import GaitParams
-from plant.gaits import DEFAULT_LIBRARY_PATH, GaitLibrary
+from plant.gaits import DEFAULT_LIBRARY_PATH, GaitLibrary, GaitParams
+from plant.model import load_model
 from plant.sim import CassieWalker, apply_regulator
 
 log = logging.getLogger(__name__)
@@ -170,10 +169,6 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="only vy=0 and vx in {0, 0.5, 1}")
     a = ap.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(message)s")
-    os.environ.setdefault("MENAGERIE_ROOT", str(
-        __import__("pathlib").Path(__file__).resolve().parents[2] / "shared" / "cassie" / "menagerie"))
-    from plant.model import load_model
-
     def model_fn():
         return load_model(a.source)
 

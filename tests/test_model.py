@@ -5,11 +5,12 @@ import mujoco
 import numpy as np
 import pytest
 
+from plant import model as plant_model
 from plant.errors import ModelError, PerturbationError
 from plant.model import (
     ACTUATOR_NAMES, HOME_KEY, JOINT_NAMES, PELVIS_BODY, TERRAIN_GEOM, Perturbation,
-    TerrainSpec, generate_terrain, load_model, model_summary, osu_model_path,
-    terrain_height_at, terrain_max_slope_deg,
+    TerrainSpec, generate_terrain, load_model, menagerie_root, menagerie_xml_path, model_summary,
+    osu_model_path, terrain_height_at, terrain_max_slope_deg,
 )
 
 SOURCES = ("menagerie", "osu")
@@ -94,6 +95,21 @@ def test_bad_path_and_non_cassie_file(tmp_path):
     broken.write_text("<mujoco><worldbody>")
     with pytest.raises(ModelError, match="cannot parse"):
         load_model(broken)
+
+
+def test_menagerie_root_defaults_to_the_shared_copy(monkeypatch, tmp_path):
+    """One default, in the loader: unset MENAGERIE_ROOT means ../shared/cassie/menagerie if it
+    exists (the offline copy beside the repo), else the mujoco-menagerie cache (None)."""
+    shared = plant_model._SHARED_CASSIE / "menagerie"
+    monkeypatch.delenv("MENAGERIE_ROOT", raising=False)
+    assert menagerie_root() == shared and shared.is_dir()
+    assert menagerie_xml_path() == shared / "agility_cassie" / "scene.xml"
+    assert load_model("menagerie").nu == 10
+    monkeypatch.setenv("MENAGERIE_ROOT", str(tmp_path))
+    assert menagerie_root() == tmp_path  # the environment wins
+    monkeypatch.delenv("MENAGERIE_ROOT")
+    monkeypatch.setattr(plant_model, "_SHARED_CASSIE", tmp_path / "no-such-folder")
+    assert menagerie_root() is None
 
 
 def test_menagerie_missing_root(monkeypatch, tmp_path):

@@ -8,12 +8,13 @@ import numpy as np
 import pytest
 
 from fmu_src.avr_core import Regulator
-from plant.cassie import FALL_HEIGHT_M, FALL_TILT_RAD, MOTOR_JOINTS, SIDES, CassiePhysics
-from plant.controller import (OFFSET_KEYS, ControllerParams, GaitParams, LegKinematics,
-                              bezier, joint_pd_torque)
+from plant.cassie import FALL_HEIGHT_M, FALL_TILT_RAD, CassiePhysics
+from plant.constants import MOTOR_JOINTS, SIDES
+from plant.controller import OFFSET_KEYS, ControllerParams, GaitParams, LegKinematics, bezier
 from plant.gaits import DEFAULT_LIBRARY_PATH, GaitLibrary
 from plant.make_gaits import PD_ONLY_PARAMS
-from plant.model import load_model
+from plant.errors import ModelError
+from plant.model import load_model, menagerie_xml_path
 from plant.sim import CassieWalker, apply_regulator
 
 REG_KEYS = {"vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index"}
@@ -216,6 +217,12 @@ def test_offset_mapping_signs(model):
                 assert abs(v - base[l2, j2]) < tol, (key, l2, j2)
 
 
+def joint_pd_torque(kp, kd, q_des, qd_des, tau_ff, q, qd, limit):
+    """Reference joint PD law (N m) that the MuJoCo servos implement, clipped to +-limit."""
+    tau = kp * (q_des - q) + kd * (qd_des - qd) + tau_ff
+    return min(max(tau, -limit), limit)
+
+
 def test_servo_matches_reference_pd(model):
     w = _walker_in_walk(model)
     ph = w.physics
@@ -291,6 +298,17 @@ def test_ground_height_on_terrain_matches_model_module():
     assert ph.pelvis_height_above_ground_m() == pytest.approx(1.006, abs=2e-3)
 
 
-def test_ground_geoms_found_on_both_models(phys):
-    assert phys._ground_geoms, "the floor plane must be found"
-    assert CassiePhysics(load_model("osu"))._ground_geoms
+def test_ground_is_the_floor_plane_on_both_models(phys):
+    """Without terrain the ground is each model's floor plane (OSU's sits at z = 0 too)."""
+    osu = CassiePhysics(load_model("osu"))
+    for ph in (phys, osu):
+        assert not ph.ground.has_terrain and ph.ground_height_m(3.0, -2.0) == 0.0
+    assert osu.pelvis_height_above_ground_m() == pytest.approx(1.006, abs=2e-3)
+
+
+def test_model_without_home_key_is_refused(model, tmp_path):
+    """CassiePhysics stands the robot on the model's ``home`` keyframe (load_model adds it)."""
+    spec = mujoco.MjSpec.from_file(str(menagerie_xml_path()))
+    spec.delete(spec.key("home"))
+    with pytest.raises(ModelError, match="'home' keyframe"):
+        CassiePhysics(spec.compile())
