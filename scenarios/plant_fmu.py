@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from scenarios.errors import CosimError
-from plant.controller import OFFSET_KEYS
+from plant.constants import OFFSET_NAMES as OFFSET_KEYS
 from plant.fmu_core import INPUT_NAMES, MODEL_FILES, PLANT_STEP_S, values_from_perturbation
 from scenarios.fmi_host import FmuInstance
 

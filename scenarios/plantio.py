@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:  # pragma: no cover
     import mujoco
 
-    from plant.model import Perturbation
+    from plant.perturbation import Perturbation
     from scenarios.scenario import Scenario
 
 log = logging.getLogger(__name__)
@@ -45,7 +45,9 @@ def perturbation_problems(torso_mass_kg: float | None, torso_added_mass_kg: floa
 def _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale, terrain,
                   nominal_torso_mass_kg) -> "Perturbation":
     """The one place that builds the plant's Perturbation (and TerrainSpec) from scenario values."""
-    from plant.model import NOMINAL_PELVIS_MASS_KG, Perturbation, TerrainSpec
+    from plant.constants import NOMINAL_PELVIS_MASS_KG
+    from plant.perturbation import Perturbation
+    from plant.terrain import TerrainSpec
 
     mass = torso_mass_kg
     if torso_added_mass_kg is not None:
@@ -73,11 +75,12 @@ def check_plant(scenario: "Scenario") -> list[tuple[str, str]]:
 
 def _file_stamp(model: str) -> tuple | None:
     """What the cached check of ``model`` depends on besides its name: the file's mtime and
-    size (the OSU file's for ``osu``), or ``MENAGERIE_ROOT`` for ``menagerie``."""
-    from plant.model import osu_model_path
+    size (the OSU file's for ``osu``), or the Menagerie folder the loader uses."""
+    from plant.model import menagerie_root, osu_model_path
 
     if model == "menagerie":
-        return ("MENAGERIE_ROOT", os.environ.get("MENAGERIE_ROOT"))
+        root = menagerie_root()
+        return ("menagerie", None if root is None else str(root))
     try:
         st = os.stat(osu_model_path() if model == "osu" else model)
     except OSError:

@@ -1,4 +1,5 @@
-"""Shared pytest set-up: the offline Menagerie model from ../shared, the FMU under test, tools.
+"""Shared pytest set-up: the FMU under test and the tools beside the interpreter (the
+offline Menagerie model beside the repository is the model loader's own default).
 
 Tests never use the system temp folder directly: FMUs are built and extracted under
 pytest's ``tmp_path``/``tmp_path_factory``, and tools are found beside the running
@@ -16,7 +17,6 @@ from pathlib import Path
 
 import pytest
 
-REPO_ROOT = Path(__file__).resolve().parents[1]
 
 
 @pytest.fixture(scope="session")

@@ -24,6 +24,8 @@ from pathlib import Path
 import psutil
 import pytest
 
+from plant.model import menagerie_root
+
 from scenarios.campaign.store import TIMING_COLUMNS
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
@@ -33,7 +35,7 @@ BIN = Path(sys.executable).parent
 # job, like this test's, would start it with SIGINT ignored).
 CLI = [sys.executable, "-c", "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
        "from scenarios.cli import main; sys.exit(main())", "campaign"]
-MENAGERIE_ROOT = str(Path(os.environ["MENAGERIE_ROOT"]).resolve())  # conftest sets it
+MENAGERIE_ROOT = str(menagerie_root().resolve())  # the model loader's one default
 WAIT_S = 180.0  # bound of every wait below; the smoke tasks take ~3 s each on a busy 2-core machine
 
 
