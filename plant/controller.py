@@ -339,7 +339,9 @@ class NominalController:
         if self.tau > p.switch_min_tau:
             # Contact forces only when a touchdown can end the step (saves time).
             fl, fr = self.phys.foot_normal_forces_n()
-            touchdown = (fl if self.swing == "left" else fr) > p.touchdown_force_n
+            swing, stance = (fl, fr) if self.swing == "left" else (fr, fl)
+            touchdown = swing > p.touchdown_force_n or (
+                swing > p.touchdown_share_min_force_n and swing >= stance)
         if touchdown or self.tau >= p.switch_max_tau:
             self._start_step(t, yaw, self.swing)
             self.tau = 0.0

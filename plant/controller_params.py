@@ -29,6 +29,11 @@ class ControllerParams:
     switch_min_tau: float = 0.6
     switch_max_tau: float = 1.1
     touchdown_force_n: float = 200.0
+    #: A swing foot carrying at least this much (N) and at least as much as the stance
+    #: foot has also touched down: on an up-slope the swing foot lands early and takes the
+    #: weight gradually, below ``touchdown_force_n``; holding the stance until
+    #: ``switch_max_tau`` then leaves the torso without its stance leg and it pitches over.
+    touchdown_share_min_force_n: float = 50.0
     #: Start-up from rest.
     stand_time_s: float = 0.3
     shift_time_s: float = 0.5

@@ -93,7 +93,8 @@ def scenario_header(scenario: Scenario, regulator: str) -> dict[str, Any]:
                        for p in scenario.pushes],
             "terrain": None if scenario.terrain is None else {
                 "max_height_m": scenario.terrain.max_height_m, "max_slope_deg": scenario.terrain.max_slope_deg,
-                "seed": scenario.terrain.seed, "size_m": scenario.terrain.size_m},
+                "seed": scenario.terrain.seed, "size_m": scenario.terrain.size_m,
+                "flat_radius_m": scenario.terrain.flat_radius_m},
         },
         "claim": claim_dict(scenario),
     }
@@ -329,7 +330,7 @@ SUMMARY_SCHEMA = _obj(
                       joint_damping_scale=NUM,
                       pushes=_list(_obj("t_s", "force_n", "duration_s", t_s=NUM, force_n=_VEC3, duration_s=NUM)),
                       terrain=_opt(_obj("max_height_m", "max_slope_deg", "seed", max_height_m=NUM, max_slope_deg=NUM,
-                                        seed=INT, size_m=NUM))),
+                                        seed=INT, size_m=NUM, flat_radius_m=NUM))),
     claim=_opt(_obj(text=STR, source=_opt(STR), checks=_list(_obj("arm", "metric", "op",
         arm=STR, metric=_one_of(*CHECKABLE_METRICS), op=_one_of(*CHECK_OPS),
         value=_METRIC, other_arm=_opt(STR))))),

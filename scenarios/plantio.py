@@ -27,7 +27,8 @@ def build_perturbation(scenario: "Scenario", nominal_torso_mass_kg: float | None
     """
     t = scenario.terrain
     terrain = None if t is None else dict(max_height_m=t.max_height_m, max_slope_deg=t.max_slope_deg,
-                                          seed=t.seed, size_m=t.size_m)
+                                          seed=t.seed, size_m=t.size_m,
+                                          flat_radius_m=t.flat_radius_m)
     pert = _perturbation(scenario.torso_mass_kg, scenario.torso_added_mass_kg, scenario.torso_com_offset_m,
                          scenario.joint_damping_scale, terrain, nominal_torso_mass_kg)
     return None if pert.is_nominal else pert

@@ -8,6 +8,8 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from plant.terrain import TerrainSpec as _TerrainSpec
+
 #: The plant's integration step (Cassie's 2 kHz); the master re-checks it against
 #: ``plant.sim.SIM_DT_S`` when it runs.
 PLANT_DT_S = 0.0005
@@ -18,8 +20,10 @@ BUILTIN_ARMS = ("adaptive", "pd_only", "rl_hzd")
 #: What drives an arm: the regulator (FMU or core, per ``--regulator``) or the fixed
 #: RL-HZD policy (:mod:`scenarios.rl_hzd`, in-process whatever ``--regulator`` says).
 CONTROLLERS = ("regulator", "rl_hzd")
-#: Half-size of the terrain square, m (plant TerrainSpec.size_m), unless the file says.
-DEFAULT_TERRAIN_SIZE_M = 20.0
+#: Half-size of the terrain square and radius of its flat start patch, m, unless the file
+#: says: the plant's own defaults.
+DEFAULT_TERRAIN_SIZE_M = _TerrainSpec.size_m
+DEFAULT_FLAT_RADIUS_M = _TerrainSpec.flat_radius_m
 #: Metrics a claim check may name (the keys of each arm in ``summary.json``).
 CHECKABLE_METRICS = (
     "fell",
@@ -65,6 +69,7 @@ class Terrain:
     max_slope_deg: float
     seed: int
     size_m: float = DEFAULT_TERRAIN_SIZE_M
+    flat_radius_m: float = DEFAULT_FLAT_RADIUS_M
 
 
 @dataclass(frozen=True)

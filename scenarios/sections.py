@@ -23,7 +23,7 @@ from scenarios.fields import (Problems, did_you_mean, integer, name, number, on_
                               table_list, unknown_keys, vec3)
 from scenarios.formatting import is_number, show
 from scenarios.scenario import (BUILTIN_ARMS, BUILTIN_MODELS, CHECK_OPS, CHECKABLE_METRICS, DEFAULT_COMM_STEP_S,
-                                DEFAULT_MODEL, DEFAULT_TERRAIN_SIZE_M, PLANT_DT_S, Arm, Claim, ClaimCheck,
+                                DEFAULT_FLAT_RADIUS_M, DEFAULT_MODEL, DEFAULT_TERRAIN_SIZE_M, PLANT_DT_S, Arm, Claim, ClaimCheck,
                                 CommandPoint, Push, Terrain)
 
 TOP_KEYS = (
@@ -33,7 +33,7 @@ TOP_KEYS = (
 )
 COMMAND_KEYS = ("t_s", "vx_des", "vy_des")
 PUSH_KEYS = ("t_s", "force_n", "duration_s")
-TERRAIN_KEYS = ("max_height_m", "max_slope_deg", "seed", "size_m")
+TERRAIN_KEYS = ("max_height_m", "max_slope_deg", "seed", "size_m", "flat_radius_m")
 ARM_KEYS = ("name", "description", "regulator")
 CLAIM_KEYS = ("text", "source", "check")
 CHECK_KEYS = ("arm", "metric", "op", "value", "other_arm")
@@ -204,6 +204,8 @@ def _terrain(doc: Mapping[str, Any], probs: Problems) -> tuple[dict[str, Any], T
         "max_slope_deg": number(tt, "max_slope_deg", "terrain.max_slope_deg", probs, required=True),
         "seed": integer(tt, "seed", "terrain.seed", probs, required=True),
         "size_m": number(tt, "size_m", "terrain.size_m", probs, default=DEFAULT_TERRAIN_SIZE_M),
+        "flat_radius_m": number(tt, "flat_radius_m", "terrain.flat_radius_m", probs,
+                                default=DEFAULT_FLAT_RADIUS_M),
     }
     complete = all(v is not None for v in values.values())
     return values, Terrain(**values) if complete else None

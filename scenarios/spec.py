@@ -47,6 +47,7 @@ Layout of a file (every key below is known; anything else is an error)::
     max_slope_deg = 20.0
     seed = 3
     size_m = 20.0                   # optional
+    flat_radius_m = 1.0             # optional: the flat start patch around the origin, m
 
     [regulator]                     # overrides for every arm, by FMU parameter name
     learning_rate = 0.01

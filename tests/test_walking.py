@@ -103,3 +103,25 @@ def test_perturbed_30s(mass_kg, com_dx_m):
 def test_push_while_walking(menagerie, force_x):
     r = simulate_walk(menagerie, 0.5, 0.0, 15.0, push=(8.0, 0.1, (force_x, 0.0, 0.0)))
     assert not r.fell, r.fall_reason
+
+
+def test_early_touchdown_on_an_up_slope_ends_the_step():
+    """Terrain seed 5 with +5 kg and COM +0.1 m: the swing foot lands early on the rising
+    ground and takes the weight gradually (below ``touchdown_force_n``).  Holding the stance
+    until ``switch_max_tau`` unloaded the stance leg and the torso pitched over at 3.8 s
+    (x = 2.2 m); with the weight-share touchdown the walker is still up at 8 s."""
+    from plant.constants import NOMINAL_PELVIS_MASS_KG
+    from plant.sim import CassieWalker, apply_regulator
+    from plant.terrain import TerrainSpec
+
+    terrain = TerrainSpec(max_height_m=0.4, max_slope_deg=20.0, seed=5, size_m=45.0)
+    pert = Perturbation(torso_mass_kg=NOMINAL_PELVIS_MASS_KG + 5.0, torso_com_offset_m=(0.1, 0.0, 0.0),
+                        terrain=terrain)
+    walker = CassieWalker(load_model("menagerie", pert))
+    walker.set_command(0.5, 0.0)
+    regulator = Regulator()
+    while walker.time_s < 8.0 and not walker.fell():
+        apply_regulator(walker, regulator, 0.005)
+        walker.advance(10)
+    assert not walker.fell(), walker.fall_reason
+    assert walker.physics.pelvis_position()[0] > 3.0  # past the slope it fell on
