@@ -29,10 +29,8 @@ pytestmark = pytest.mark.skipif(shutil.which("cc") is None or not sys.platform.s
 
 @pytest.fixture(scope="module")
 def host(tmp_path_factory):
-    import fmpy
-
     exe = tmp_path_factory.mktemp("c_host") / "c_host"
-    include = Path(fmpy.__file__).parent / "c-code"
+    include = Path(__file__).parents[1] / "fmu_src" / "native" / "third_party" / "fmi2"
     subprocess.run(["cc", "-O1", "-std=c11", f"-I{include}", str(HOST_SOURCE), "-o", str(exe), "-ldl", "-lm"],
                    check=True)
     return exe

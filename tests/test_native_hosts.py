@@ -27,7 +27,7 @@ from fmu_src.avr_core import INPUT_SPECS
 from native_support import (CC, MINGW_CC, NATIVE_DIR, OUTPUT_NAMES, WINE, AnySlave, compile_c, core_outputs,
                             input_sequence, native_fmus, require, unzipped)  # noqa: F401 (fixture)
 
-FMI_INCLUDE = Path(__file__).parents[1] / "fmu_src" / "native" / "include"
+FMI_INCLUDE = Path(__file__).parents[1] / "fmu_src" / "native" / "third_party" / "fmi2"
 PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_knee": 0.0}
 N_STEPS = 400
 #: native vs numpy differ only by summation order (~1e-16 after 400 calls); %.17g round-trips
