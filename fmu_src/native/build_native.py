@@ -16,7 +16,7 @@ NATIVE_SRC = Path(__file__).resolve().parent
 MODEL_IDENTIFIER = "AdaptiveVelocityRegulatorNative"
 CORE_SOURCES = ("avr_model.c", "avr_instance.c", "avr_state.c")
 API_SOURCES = {2: ("fmi2_api.c",), 3: ("fmi3_api.c", "fmi3_refused.c")}
-HEADERS = ("avr_types.h", "avr_model.h", "avr_instance.h")
+HEADERS = ("avr_types.h", "avr_model.h", "avr_instance.h", "avr_fmi_api.h")
 #: The FMI standard headers (third_party/fmi<version>/, with their license) each FMU ships.
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
