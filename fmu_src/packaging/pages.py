@@ -1,7 +1,9 @@
-"""The pythonfmu FMUs' documentation pages (``documentation/index.html``)."""
+"""The pythonfmu FMUs' documentation pages (``documentation/index.html``); the regulator's
+method section is ``docs/method.md`` rendered."""
 from __future__ import annotations
 
 from .describe import variables_table
+from .method_page import method_html
 
 
 def regulator_page(model_identifier: str, specs) -> str:
@@ -9,24 +11,7 @@ def regulator_page(model_identifier: str, specs) -> str:
     return f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>{model_identifier}</title></head><body>
 <h1>{model_identifier}</h1>
-<p>Adaptive velocity regulator for 3D bipedal walking, after Castillo, Weng, Stewart, Zhang and Hereid,
-"Velocity Regulation of 3D Bipedal Walking Robots with Uncertain Dynamics Through Adaptive Neural Network
-Controller" (IROS 2020). A nominal walking controller tracks joint virtual constraints
-<code>y = q - (y_d(tau) + delta_y)</code>; this FMU computes the offsets <code>delta_y</code>.</p>
-<h2>Method</h2>
-<ul>
-<li>Longitudinal: <code>Kp_x (vx[k]-vx_des) + Kd_x (vx[k]-vx[k-1]) + Psi_x</code> on swing hip pitch
-(Psi also on swing knee); updated when <code>step_index</code> changes.</li>
-<li>Lateral: the same with <code>vy</code> on swing hip roll (Psi also on stance hip roll).</li>
-<li>Torso: <code>Kp_pitch (pitch-pitch_des) + Kd_pitch pitch_rate + Psi</code> on stance hip pitch
-(Psi also on stance knee); roll on stance hip roll.</li>
-<li>Each Psi is a one-hidden-layer network of <code>n_neurons</code> LIF-rate neurons with fixed random
-encoders (seeded); output weights start at zero and learn online by the delta rule
-<code>W += -learning_rate * dt / n_neurons * E h^T</code>, <code>E = desired - actual</code>.
-<code>psi_gain_*</code> scale each output (0 switches it off); <code>adaptation_enabled=false</code> gives the
-classic PD regulator exactly.</li>
-</ul>
-<h2>FMI behaviour</h2>
+{method_html()}<h2>FMI behaviour</h2>
 <p>Co-simulation, any communication step &gt; 0. Calls the FMI 2.0 state machine forbids, sets of outputs or of
 fixed parameters after initialization, NaN/inf values and values outside [min, max] are refused with
 fmi2Error and a log message naming the variable and its range; a refused call changes nothing. The six offsets
