@@ -40,7 +40,8 @@ REPO_ROOT = Path(__file__).resolve().parent
 if str(REPO_ROOT) not in sys.path:  # build.py also runs without the package installed
     sys.path.insert(0, str(REPO_ROOT))
 
-from fmu_src.guard.build_guard import GUARD_TEXTS, SANITIZE_FLAGS, compile_guard, guard_header  # noqa: E402
+from fmu_src.guard.build_guard import (GUARD_TEXTS, SANITIZE_FLAGS,  # noqa: E402,F401 (SANITIZE_FLAGS: documented)
+                                       compile_guard, guard_header)
 from fmu_src.native import build_native  # noqa: E402
 from fmu_src.native.build_native import compile_native  # noqa: E402,F401 (the tests' sanitizer build)
 from fmu_src.packaging import pages, vendor  # noqa: E402
