@@ -19,7 +19,7 @@ with AddressSanitizer + UndefinedBehaviorSanitizer instead (for the ``sanitize``
 Temporary folders are removed when the build ends, also when it fails.
 
 This file is the entry point and the orchestration; the pieces live beside what they
-build: ``fmu_src/packaging/`` (archives and GUIDs, model descriptions, documentation
+build: ``fmu_src/avr_packaging/`` (archives and GUIDs, model descriptions, documentation
 pages, the pythonfmu library fix, the plant's vendored modules),
 ``fmu_src/guard/build_guard.py`` and ``fmu_src/native/build_native.py``.
 """
@@ -44,10 +44,10 @@ from fmu_src.guard.build_guard import (GUARD_TEXTS, SANITIZE_FLAGS,  # noqa: E40
                                        compile_guard, guard_header)
 from fmu_src.native import build_native  # noqa: E402
 from fmu_src.native.build_native import compile_native  # noqa: E402,F401 (the tests' sanitizer build)
-from fmu_src.packaging import pages, vendor  # noqa: E402
-from fmu_src.packaging.archive import content_guid, read_entries, sha256_of, write_zip  # noqa: E402
-from fmu_src.packaging.describe import DEFAULT_EXPERIMENT, UNITS, model_description  # noqa: E402
-from fmu_src.packaging.pythonfmu_fix import (EXIT_BUG_PATCH, EXIT_BUG_SYMBOL,  # noqa: E402,F401 (tests)
+from fmu_src.avr_packaging import pages, vendor  # noqa: E402
+from fmu_src.avr_packaging.archive import content_guid, read_entries, sha256_of, write_zip  # noqa: E402
+from fmu_src.avr_packaging.describe import DEFAULT_EXPERIMENT, UNITS, model_description  # noqa: E402
+from fmu_src.avr_packaging.pythonfmu_fix import (EXIT_BUG_PATCH, EXIT_BUG_SYMBOL,  # noqa: E402,F401 (tests)
                                              _elf_symbol_file_offset, patch_pythonfmu_exit_bug)
 
 FMU_SRC = REPO_ROOT / "fmu_src"

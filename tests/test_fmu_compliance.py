@@ -27,7 +27,7 @@ import pythonfmu
 from pythonfmu.builder import FmuBuilder
 
 from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
-from fmu_src.packaging.archive import ZIP_EPOCH
+from fmu_src.avr_packaging.archive import ZIP_EPOCH
 from native_support import DRIVERS, H, AnySlave, fmi2_only, input_sequence
 
 OK, ERROR = 0, 3

@@ -10,7 +10,7 @@ from pathlib import Path
 
 from .. import avr_fmustate
 from ..native.header import c_string
-from ..packaging import compiler
+from ..avr_packaging import compiler
 
 GUARD_DIR = Path(__file__).resolve().parent
 REPO_ROOT = GUARD_DIR.parents[1]

@@ -8,8 +8,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from ..packaging import compiler
-from ..packaging.archive import PLACEHOLDER_GUID, content_guid
+from ..avr_packaging import compiler
+from ..avr_packaging.archive import PLACEHOLDER_GUID, content_guid
 from . import describe, header
 
 NATIVE_SRC = Path(__file__).resolve().parent

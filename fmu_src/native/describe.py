@@ -12,8 +12,8 @@ from __future__ import annotations
 import html
 import xml.etree.ElementTree as ET
 
-from ..packaging.describe import xml_value
-from ..packaging.method_page import method_html
+from ..avr_packaging.describe import xml_value
+from ..avr_packaging.method_page import method_html
 from .header import all_specs
 
 AUTHOR = "cassie-avr project"

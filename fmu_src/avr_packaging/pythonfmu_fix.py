@@ -55,5 +55,5 @@ def patch_pythonfmu_exit_bug(data: bytes) -> bytes:
     if found != EXIT_BUG_PROLOGUE:
         raise RuntimeError(f"unexpected code at {EXIT_BUG_SYMBOL.decode()} ({found.hex()}): a pythonfmu build this "
                            "script does not know; check whether its exit-time use-after-free is fixed, "
-                           "then update fmu_src/packaging/pythonfmu_fix.py")
+                           "then update fmu_src/avr_packaging/pythonfmu_fix.py")
     return data[:offset] + EXIT_BUG_PATCH + data[offset + len(EXIT_BUG_PATCH):]
