@@ -7,16 +7,19 @@ interpreter (``venv_tool``), never through ``PATH``.
 
 ``AVR_TEST_FMU=/path/to/AdaptiveVelocityRegulator.fmu`` makes the FMU tests use that FMU
 instead of building one (the sanitizer run, tests/test_fmu_sanitize.py, points it at a
-guard built with AddressSanitizer).
+guard built with AddressSanitizer); the tests parametrized over every regulator FMU
+(``regulator_fmu``) then run on that one only.
 """
 import json
 import os
 import subprocess
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
+from native_support import REGULATOR_FMUS
 
 
 @pytest.fixture(scope="session")
@@ -53,6 +56,42 @@ def unzip():
 def fmu_dir(tmp_path_factory, built_fmu):
     """The built FMU, extracted once per session (a folder holding modelDescription.xml, binaries/, ...)."""
     return _unzip(built_fmu, tmp_path_factory.mktemp("fmu_unzipped"))
+
+
+@pytest.fixture(scope="session")
+def native_fmus(tmp_path_factory, build_module):
+    """{2: path, 3: path}: both native FMUs exactly as build.py builds them."""
+    out = tmp_path_factory.mktemp("native_fmus")
+    return {v: build_module.build_native_fmu(v, out) for v in (2, 3)}
+
+
+@dataclass(frozen=True)
+class RegulatorFmu:
+    """One of the regulator FMUs build.py builds: ``implementation`` "python" (pythonfmu) or
+    "native" (C), its FMI version, the .fmu and the folder it is extracted to."""
+
+    implementation: str
+    fmi: int
+    path: Path
+    dir: str
+
+    def rebuild(self, build_module, out_dir) -> Path:
+        """The same FMU built again into ``out_dir``."""
+        if self.implementation == "python":
+            return build_module.build_fmu(out_dir)
+        return build_module.build_native_fmu(self.fmi, out_dir)
+
+
+@pytest.fixture(scope="session", params=REGULATOR_FMUS)
+def regulator_fmu(request, tmp_path_factory) -> RegulatorFmu:
+    """Each regulator FMU in turn: the pythonfmu FMU (FMI 2.0) and the native FMI 2.0 and 3.0 FMUs."""
+    implementation, version = request.param.split("-fmi")
+    if implementation == "python":
+        return RegulatorFmu("python", 2, request.getfixturevalue("built_fmu"), request.getfixturevalue("fmu_dir"))
+    if os.environ.get("AVR_TEST_FMU"):
+        pytest.skip("AVR_TEST_FMU names the one FMU this run tests")
+    path = request.getfixturevalue("native_fmus")[int(version)]
+    return RegulatorFmu("native", int(version), path, _unzip(path, tmp_path_factory.mktemp(request.param)))
 
 
 @pytest.fixture(scope="session")

@@ -1,9 +1,7 @@
-"""Shared pieces of the native-FMU tests: the FMUs build.py really builds (once per
-session, into a temporary folder), an fmpy slave that speaks FMI 2.0 and FMI 3.0 with
-variable names, the numpy core run on the same inputs, and C compilation helpers.
-
-Written for any of the three FMUs (the slave takes any FMI 2.0 or 3.0 FMU), so the
-compliance suite can later be parametrized over the pythonfmu FMU too.
+"""Shared pieces of the regulator-FMU tests (pythonfmu and native alike): an fmpy slave that
+speaks FMI 2.0 and FMI 3.0 with variable names, seeded input sequences, the numpy core run on
+the same inputs, the subprocess drivers, and C compilation helpers.  The FMUs themselves come
+from conftest.py (``built_fmu``, ``native_fmus``, ``regulator_fmu``).
 """
 from __future__ import annotations
 
@@ -18,12 +16,21 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
-from fmu_src.avr_core import OUTPUT_SPECS, Regulator, RegulatorInputs, RegulatorParams
-from test_fmu_compliance import input_sequence  # noqa: F401 (the same seeded inputs as the pythonfmu suite)
-
+from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, Regulator, RegulatorInputs, RegulatorParams
 H = 0.005  # communication step, s
 OUTPUT_NAMES = [s.name for s in OUTPUT_SPECS]
 NATIVE_DIR = Path(__file__).parent / "native"
+#: The regulator FMUs every compliance rule is checked on (the ids of conftest's ``regulator_fmu``),
+#: and those an FMI 2.0-only importer or host takes.
+REGULATOR_FMUS = ("python-fmi2", "native-fmi2", "native-fmi3")
+FMI2_REGULATOR_FMUS = REGULATOR_FMUS[:2]
+#: ``@fmi2_only``: a test taking ``regulator_fmu`` runs on the FMI 2.0 regulator FMUs only.
+fmi2_only = pytest.mark.parametrize("regulator_fmu", FMI2_REGULATOR_FMUS, indirect=True)
+#: The subprocess drivers (one FMU process per test: a crash fails the test, not pytest), by FMI version.
+DRIVERS = {2: Path(__file__).parent / "fmi" / "driver.py", 3: NATIVE_DIR / "driver3.py"}
+#: The plain C FMI 2.0 host (tests/native/fmi2_host.c) and the FMI 2.0 headers it is compiled with.
+C_HOST = NATIVE_DIR / "fmi2_host.c"
+FMI2_INCLUDE = Path(__file__).parents[1] / "fmu_src" / "native" / "third_party" / "fmi2"
 #: System compilers and Wine are Debian packages (.ci/run installs them), not Python tools.
 CC = Path("/usr/bin/cc")
 MINGW_CC = Path("/usr/bin/x86_64-w64-mingw32-gcc")
@@ -38,11 +45,16 @@ def require(tool: Path) -> Path:
     return tool
 
 
-@pytest.fixture(scope="session")
-def native_fmus(tmp_path_factory, build_module):
-    """{2: path, 3: path}: both native FMUs exactly as build.py builds them."""
-    out = tmp_path_factory.mktemp("native_fmus")
-    return {v: build_module.build_native_fmu(v, out) for v in (2, 3)}
+def input_sequence(n, seed):
+    """A seeded sequence of plausible regulator inputs (a step every 70 calls)."""
+    rng = np.random.default_rng(seed)
+    seq = []
+    for k in range(n):
+        seq.append({"vx": float(0.5 + 0.3 * rng.standard_normal()), "vy": float(0.1 * rng.standard_normal()),
+                    "vx_des": 0.5, "vy_des": 0.0, "pitch": float(0.05 * rng.standard_normal()),
+                    "roll": float(0.05 * rng.standard_normal()), "pitch_rate": float(0.3 * rng.standard_normal()),
+                    "roll_rate": float(0.3 * rng.standard_normal()), "step_index": k // 70})
+    return seq
 
 
 def unzipped(fmu_path) -> str:
@@ -133,3 +145,19 @@ def compile_c(compiler: Path, sources, out: Path, *flags, cwd=None) -> Path:
 def fmutool() -> Path:
     """fmutool (fmu-manipulation-toolbox) of the running interpreter's environment."""
     return Path(sys.executable).parent / "fmutool"
+
+
+def c_host_script(fmu, params, sequence) -> str:
+    """The script tests/native/fmi2_host.c runs: ``params``, then ``sequence`` (dicts of inputs)."""
+    md = read_model_description(str(fmu))
+    vars_ = {v.name: v for v in md.modelVariables}
+    lines = [f"P {vars_[k].valueReference} {vars_[k].type[0]} {float(v)!r}" for k, v in params.items()]
+    lines.append("I " + " ".join(str(vars_[s.name].valueReference) for s in INPUT_SPECS))
+    lines.append(f"O {len(OUTPUT_NAMES)} " + " ".join(str(vars_[n].valueReference) for n in OUTPUT_NAMES))
+    lines += ["S " + " ".join(repr(float(u[s.name])) for s in INPUT_SPECS) for u in sequence]
+    return "\n".join(lines) + "\n"
+
+
+def c_host_outputs(stdout: str) -> np.ndarray:
+    """The outputs tests/native/fmi2_host.c printed (rows: steps)."""
+    return np.array([[float(x) for x in line.split()] for line in stdout.splitlines()])

@@ -1,16 +1,15 @@
-"""Random FMI call sequences, legal and illegal, against the real FMU in a subprocess.
+"""Random FMI call sequences, legal and illegal, against each real regulator FMU in a subprocess.
 
-An independent model of the FMI 2.0 co-simulation state machine (section 4.2.4), of
-the FMU's variable table and of its FMU-state rule (a state is restored only into an
-instance whose fixed parameters have the values it was saved with) says which calls
-are legal.  Property: the process never dies, every legal call returns fmi2OK and no
-illegal call returns fmi2OK.
+An independent model of the FMI 2.0 co-simulation state machine (section 4.2.4; for FMI 3.0
+the same phases without SetupExperiment), of the FMU's variable table and of its FMU-state
+rule (a state is restored only into an instance whose fixed parameters have the values it
+was saved with) says which calls are legal.  Property: the process never dies, every legal
+call returns OK and no illegal call returns OK.
 """
 import json
 import math
 import subprocess
 import sys
-from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
@@ -18,8 +17,8 @@ from hypothesis import strategies as st
 
 from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
 
-DRIVER = Path(__file__).parent / "fmi" / "driver.py"
-H = 0.005
+from native_support import DRIVERS, H
+
 SPECS = {s.name: s for s in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)}
 LIVE = {"instantiated", "initializationMode", "stepComplete", "stepFailed", "terminated"}
 FIXED_DEFAULTS = {s.name: s.default for s in PARAM_SPECS if s.variability == "fixed"}
@@ -110,6 +109,17 @@ class FmiModel:
             self.phase = None
 
 
+class Fmi3Model(FmiModel):
+    """FMI 3.0 co-simulation without event mode: no SetupExperiment (the start time goes with
+    EnterInitializationMode); otherwise the same phases and rules."""
+
+    def legal(self, op, *args):
+        if op == "setup":
+            return None  # not an FMI 3.0 call: not sent
+        return super().legal(op, *args)
+
+
+MODELS = {2: FmiModel, 3: Fmi3Model}
 NAMES = sorted(SPECS)
 values = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64), st.integers(-5, 5000),
                    st.sampled_from([0.0, 0.25, 1e-6, 1.0, -1.0]))
@@ -137,10 +147,11 @@ def _coerce(call):
 
 
 @pytest.fixture(scope="module")
-def driver(fmu_dir):
-    proc = subprocess.Popen([sys.executable, str(DRIVER), fmu_dir], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
-    yield proc
+def driver(regulator_fmu):
+    """(FMI version, the driver process) on the extracted regulator FMU."""
+    proc = subprocess.Popen([sys.executable, str(DRIVERS[regulator_fmu.fmi]), regulator_fmu.dir],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+    yield regulator_fmu.fmi, proc
     proc.stdin.close()
     assert proc.wait(timeout=60) == 0, proc.stderr.read()[-2000:]
 
@@ -158,15 +169,16 @@ def _send(proc, call):
           suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
 @given(sequence=st.lists(calls, min_size=1, max_size=25))
 def test_random_call_sequences_never_crash_and_illegal_calls_are_refused(driver, sequence):
-    model = FmiModel()
+    fmi, proc = driver
+    model = MODELS[fmi]()
     for call in [("instantiate",)] + [_coerce(c) for c in sequence] + [("free",)]:
         legal = model.legal(*call)
         if legal is None:
             continue
-        answer = _send(driver, call)
+        answer = _send(proc, call)
         if legal:
-            assert answer["status"] == 0, f"legal call {call} answered {answer} in phase {model.phase}"
+            assert answer["status"] == 0, f"FMI {fmi}: legal call {call} answered {answer} in phase {model.phase}"
             model.apply(*call)
         else:
-            assert answer["status"] != 0, f"illegal call {call} answered OK in phase {model.phase}"
-    assert driver.poll() is None
+            assert answer["status"] != 0, f"FMI {fmi}: illegal call {call} answered OK in phase {model.phase}"
+    assert proc.poll() is None

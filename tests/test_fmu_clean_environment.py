@@ -1,7 +1,8 @@
 """The FMU tests on a bare machine: no project tool on PATH, nothing left in the temp folder.
 
 A representative subset of the FMU tests (build, fmpy and fmutool checks, every importer,
-the C host, hostile host inputs, the fatal-error path) runs in a fresh pytest process with
+the C host, hostile host inputs, the fatal-error path; on every regulator FMU) runs in a
+fresh pytest process with
 
 * ``PATH=/usr/bin:/bin`` only, as ``.ci/run`` gives it on a fresh machine: the tools the
   tests run (fmutool, fmucontainer) must be found beside the interpreter, not on PATH;
@@ -21,7 +22,7 @@ SUBSET = [
     "tests/test_fmu_compliance.py::test_legal_sequence_all_ok",
     "tests/test_fmu_compliance.py::test_state_round_trips_are_bit_exact",
     "tests/test_fmu_compliance.py::test_two_different_fmus_in_one_process",
-    "tests/test_fmu_compliance.py::test_guard_refuses_a_wrong_guid",
+    "tests/test_fmu_compliance.py::test_wrong_guid_is_refused",
     "tests/test_fmu_importers.py",
     "tests/test_fmu_c_host.py",
     "tests/test_fmu_host_inputs.py::test_set_debug_logging_refuses_null_non_utf8_and_unknown_categories",

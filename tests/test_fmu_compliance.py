@@ -1,8 +1,10 @@
-"""FMI 2.0 compliance of the FMU that build.py really builds (into a temporary folder).
+"""FMI compliance of every regulator FMU build.py really builds (into a temporary folder):
+the pythonfmu FMU (FMI 2.0) and the native FMUs (FMI 2.0 and FMI 3.0), each rule written
+once and run on each FMU (``regulator_fmu``), plus the checks only one implementation needs.
 
-Calls that could crash run in a subprocess (tests/fmi/driver.py), so a crash shows
-as a failed test, not a dead pytest.  FMUs are extracted under tmp_path (``fmu_dir``,
-``unzip``), tools are found beside the running interpreter (``venv_tool``).
+Calls that could crash run in a subprocess (tests/fmi/driver.py, tests/native/driver3.py),
+so a crash shows as a failed test, not a dead pytest.  FMUs are extracted under tmp_path,
+tools are found beside the running interpreter (``venv_tool``).
 """
 import hashlib
 import json
@@ -16,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy import read_model_description
-from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
+from fmpy.fmi3 import FMU3Slave
 from fmpy.validation import validate_fmu
 # Imported here, before any test instantiates the FMU in this process: pythonfmu puts the FMU's
 # resources/ (which holds a copy of the pythonfmu package, without its binaries) first on sys.path.
@@ -25,65 +27,103 @@ import pythonfmu
 from pythonfmu.builder import FmuBuilder
 
 from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+from fmu_src.avr_packaging.archive import ZIP_EPOCH
+from native_support import DRIVERS, H, AnySlave, fmi2_only, input_sequence
 
-DRIVER = Path(__file__).parent / "fmi" / "driver.py"
-OK, DISCARD, ERROR, FATAL = 0, 2, 3, 4
-H = 0.005  # communication step, s
+OK, ERROR = 0, 3
+SPECS = (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)
+PSI_X = [s.name for s in OUTPUT_SPECS].index("psi_x")
+#: Where each FMU keeps its binaries (platform folders by FMI version) and its library's suffix.
+NATIVE_PLATFORMS = {2: ("linux64", "win64"), 3: ("x86_64-linux", "x86_64-windows")}
 
 
-def run_calls(fmu_dir, calls):
-    """Statuses of `calls` made in a fresh process on the extracted FMU; the process must not die."""
-    proc = subprocess.run([sys.executable, str(DRIVER), str(fmu_dir), json.dumps(calls)], capture_output=True,
+def run_calls(fmu, calls):
+    """Answers (dicts) to `calls` made in a fresh process on the extracted FMU, and the process's
+    stdout (fmpy prints the FMU's log messages there); the process must not die."""
+    proc = subprocess.run([sys.executable, str(DRIVERS[fmu.fmi]), fmu.dir, json.dumps(calls)], capture_output=True,
                           text=True, timeout=120)
     assert proc.returncode == 0, f"driver died (exit {proc.returncode}):\n{proc.stderr[-2000:]}"
-    return [r["status"] for r in json.loads(proc.stdout.strip().splitlines()[-1])]
+    return json.loads(proc.stdout.strip().splitlines()[-1]), proc.stdout
 
 
-INIT = [["instantiate"], ["setup", 0.0], ["enter"], ["exit"]]
+def statuses(fmu, calls):
+    return [r["status"] for r in run_calls(fmu, calls)[0]]
+
+
+def init_calls(fmi):
+    """Instantiate and initialize (FMI 3.0: the start time goes with enterInitializationMode)."""
+    return [["instantiate"], ["setup", 0.0], ["enter"], ["exit"]] if fmi == 2 else [["instantiate"], ["enter"], ["exit"]]
+
+
+def slave(fmu, name="avr") -> AnySlave:
+    return AnySlave(fmu.path, name=name, unzip=fmu.dir)
 
 
 # ---- static checks --------------------------------------------------------------------
-def test_fmpy_validation_finds_no_problems(built_fmu):
-    assert validate_fmu(str(built_fmu)) == []
+def test_fmpy_validation_finds_no_problems(regulator_fmu):
+    assert validate_fmu(str(regulator_fmu.path)) == []
 
 
-def test_fmutool_check_passes(built_fmu, venv_tool):
-    proc = subprocess.run([venv_tool("fmutool"), "-input", str(built_fmu), "-check"], capture_output=True, text=True)
+def test_fmutool_check_passes(regulator_fmu, venv_tool):
+    fmi = regulator_fmu.fmi
+    proc = subprocess.run([venv_tool("fmutool"), "-input", str(regulator_fmu.path), "-check"],
+                          capture_output=True, text=True)
     out = proc.stdout + proc.stderr
     assert proc.returncode == 0, out
-    assert "compliant with FMI-2.0" in out and "No semantic error" in out, out
+    assert f"compliant with FMI-{fmi}.0" in out and f"No semantic error against the FMI-{fmi}" in out, out
 
 
-def test_two_builds_have_the_same_sha256(built_fmu, build_module, tmp_path):
-    again = build_module.build_fmu(tmp_path)
-    assert hashlib.sha256(again.read_bytes()).hexdigest() == hashlib.sha256(built_fmu.read_bytes()).hexdigest()
+def test_two_builds_have_the_same_sha256(regulator_fmu, build_module, tmp_path):
+    again = regulator_fmu.rebuild(build_module, tmp_path)
+    assert hashlib.sha256(again.read_bytes()).hexdigest() == hashlib.sha256(regulator_fmu.path.read_bytes()).hexdigest()
 
 
-def test_model_description_has_units_ranges_and_content_guid(built_fmu):
-    md = read_model_description(str(built_fmu))
-    units = {u.name for u in md.unitDefinitions}
-    assert {"m/s", "rad", "rad/s"} <= units
-    by_name = {v.name: v for v in md.modelVariables}
+def test_model_description_is_the_variable_table(regulator_fmu):
+    md = read_model_description(str(regulator_fmu.path))
+    variables = [v for v in md.modelVariables if v.causality != "independent"]
+    assert [v.name for v in variables] == [s.name for s in SPECS]  # every declared variable, in declaration order
+    assert [v.valueReference for v in variables] == list(range(len(SPECS)))  # the same in every regulator FMU
+    for v, spec in zip(variables, SPECS):
+        assert (v.causality, v.variability, v.description) == (spec.causality, spec.variability, spec.description)
+        assert (v.min is None) == (spec.min is None) and (v.max is None) == (spec.max is None)
+        if spec.min is not None:
+            assert float(v.min) == spec.min and float(v.max) == spec.max
+        if spec.type == "Boolean":
+            assert str(v.start).lower() == str(spec.default).lower()
+        else:
+            assert float(v.start) == spec.default
+    by_name = {v.name: v for v in variables}
+    assert {"m/s", "rad", "rad/s"} <= {u.name for u in md.unitDefinitions}
     assert by_name["vx"].unit == "m/s" and by_name["pitch"].unit == "rad" and by_name["roll_rate"].unit == "rad/s"
     assert by_name["delta_swing_knee"].unit == "rad"
-    assert by_name["step_index"].type == "Integer" and by_name["step_index"].variability == "discrete"
+    assert by_name["step_index"].variability == "discrete" and by_name["step_index"].type in ("Integer", "Int32")
     assert by_name["n_neurons"].variability == "fixed" and by_name["adaptation_enabled"].variability == "tunable"
-    for spec in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS):  # every declared variable, in declaration order
-        var = by_name[spec.name]
-        assert var.causality == spec.causality
-        if spec.min is not None:
-            assert float(var.min) == spec.min
-    assert [v.name for v in md.modelVariables] == [s.name for s in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)]
     assert md.coSimulation.canGetAndSetFMUstate and md.coSimulation.canSerializeFMUstate
     assert md.generationDateAndTime is None  # no timestamp: builds are reproducible
-    with zipfile.ZipFile(built_fmu) as z:
-        names = set(z.namelist())
-        assert "documentation/index.html" in names
-        assert z.read("resources/requirements.txt").decode().startswith("numpy")
-        assert all(info.date_time == (1980, 1, 1, 0, 0, 0) for info in z.infolist())
+    with zipfile.ZipFile(regulator_fmu.path) as z:
+        assert all(info.date_time == ZIP_EPOCH for info in z.infolist())
         doc = z.read("documentation/index.html").decode()
-    for spec in PARAM_SPECS:
-        assert f"<td>{spec.name}</td>" in doc
+    assert all(f"<td>{s.name}</td>" in doc for s in SPECS)
+
+
+def test_pythonfmu_fmu_ships_its_requirements(built_fmu):
+    with zipfile.ZipFile(built_fmu) as z:
+        assert z.read("resources/requirements.txt").decode().startswith("numpy")
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_native_fmu_ships_binaries_and_sources(native_fmus, fmi):
+    md = read_model_description(str(native_fmus[fmi]))
+    with zipfile.ZipFile(native_fmus[fmi]) as z:
+        names = set(z.namelist())
+    linux, windows = NATIVE_PLATFORMS[fmi]
+    assert {f"binaries/{linux}/AdaptiveVelocityRegulatorNative.so",
+            f"binaries/{windows}/AdaptiveVelocityRegulatorNative.dll"} <= names
+    assert {"sources/avr_model.c", "sources/avr_vars.h", f"sources/fmi{fmi}Functions.h"} <= names
+    if fmi == 3:
+        assert "sources/buildDescription.xml" in names
+        [time] = [v for v in md.modelVariables if v.causality == "independent"]
+        assert (time.name, time.valueReference, time.unit) == ("time", len(SPECS), "s")
 
 
 def test_module_names_are_unique_to_this_fmu(built_fmu):
@@ -92,158 +132,176 @@ def test_module_names_are_unique_to_this_fmu(built_fmu):
         assert z.read("resources/slavemodule.txt").decode() == "avr_slave"
 
 
-# ---- the calling sequence (FMI 2.0 section 4.2.4) ------------------------------------------
-def test_legal_sequence_all_ok(fmu_dir):
+# ---- the calling sequence (FMI 2.0 section 4.2.4, FMI 3.0 section 4.3) ----------------------
+def test_legal_sequence_all_ok(regulator_fmu):
     calls = [["instantiate"], ["set", "Kp_x", 0.3], ["set", "n_neurons", 200], ["setup", 0.0], ["enter"],
              ["set", "vx", 0.4], ["get", "delta_swing_hip_pitch"], ["exit"],
              ["step", 0.0, H], ["set", "Kp_x", 0.2], ["set", "vx", 0.6], ["set", "step_index", 1],
              ["step", H, H], ["get", "psi_x"], ["get_state"], ["serialize", 0], ["deserialize", 0],
              ["set_state", 1], ["step", 2 * H, H], ["terminate"], ["get", "delta_swing_knee"],
              ["reset"], ["setup", 0.0], ["enter"], ["exit"], ["step", 0.0, H], ["terminate"], ["free"]]
-    assert run_calls(fmu_dir, calls) == [OK] * len(calls)
+    assert statuses(regulator_fmu, calls) == [OK] * len(calls)
 
 
-@pytest.mark.parametrize("case, calls, expected", [
-    ("doStep before initialization", [["instantiate"], ["step", 0.0, H]], ERROR),
-    ("doStep in initialization mode", [["instantiate"], ["setup", 0.0], ["enter"], ["step", 0.0, H]], ERROR),
-    ("exitInitializationMode twice", INIT + [["exit"]], ERROR),
-    ("setupExperiment after initialization", INIT + [["setup", 0.0]], ERROR),
-    ("set an output", INIT + [["set", "delta_swing_hip_pitch", 0.1]], ERROR),
-    ("set an output before initialization", [["instantiate"], ["set", "psi_x", 0.1]], ERROR),
-    ("set a fixed parameter after initialization", INIT + [["set", "n_neurons", 10]], ERROR),
-    ("set the seed after initialization", INIT + [["set", "seed", 3]], ERROR),
-    ("doStep after terminate", INIT + [["step", 0.0, H], ["terminate"], ["step", H, H]], ERROR),
-    ("set after terminate", INIT + [["terminate"], ["set", "vx", 0.1]], ERROR),
-    ("terminate twice", INIT + [["terminate"], ["terminate"]], ERROR),
-    ("zero step size", INIT + [["step", 0.0, 0.0]], ERROR),
-    ("negative step size", INIT + [["step", 0.0, -H]], ERROR),
-    ("step not starting at the current time", INIT + [["step", 0.0, H], ["step", 3 * H, H]], ERROR),
-    ("step starting in the past", INIT + [["step", 0.0, H], ["step", 0.0, H]], ERROR),
-    ("NaN input", INIT + [["set", "vx", math.nan]], ERROR),
-    ("infinite input", INIT + [["set", "pitch", math.inf]], ERROR),
-    ("input above its declared range", INIT + [["set", "vx", 1e308]], ERROR),
-    ("input below its declared range", INIT + [["set", "roll_rate", -101.0]], ERROR),
-    ("negative step_index", INIT + [["set", "step_index", -1]], ERROR),
-    ("parameter above its range", [["instantiate"], ["set", "psi_limit", 50.0]], ERROR),
-    ("tunable parameter NaN while stepping", INIT + [["set", "Kp_x", math.nan]], ERROR),
-    ("n_neurons zero", [["instantiate"], ["set", "n_neurons", 0]], ERROR),
-    ("garbage serialized state", INIT + [["deserialize", -1]], ERROR),
-    ("get before initialization", [["instantiate"], ["get", "vx"]], ERROR),
-])
-def test_illegal_call_is_refused_and_instance_survives(fmu_dir, case, calls, expected):
-    # After the refused call the instance must still work: a legal step from where it was.
-    statuses = run_calls(fmu_dir, calls)
-    assert statuses[:-1] == [OK] * (len(calls) - 1), case
-    assert statuses[-1] == expected, case
+AFTER_INIT = None
+ILLEGAL = [  # (case, calls after instantiate, or AFTER_INIT and the calls after initialization)
+    ("doStep before initialization", [["step", 0.0, H]]),
+    ("doStep in initialization mode", [["setup", 0.0], ["enter"], ["step", 0.0, H]]),
+    ("exitInitializationMode twice", AFTER_INIT, [["exit"]]),
+    ("enterInitializationMode after initialization", AFTER_INIT, [["enter"]]),
+    ("set an output", AFTER_INIT, [["set", "delta_swing_hip_pitch", 0.1]]),
+    ("set an output before initialization", [["set", "psi_x", 0.1]]),
+    ("set a fixed parameter after initialization", AFTER_INIT, [["set", "n_neurons", 10]]),
+    ("set the seed after initialization", AFTER_INIT, [["set", "seed", 3]]),
+    ("doStep after terminate", AFTER_INIT, [["step", 0.0, H], ["terminate"], ["step", H, H]]),
+    ("set after terminate", AFTER_INIT, [["terminate"], ["set", "vx", 0.1]]),
+    ("terminate twice", AFTER_INIT, [["terminate"], ["terminate"]]),
+    ("zero step size", AFTER_INIT, [["step", 0.0, 0.0]]),
+    ("negative step size", AFTER_INIT, [["step", 0.0, -H]]),
+    ("step not starting at the current time", AFTER_INIT, [["step", 0.0, H], ["step", 3 * H, H]]),
+    ("step starting in the past", AFTER_INIT, [["step", 0.0, H], ["step", 0.0, H]]),
+    ("NaN input", AFTER_INIT, [["set", "vx", math.nan]]),
+    ("infinite input", AFTER_INIT, [["set", "pitch", math.inf]]),
+    ("input above its declared range", AFTER_INIT, [["set", "vx", 1e308]]),
+    ("input below its declared range", AFTER_INIT, [["set", "roll_rate", -101.0]]),
+    ("negative step_index", AFTER_INIT, [["set", "step_index", -1]]),
+    ("parameter above its range", [["set", "psi_limit", 50.0]]),
+    ("tunable parameter NaN while stepping", AFTER_INIT, [["set", "Kp_x", math.nan]]),
+    ("n_neurons zero", [["set", "n_neurons", 0]]),
+    ("garbage serialized state", AFTER_INIT, [["deserialize", -1]]),
+    ("get before initialization", [["get", "vx"]]),
+]
+FMI2_ILLEGAL = [("setupExperiment after initialization", AFTER_INIT, [["setup", 0.0]])]  # no such FMI 3.0 call
 
 
-def test_refused_set_changes_nothing_and_stepping_continues(fmu_dir):
-    calls = INIT + [["set", "vx", 0.7], ["set", "vx", math.nan], ["get", "vx"], ["step", 0.0, H],
+def _refused_last(fmu, case):
+    """The case's calls all OK but the last, which is refused (Error): the instance survives it."""
+    name, calls = case[0], ([["instantiate"]] + case[1] if case[1] is not AFTER_INIT else init_calls(fmu.fmi) + case[2])
+    calls = [c for c in calls if not (fmu.fmi == 3 and c[0] == "setup")]  # FMI 3.0: start time goes with enter
+    answers = statuses(fmu, calls)
+    assert answers[:-1] == [OK] * (len(calls) - 1), name
+    assert answers[-1] == ERROR, name
+
+
+@pytest.mark.parametrize("case", ILLEGAL, ids=[c[0] for c in ILLEGAL])
+def test_illegal_call_is_refused_and_instance_survives(regulator_fmu, case):
+    _refused_last(regulator_fmu, case)
+
+
+@fmi2_only
+@pytest.mark.parametrize("case", FMI2_ILLEGAL, ids=[c[0] for c in FMI2_ILLEGAL])
+def test_illegal_fmi2_call_is_refused_and_instance_survives(regulator_fmu, case):
+    _refused_last(regulator_fmu, case)
+
+
+def test_refused_set_changes_nothing_and_stepping_continues(regulator_fmu):
+    init = init_calls(regulator_fmu.fmi)
+    calls = init + [["set", "vx", 0.7], ["set", "vx", math.nan], ["get", "vx"], ["step", 0.0, H],
                     ["set", "Kp_x", 99.0], ["get", "Kp_x"], ["step", H, H], ["terminate"], ["free"]]
-    proc = subprocess.run([sys.executable, str(DRIVER), fmu_dir, json.dumps(calls)], capture_output=True,
-                          text=True, timeout=120)
-    results = json.loads(proc.stdout.strip().splitlines()[-1])
-    assert [r["status"] for r in results] == [OK] * 5 + [ERROR, OK, OK, ERROR, OK, OK, OK, OK]
-    assert results[6]["value"] == 0.7  # the NaN was not applied
-    assert results[9]["value"] == {s.name: s for s in PARAM_SPECS}["Kp_x"].default  # nor the bad gain
+    answers, _ = run_calls(regulator_fmu, calls)
+    n = len(init)
+    assert [r["status"] for r in answers] == [OK] * (n + 1) + [ERROR, OK, OK, ERROR, OK, OK, OK, OK]
+    assert answers[n + 2]["value"] == 0.7  # the NaN was not applied
+    assert answers[n + 5]["value"] == {s.name: s for s in PARAM_SPECS}["Kp_x"].default  # nor the bad gain
+
+
+def test_refused_calls_log_the_variable_and_its_range(regulator_fmu):
+    calls = [["instantiate"], ["set", "psi_limit", 50.0], ["set", "delta_swing_knee", 0.1], ["setup", 0.0],
+             ["enter"], ["exit"], ["set", "vx", math.nan], ["set", "vx", 1e308], ["step", 0.0, -1.0],
+             ["set", "n_neurons", 20000]]
+    _, log = run_calls(regulator_fmu, calls)
+    spec = {s.name: s for s in PARAM_SPECS}["psi_limit"]
+    assert f"psi_limit = 50: out of range [{spec.min:g}, {spec.max:g}]" in log, log
+    assert "delta_swing_knee is an output and cannot be set" in log, log
+    assert "vx = nan: must be a finite number in [-10, 10]" in log, log
+    assert "vx = 1e+308: out of range [-10, 10]" in log, log
+    assert "communicationStepSize = -1: must be a finite number > 0" in log, log
+    assert "n_neurons is a fixed parameter" in log, log
+
+
+def test_wrong_guid_is_refused(regulator_fmu):
+    md = read_model_description(str(regulator_fmu.path))
+    cls = FMU3Slave if regulator_fmu.fmi == 3 else FMU2Slave
+    fmu = cls(guid="{not-the-guid}", unzipDirectory=regulator_fmu.dir,
+              modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bad")
+    with pytest.raises(Exception, match="nstantiate"):
+        fmu.instantiate()
 
 
 # ---- in-process checks (legal calls only) ------------------------------------------------
-class Slave:
-    """A thin helper around fmpy's FMU2Slave with names instead of value references."""
-
-    def __init__(self, fmu_dir, name="avr"):
-        self.md = read_model_description(str(fmu_dir))
-        self.unzip = str(fmu_dir)
-        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
-        self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzip,
-                             modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
-        self.fmu.instantiate(loggingOn=False)
-
-    def init(self, **params):
-        for name, value in params.items():
-            self.set(name, value)
-        self.fmu.setupExperiment(startTime=0.0)
-        self.fmu.enterInitializationMode()
-        self.fmu.exitInitializationMode()
-        return self
-
-    def set(self, name, value):
-        vr = [self.vr[name]]
-        if isinstance(value, bool):
-            self.fmu.setBoolean(vr, [value])
-        elif isinstance(value, int):
-            self.fmu.setInteger(vr, [value])
-        else:
-            self.fmu.setReal(vr, [value])
-
-    def step(self, k, inputs):
-        for name, value in inputs.items():
-            self.set(name, value)
-        self.fmu.doStep(k * H, H)
-        return np.array(self.fmu.getReal([self.vr[s.name] for s in OUTPUT_SPECS]))
-
-
-def input_sequence(n, seed):
-    """A seeded sequence of plausible regulator inputs (a step every 70 calls)."""
-    rng = np.random.default_rng(seed)
-    seq = []
-    for k in range(n):
-        seq.append({"vx": float(0.5 + 0.3 * rng.standard_normal()), "vy": float(0.1 * rng.standard_normal()),
-                    "vx_des": 0.5, "vy_des": 0.0, "pitch": float(0.05 * rng.standard_normal()),
-                    "roll": float(0.05 * rng.standard_normal()), "pitch_rate": float(0.3 * rng.standard_normal()),
-                    "roll_rate": float(0.3 * rng.standard_normal()), "step_index": k // 70})
-    return seq
-
-
-def test_reset_returns_the_start_state(fmu_dir):
-    s = Slave(fmu_dir).init(n_neurons=300)
+def test_reset_returns_the_start_state(regulator_fmu):
+    params = {"n_neurons": 300, "learning_rate": 1e-4, "learn_from_step": 0}
+    s = slave(regulator_fmu).init(**params)
     seq = input_sequence(50, seed=1)
     first = [s.step(k, u) for k, u in enumerate(seq)]
     s.fmu.terminate()
     s.fmu.reset()
-    s.init(n_neurons=300)
+    s.init(**params)
     second = [s.step(k, u) for k, u in enumerate(seq)]
-    assert np.array_equal(np.array(first), np.array(second))
-    s.fmu.terminate()
-    s.fmu.freeInstance()
+    assert np.array_equal(np.array(first), np.array(second)) and np.any(np.array(first)[:, PSI_X] != 0.0)
+    s.close()
 
 
-def test_state_round_trips_are_bit_exact(fmu_dir):
-    s = Slave(fmu_dir).init()
+def test_state_round_trips_are_bit_exact(regulator_fmu):
+    s = slave(regulator_fmu).init(learning_rate=1e-4)
     seq = input_sequence(120, seed=2)
     for k, u in enumerate(seq[:60]):
         s.step(k, u)
-    state = s.fmu.getFMUstate()
-    blob = s.fmu.serializeFMUstate(state)
+    state = s.get_state()
+    blob = s.serialize(state)
     straight = np.array([s.step(k, u) for k, u in enumerate(seq[60:], start=60)])
-    s.fmu.setFMUstate(state)  # restore in memory, then continue
+    s.set_state(state)  # restore in memory, then continue
     again = np.array([s.step(k, u) for k, u in enumerate(seq[60:], start=60)])
-    other = Slave(fmu_dir, name="other").init()  # restore the serialized state in a fresh instance
-    other.fmu.setFMUstate(other.fmu.deSerializeFMUstate(blob))
+    other = slave(regulator_fmu, name="other").init()  # same fixed parameters (other ones are refused)
+    other.set_state(other.deserialize(blob))  # restore the serialized state in a fresh instance
     restored = np.array([other.step(k, u) for k, u in enumerate(seq[60:], start=60)])
     assert np.array_equal(straight, again) and np.array_equal(straight, restored)
-    assert np.any(straight[:, [i for i, o in enumerate(OUTPUT_SPECS) if o.name == "psi_x"][0]] != 0.0)
-    assert bytes(s.fmu.serializeFMUstate(s.fmu.getFMUstate())) != bytes(blob)  # learning went on
-    for slave in (s, other):
-        slave.fmu.terminate()
-        slave.fmu.freeInstance()
+    assert np.any(straight[:, PSI_X] != 0.0)  # the state carries learned weights
+    assert other.serialize(other.get_state()) == s.serialize(s.get_state())  # same history, same bytes
+    assert s.serialize(s.get_state()) != blob  # learning went on
+    for each in (s, other):
+        each.close()
 
 
-def test_twenty_instances_in_one_process_are_independent(fmu_dir):
-    slaves = [Slave(fmu_dir, name=f"i{i}").init(n_neurons=200, seed=i % 2) for i in range(20)]
+def test_twenty_instances_in_one_process_are_independent(regulator_fmu):
+    params = [{"n_neurons": 200, "seed": i % 2, "learning_rate": 1e-4} for i in range(20)]
+    slaves = [slave(regulator_fmu, name=f"i{i}").init(**params[i]) for i in range(20)]
     seqs = [input_sequence(30, seed=100 + i) for i in range(20)]
     interleaved = [[None] * 30 for _ in range(20)]
     for k in range(30):
         for i, s in enumerate(slaves):
             interleaved[i][k] = s.step(k, seqs[i][k])
     for i in (0, 7, 19):  # each equals a run of its own in a fresh instance
-        alone = Slave(fmu_dir, name=f"alone{i}").init(n_neurons=200, seed=i % 2)
+        alone = slave(regulator_fmu, name=f"alone{i}").init(**params[i])
         assert np.array_equal(np.array(interleaved[i]), np.array([alone.step(k, u) for k, u in enumerate(seqs[i])]))
-        alone.fmu.freeInstance()
+        alone.close()
     for s in slaves:
-        s.fmu.terminate()
-        s.fmu.freeInstance()
+        s.close()
+
+
+def test_a_state_with_other_fixed_parameters_is_refused_until_they_match(regulator_fmu):
+    """A state restores only into an instance with the state's n_neurons and seed (it must never
+    bring its own along, silently changing the instance's networks)."""
+    from fmpy.fmi1 import FMICallException
+
+    seq = input_sequence(20, seed=4)
+    a = slave(regulator_fmu, name="a").init(n_neurons=20, seed=0, learning_rate=1e-3)
+    for k, u in enumerate(seq[:10]):
+        a.step(k, u)
+    blob = a.serialize(a.get_state())
+    expected = np.array([a.step(k, u) for k, u in enumerate(seq[10:], start=10)])
+    a.close()
+
+    b = slave(regulator_fmu, name="b").init(n_neurons=10, seed=5)
+    with pytest.raises(FMICallException):
+        b.set_state(b.deserialize(blob))
+    b.step(0, seq[0])  # refused, nothing changed: b still steps from its own start
+    b.close()
+
+    c = slave(regulator_fmu, name="c").init(n_neurons=20, seed=0)
+    c.set_state(c.deserialize(blob))
+    np.testing.assert_array_equal([c.step(k, u) for k, u in enumerate(seq[10:], start=10)], expected)
+    c.close()
 
 
 OTHER_SLAVE = '''
@@ -275,39 +333,16 @@ def test_two_different_fmus_in_one_process(fmu_dir, tmp_path, unzip):
     other.setupExperiment(startTime=0.0)
     other.enterInitializationMode()
     other.exitInitializationMode()
-    s = Slave(fmu_dir).init(n_neurons=100)
+    s = AnySlave(fmu_dir, unzip=fmu_dir).init(n_neurons=100)
     seq = input_sequence(10, seed=5)
     outputs = [s.step(k, u) for k, u in enumerate(seq)]
     for k in range(10):
         other.doStep(k * H, H)
     assert other.getReal([md.modelVariables[0].valueReference]) == [10.0]
     assert np.all(np.isfinite(outputs))
-    for fmu in (other, s.fmu):
-        fmu.terminate()
-        fmu.freeInstance()
-
-
-def test_refused_calls_log_the_variable_and_its_range(fmu_dir):
-    # fmpy's default logger prints FMU messages to stdout; the driver's JSON is the last line.
-    calls = [["instantiate"], ["set", "psi_limit", 50.0], ["set", "delta_swing_knee", 0.1], ["setup", 0.0],
-             ["enter"], ["exit"], ["set", "vx", math.nan], ["set", "vx", 1e308], ["step", 0.0, -1.0]]
-    proc = subprocess.run([sys.executable, str(DRIVER), fmu_dir, json.dumps(calls)], capture_output=True,
-                          text=True, timeout=120)
-    log = proc.stdout
-    spec = {s.name: s for s in PARAM_SPECS}["psi_limit"]
-    assert f"psi_limit = 50: out of range [{spec.min:g}, {spec.max:g}]" in log, log
-    assert "delta_swing_knee is an output and cannot be set" in log, log
-    assert "vx = nan: must be a finite number in [-10, 10]" in log, log
-    assert "vx = 1e+308: out of range [-10, 10]" in log, log
-    assert "communicationStepSize = -1: must be a finite number > 0" in log, log
-
-
-def test_guard_refuses_a_wrong_guid(fmu_dir):
-    md = read_model_description(fmu_dir)
-    fmu = FMU2Slave(guid="{not-the-guid}", unzipDirectory=fmu_dir,
-                    modelIdentifier=md.coSimulation.modelIdentifier, instanceName="bad")
-    with pytest.raises(Exception, match="instantiate"):
-        fmu.instantiate()
+    other.terminate()
+    other.freeInstance()
+    s.close()
 
 
 def test_guard_header_matches_model_description(built_fmu):

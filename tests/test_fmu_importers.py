@@ -1,10 +1,11 @@
-"""The same input sequence through four importers (and the numpy core in-process).
+"""The same input sequence through four importers (and the numpy core in-process), on every
+regulator FMU (pythonfmu FMI 2.0, native FMI 2.0 and 3.0).
 
-fmpy FMU2Slave, fmpy simulate_fmu, libcosimpy (Open Simulation Platform, set up from
-an OSP system structure file) and an FMU container (fmu-manipulation-toolbox) must
-give the core's outputs to 1e-12.  They
-are in fact bit-identical (the same float64 code runs), the tolerance only allows
-for an importer that routes values through a different float formatting.
+fmpy FMU2Slave/FMU3Slave, fmpy simulate_fmu, libcosimpy (Open Simulation Platform, set up
+from an OSP system structure file; FMI 2.0) and an FMU container (fmu-manipulation-toolbox;
+FMI 2.0) must give the core's outputs to 1e-12.  The pythonfmu FMU runs the core's own
+float64 code (bit-identical); the native cores differ by summation order only (~1e-16 here);
+the tolerance also allows an importer that routes values through a different float formatting.
 """
 import shutil
 
@@ -12,12 +13,11 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
-from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, Regulator, RegulatorInputs, RegulatorParams
-from test_fmu_compliance import H, Slave, input_sequence
+from fmu_src.avr_core import INPUT_SPECS
+from native_support import H, OUTPUT_NAMES, AnySlave, core_outputs, fmi2_only, input_sequence
 
 N_STEPS = 150
 PARAMS = {"n_neurons": 400, "seed": 11, "Kp_x": 0.3, "learning_rate": 1e-4}  # a fast learner: Psi visibly moves
-OUTPUT_NAMES = [s.name for s in OUTPUT_SPECS]
 TOL = dict(rtol=1e-12, atol=1e-12)
 
 
@@ -28,9 +28,7 @@ def sequence():
 
 @pytest.fixture(scope="module")
 def reference(sequence):
-    regulator = Regulator(RegulatorParams(**PARAMS))
-    out = [regulator.step(RegulatorInputs(**u), H) for u in sequence]
-    return np.array([[o[name] for name in OUTPUT_NAMES] for o in out])
+    return core_outputs(sequence, **PARAMS)
 
 
 def test_reference_actually_learns(reference):
@@ -38,21 +36,20 @@ def test_reference_actually_learns(reference):
     assert psi_x[0] == 0.0 and abs(psi_x[-1]) > 1e-4
 
 
-def test_fmpy_fmu2slave_matches_core(fmu_dir, sequence, reference):
-    s = Slave(fmu_dir).init(**PARAMS)
+def test_fmpy_slave_matches_core(regulator_fmu, sequence, reference):
+    s = AnySlave(regulator_fmu.path, unzip=regulator_fmu.dir).init(**PARAMS)
     out = np.array([s.step(k, u) for k, u in enumerate(sequence)])
-    s.fmu.terminate()
-    s.fmu.freeInstance()
+    s.close()
     np.testing.assert_allclose(out, reference, **TOL)
 
 
-def test_fmpy_simulate_fmu_matches_core(built_fmu, sequence, reference):
+def test_fmpy_simulate_fmu_matches_core(regulator_fmu, sequence, reference):
     names = [s.name for s in INPUT_SPECS]
     dtype = [("time", np.float64)] + [(n, np.int32 if n == "step_index" else np.float64) for n in names]
     # fmpy applies the input row whose time is the current communication point; rows at k*H.
     rows = [(k * H, *[u[n] for n in names]) for k, u in enumerate(sequence)]
     signals = np.array(rows, dtype=dtype)
-    result = simulate_fmu(str(built_fmu), start_time=0.0, stop_time=N_STEPS * H, step_size=H,
+    result = simulate_fmu(str(regulator_fmu.path), start_time=0.0, stop_time=N_STEPS * H, step_size=H,
                           output_interval=H, input=signals, start_values=PARAMS, output=OUTPUT_NAMES)
     # result row 0 is the state at t=0 (before any step); row k+1 follows step k
     out = np.array([[row[n] for n in OUTPUT_NAMES] for row in result[1:N_STEPS + 1]])
@@ -65,7 +62,7 @@ OSP_SYSTEM = """<?xml version="1.0" encoding="utf-8"?>
   <BaseStepSize>{h}</BaseStepSize>
   <Algorithm>fixedStep</Algorithm>
   <Simulators>
-    <Simulator name="avr" source="AdaptiveVelocityRegulator.fmu" stepSize="{h}">
+    <Simulator name="avr" source="{fmu}" stepSize="{h}">
       <InitialValues>
 {initial}
       </InitialValues>
@@ -75,19 +72,20 @@ OSP_SYSTEM = """<?xml version="1.0" encoding="utf-8"?>
 """
 
 
-def test_libcosimpy_matches_core(built_fmu, sequence, reference, tmp_path):
+@fmi2_only
+def test_libcosimpy_matches_core(regulator_fmu, sequence, reference, tmp_path):
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimManipulator import CosimManipulator
     from libcosimpy.CosimObserver import CosimObserver
 
     log_output_level(CosimLogLevel.ERROR)
-    shutil.copy(built_fmu, tmp_path / "AdaptiveVelocityRegulator.fmu")
+    shutil.copy(regulator_fmu.path, tmp_path / regulator_fmu.path.name)
     typed = {"n_neurons": "Integer", "seed": "Integer"}
     initial = "\n".join(
         f'        <InitialValue variable="{k}"><{typed.get(k, "Real")} value="{v!r}"/></InitialValue>'
         for k, v in PARAMS.items())
-    (tmp_path / "OspSystemStructure.xml").write_text(OSP_SYSTEM.format(h=H, initial=initial))
+    (tmp_path / "OspSystemStructure.xml").write_text(OSP_SYSTEM.format(h=H, initial=initial, fmu=regulator_fmu.path.name))
     execution = CosimExecution.from_osp_config_file(osp_path=str(tmp_path))
     index = execution.slave_index_from_instance_name("avr")
     vr = {v.name.decode(): v.reference for v in execution.slave_variables(slave_index=index)}
@@ -105,24 +103,20 @@ def test_libcosimpy_matches_core(built_fmu, sequence, reference, tmp_path):
     np.testing.assert_allclose(np.array(out), reference, **TOL)
 
 
-def test_fmu_container_matches_core(built_fmu, sequence, reference, tmp_path, venv_tool, unzip):
-    """Our FMU inside an FMU container (fmu-manipulation-toolbox's fmucontainer), run by fmpy."""
+@fmi2_only
+def test_fmu_container_matches_core(regulator_fmu, sequence, tmp_path, venv_tool, unzip):
+    """The FMU inside an FMU container (fmu-manipulation-toolbox's fmucontainer), run by fmpy."""
     import subprocess
 
-    shutil.copy(built_fmu, tmp_path / "AdaptiveVelocityRegulator.fmu")
-    (tmp_path / "avr_container.csv").write_text("rule;from_fmu;from_port;to_fmu;to_port\n"
-                                                 "FMU;AdaptiveVelocityRegulator.fmu;;;\n")
-    proc = subprocess.run([venv_tool("fmucontainer"), "-container", f"avr_container.csv:{H}", "-fmu-directory", str(tmp_path)],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
+    name = regulator_fmu.path.name
+    shutil.copy(regulator_fmu.path, tmp_path / name)
+    (tmp_path / "avr_container.csv").write_text(f"rule;from_fmu;from_port;to_fmu;to_port\nFMU;{name};;;\n")
+    proc = subprocess.run([venv_tool("fmucontainer"), "-container", f"avr_container.csv:{H}", "-fmu-directory",
+                           str(tmp_path)], cwd=tmp_path, capture_output=True, text=True, timeout=300)
     container = tmp_path / "avr_container.fmu"
     assert container.is_file(), proc.stdout + proc.stderr
-    s = Slave(unzip(container, tmp_path / "container_unzipped"))
-    # the container exposes the inputs and outputs, not the parameters: run with the defaults
-    s.init()
-    regulator = Regulator(RegulatorParams())
-    expected = np.array([[o[n] for n in OUTPUT_NAMES]
-                         for o in (regulator.step(RegulatorInputs(**u), H) for u in sequence)])
+    s = AnySlave(container, unzip=unzip(container, tmp_path / "container_unzipped"))
+    s.init()  # the container exposes the inputs and outputs, not the parameters: run with the defaults
     out = np.array([s.step(k, u) for k, u in enumerate(sequence)])
-    s.fmu.terminate()
-    s.fmu.freeInstance()
-    np.testing.assert_allclose(out, expected, **TOL)
+    s.close()
+    np.testing.assert_allclose(out, core_outputs(sequence), **TOL)

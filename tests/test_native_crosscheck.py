@@ -6,22 +6,19 @@
   core in the loop with adaptation on and one psi_gain at 0, a speed change at 30 s) is
   replayed through the numpy core and through both native FMUs (fmpy FMU2Slave and
   FMU3Slave): every output agrees to 1e-9.
-* Importers: fmpy simulate_fmu (FMI 2.0 and 3.0), libcosimpy (FMI 2.0) and an FMU
-  container (fmucontainer, FMI 2.0) give the core's outputs.
+* delta_limit_rad binds in C as in the core.  (The importers run every regulator FMU:
+  tests/test_fmu_importers.py.)
 """
 import ctypes
 import shutil
-import subprocess
 
 import numpy as np
 import pytest
-from fmpy import simulate_fmu
 
 from fmu_src import avr_core
 from fmu_src.avr_core import INPUT_SPECS, SplitMix64, build_networks
 from fmu_src.native.header import vars_header
-from native_support import (CC, H, NATIVE_DIR, OUTPUT_NAMES, AnySlave, compile_c, core_outputs, fmutool,  # noqa: F401
-                            input_sequence, native_fmus, require)
+from native_support import CC, H, NATIVE_DIR, OUTPUT_NAMES, AnySlave, compile_c, core_outputs, input_sequence, require
 
 INPUT_NAMES = [s.name for s in INPUT_SPECS]
 #: the recorded run's regulator: adaptation on (default), one psi_gain at 0
@@ -143,58 +140,3 @@ def test_offset_limit_binds_the_same_in_c(native_fmus, fmi):
     out = np.array([slave.step(k, u) for k, u in enumerate(seq)])
     slave.close()
     np.testing.assert_allclose(out, reference, rtol=1e-12, atol=1e-12)  # as the importer tests below
-
-
-# ---- importers ---------------------------------------------------------------------------------------
-N_STEPS = 150
-PARAMS = {"n_neurons": 400, "seed": 11, "Kp_x": 0.3, "learning_rate": 1e-4}  # a fast learner: Psi visibly moves
-#: The native and numpy cores differ by summation order only (~1e-16 here); 1e-12 also
-#: allows an importer that routes values through a different float formatting.
-TOL = dict(rtol=1e-12, atol=1e-12)
-
-
-@pytest.fixture(scope="module")
-def sequence():
-    return input_sequence(N_STEPS, seed=21)
-
-
-@pytest.fixture(scope="module")
-def reference(sequence):
-    out = core_outputs(sequence, **PARAMS)
-    assert abs(out[-1, OUTPUT_NAMES.index("psi_x")]) > 1e-4  # it learns
-    return out
-
-
-@pytest.mark.parametrize("fmi", [2, 3])
-def test_fmpy_simulate_fmu_matches_core(native_fmus, sequence, reference, fmi):
-    dtype = [("time", np.float64)] + [(n, np.int32 if n == "step_index" else np.float64) for n in INPUT_NAMES]
-    signals = np.array([(k * H, *[u[n] for n in INPUT_NAMES]) for k, u in enumerate(sequence)], dtype=dtype)
-    result = simulate_fmu(str(native_fmus[fmi]), start_time=0.0, stop_time=N_STEPS * H, step_size=H,
-                          output_interval=H, input=signals, start_values=PARAMS, output=OUTPUT_NAMES)
-    # row 0 is the state at t=0 (before any step); row k+1 follows step k
-    out = np.array([[row[n] for n in OUTPUT_NAMES] for row in result[1:N_STEPS + 1]])
-    np.testing.assert_allclose(out, reference, **TOL)
-
-
-def test_libcosimpy_matches_core(native_fmus, tmp_path):
-    """libcosimpy (OSP) runs the native FMI 2.0 FMU: the pythonfmu suite's test, on this FMU."""
-    import test_fmu_importers as importers
-
-    seq = input_sequence(importers.N_STEPS, seed=21)
-    importers.test_libcosimpy_matches_core(native_fmus[2], seq, core_outputs(seq, **importers.PARAMS), tmp_path)
-
-
-def test_fmu_container_matches_core(native_fmus, sequence, tmp_path):
-    """The native FMI 2.0 FMU inside an FMU container (fmucontainer, found beside this interpreter), run by fmpy."""
-    shutil.copy(native_fmus[2], tmp_path / native_fmus[2].name)
-    (tmp_path / "avr_container.csv").write_text("rule;from_fmu;from_port;to_fmu;to_port\n"
-                                                 f"FMU;{native_fmus[2].name};;;\n")
-    tool = fmutool().parent / "fmucontainer"
-    proc = subprocess.run([str(tool), "-container", f"avr_container.csv:{H}", "-fmu-directory", str(tmp_path)],
-                          cwd=tmp_path, capture_output=True, text=True, timeout=300)
-    container = tmp_path / "avr_container.fmu"
-    assert container.is_file(), proc.stdout + proc.stderr
-    slave = AnySlave(container).init()  # the container exposes inputs and outputs, not parameters: defaults
-    out = np.array([slave.step(k, u) for k, u in enumerate(sequence)])
-    slave.close()
-    np.testing.assert_allclose(out, core_outputs(sequence), **TOL)

@@ -1,8 +1,8 @@
 """The native FMUs outside Python: a plain C host, the shipped sources, Windows under Wine,
 and the FMU built with AddressSanitizer + UndefinedBehaviorSanitizer.
 
-* tests/native/fmi2_host.c, compiled here, loads the FMI 2.0 FMU's linux64 library with an
-  empty environment (no LD_PRELOAD, no PYTHON*) and matches the numpy core.
+* (tests/test_fmu_c_host.py: tests/native/fmi2_host.c loads the FMI 2.0 FMU's linux64
+  library with an empty environment and matches the numpy core.)
 * The FMU's ``sources/`` compile with ``cc`` alone in a clean folder; the library built
   from them gives the same outputs as the shipped one (FMI 2.0 and 3.0).
 * (marker ``wine``) the same host cross-compiled with MinGW-w64 runs the win64 library under
@@ -23,11 +23,9 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from fmu_src.avr_core import INPUT_SPECS
-from native_support import (CC, MINGW_CC, NATIVE_DIR, OUTPUT_NAMES, WINE, AnySlave, compile_c, core_outputs,
-                            input_sequence, native_fmus, require, unzipped)  # noqa: F401 (fixture)
+from native_support import (C_HOST, CC, DRIVERS, FMI2_INCLUDE, MINGW_CC, NATIVE_DIR, WINE, AnySlave, c_host_outputs,
+                            c_host_script, compile_c, core_outputs, input_sequence, require, unzipped)
 
-FMI_INCLUDE = Path(__file__).parents[1] / "fmu_src" / "native" / "include"
 PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_knee": 0.0}
 N_STEPS = 400
 #: native vs numpy differ only by summation order (~1e-16 after 400 calls); %.17g round-trips
@@ -35,20 +33,6 @@ N_STEPS = 400
 #: glibc's by an ulp: still ~1e-15, so 1e-12 serves both and is far below any real bug.
 TOL = dict(rtol=1e-12, atol=1e-12)
 LINUX = {2: "linux64", 3: "x86_64-linux"}
-
-
-def host_script(fmu, params, sequence) -> str:
-    md = read_model_description(str(fmu))
-    vars_ = {v.name: v for v in md.modelVariables}
-    lines = [f"P {vars_[k].valueReference} {vars_[k].type[0]} {float(v)!r}" for k, v in params.items()]
-    lines.append("I " + " ".join(str(vars_[s.name].valueReference) for s in INPUT_SPECS))
-    lines.append(f"O {len(OUTPUT_NAMES)} " + " ".join(str(vars_[n].valueReference) for n in OUTPUT_NAMES))
-    lines += ["S " + " ".join(repr(float(u[s.name])) for s in INPUT_SPECS) for u in sequence]
-    return "\n".join(lines) + "\n"
-
-
-def parse(stdout: str) -> np.ndarray:
-    return np.array([[float(x) for x in line.split()] for line in stdout.splitlines()])
 
 
 @pytest.fixture(scope="module")
@@ -61,28 +45,10 @@ def reference(sequence):
     return core_outputs(sequence, **PARAMS)
 
 
-@pytest.fixture(scope="module")
-def linux_host(tmp_path_factory):
-    out = tmp_path_factory.mktemp("host") / "fmi2_host"
-    return compile_c(require(CC), [NATIVE_DIR / "fmi2_host.c"], out, "-std=c99", "-O2", f"-I{FMI_INCLUDE}", "-ldl")
-
-
 def _unzip(fmu, folder: Path) -> Path:
     with zipfile.ZipFile(fmu) as z:
         z.extractall(folder)
     return folder
-
-
-def test_c_host_runs_the_fmu_with_no_python_environment(native_fmus, linux_host, sequence, reference, tmp_path):
-    unzipped = _unzip(native_fmus[2], tmp_path / "fmu")
-    script = tmp_path / "script.txt"
-    script.write_text(host_script(native_fmus[2], PARAMS, sequence))
-    lib = unzipped / "binaries" / "linux64" / "AdaptiveVelocityRegulatorNative.so"
-    guid = read_model_description(str(native_fmus[2])).guid
-    proc = subprocess.run([str(linux_host), str(lib), guid, str(script)], env={}, capture_output=True, text=True,
-                          timeout=120)
-    assert proc.returncode == 0, proc.stderr
-    np.testing.assert_allclose(parse(proc.stdout), reference, **TOL)
 
 
 @pytest.mark.parametrize("fmi", [2, 3])
@@ -110,11 +76,11 @@ def test_sources_in_the_fmu_compile_with_cc_alone_and_match(native_fmus, sequenc
 
 @pytest.mark.wine
 def test_win64_binary_under_wine_matches_the_core(native_fmus, sequence, reference, tmp_path):
-    host = compile_c(require(MINGW_CC), [NATIVE_DIR / "fmi2_host.c"], tmp_path / "fmi2_host.exe", "-std=c99", "-O2",
-                     f"-I{FMI_INCLUDE}", "-static")
+    host = compile_c(require(MINGW_CC), [C_HOST], tmp_path / "fmi2_host.exe", "-std=c99", "-O2",
+                     f"-I{FMI2_INCLUDE}", "-static")
     unzipped = _unzip(native_fmus[2], tmp_path / "fmu")
     script = tmp_path / "script.txt"
-    script.write_text(host_script(native_fmus[2], PARAMS, sequence))
+    script.write_text(c_host_script(native_fmus[2], PARAMS, sequence))
     dll = unzipped / "binaries" / "win64" / "AdaptiveVelocityRegulatorNative.dll"
     env = {"WINEPREFIX": str(tmp_path / "wineprefix"), "WINEDEBUG": "-all", "HOME": str(tmp_path),
            "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin"}
@@ -122,7 +88,7 @@ def test_win64_binary_under_wine_matches_the_core(native_fmus, sequence, referen
     proc = subprocess.run([str(require(WINE)), str(host), str(dll), guid, str(script)], env=env, capture_output=True,
                           text=True, timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    np.testing.assert_allclose(parse(proc.stdout), reference, **TOL)
+    np.testing.assert_allclose(c_host_outputs(proc.stdout), reference, **TOL)
 
 
 # ---- AddressSanitizer + UndefinedBehaviorSanitizer ----------------------------------------------------
@@ -190,8 +156,8 @@ def _random_sequences(fmi, rng):
 @pytest.mark.sanitize
 @pytest.mark.parametrize("fmi", [2, 3])
 def test_sanitized_fmu_runs_state_machine_and_fuzz_with_zero_findings(sanitized_fmus, fmi):
-    from test_native_fmu import DRIVERS, ILLEGAL, init
-    from test_native_state import Fmi3Model, FmiModel
+    from test_fmu_call_sequences import MODELS
+    from test_fmu_compliance import AFTER_INIT, FMI2_ILLEGAL, ILLEGAL, init_calls
 
     env = _sanitizer_env()
     proc = subprocess.Popen([sys.executable, str(DRIVERS[fmi]), unzipped(sanitized_fmus[fmi])], stdin=subprocess.PIPE,
@@ -205,13 +171,13 @@ def test_sanitized_fmu_runs_state_machine_and_fuzz_with_zero_findings(sanitized_
         assert line, f"the sanitized FMU process died on {call}:\n{proc.stderr.read()[-4000:]}"
         return json.loads(line)["status"]
 
-    sequences = [([["instantiate"]] + c[1] if c[1] is not None else init(fmi) + c[3]) + [["free"]]
-                 for c in ILLEGAL if fmi in c[2]]
+    sequences = [([["instantiate"]] + c[1] if c[1] is not AFTER_INIT else init_calls(fmi) + c[2]) + [["free"]]
+                 for c in ILLEGAL + (FMI2_ILLEGAL if fmi == 2 else [])]
     sequences += [[["instantiate"]] + [list(c) for c in calls] + [["free"]]
                   for calls in _random_sequences(fmi, np.random.default_rng(2024 + fmi))]
     checked = 0
     for calls in sequences:
-        model = FmiModel() if fmi == 2 else Fmi3Model()
+        model = MODELS[fmi]()
         for call in calls:
             legal = model.legal(*call)
             if legal is None:

@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 
-from native_support import native_fmus  # noqa: F401 (fixture)
 from scenarios import master, spec
 
 

@@ -1,4 +1,4 @@
-"""The CassiePlant FMU on its own, exactly as build.py builds it (issue 10).
+"""The CassiePlant FMU on its own, exactly as build.py builds it.
 
 Calls that could crash run in a subprocess (tests/fmi/driver.py, the regulator's driver:
 it reports each call's FMI status), so a crash fails a test instead of killing pytest.

@@ -1,4 +1,4 @@
-"""The closed loop as a system (issue 10): dist/CassieAVR.ssp and the OSP structure, run by
+"""The closed loop as a system: dist/CassieAVR.ssp and the OSP structure, run by
 libcosim, by fmpy's simulate_ssp and by our own master with the plant as an FMU.
 
 The main case is ``mass_20kg``-like: a 20 kg torso (nominal 10.33 kg), 0.5 m/s, the

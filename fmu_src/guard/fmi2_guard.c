@@ -40,9 +40,7 @@
  * allowed phases are one MASK_<function> in guard.h, checked by the one PROLOGUE macro.
  */
 #define _GNU_SOURCE
-#include <dlfcn.h>
 #include <math.h>
-#include <pthread.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -59,41 +57,6 @@
 
 const char *const PHASE_NAMES[N_PHASES] = {"instantiated", "initializationMode", "stepComplete",
                                            "stepFailed", "terminated", "fatal"};
-
-/* ---- the inner (pythonfmu) library ---------------------------------------------- */
-InnerApi inner;
-static void *inner_handle = NULL;
-static char inner_error[2048] = "";
-static pthread_once_t inner_once = PTHREAD_ONCE_INIT;
-
-static void load_inner(void) {
-    Dl_info info;
-    char path[4096];
-    if (!dladdr((void *)&load_inner, &info) || info.dli_fname == NULL) {
-        snprintf(inner_error, sizeof inner_error, "cannot locate the guard library itself (dladdr failed)");
-        return;
-    }
-    const char *slash = strrchr(info.dli_fname, '/');
-    size_t dir_len = slash ? (size_t)(slash - info.dli_fname) : 0;
-    snprintf(path, sizeof path, "%.*s%s%s", (int)dir_len, info.dli_fname, slash ? "/" : "", AVR_INNER_LIBRARY);
-    void *handle = dlopen(path, RTLD_NOW | RTLD_LOCAL);
-    if (handle == NULL) {
-        snprintf(inner_error, sizeof inner_error,
-                 "cannot load %s: %s. This FMU runs Python: the host process must provide libpython's "
-                 "symbols (a Python host does; a C host needs LD_PRELOAD=libpython3.x.so and PYTHONHOME set to "
-                 "an interpreter that has numpy)", path, dlerror());
-        return;
-    }
-#define RESOLVE(fn)                                                                                   \
-    inner.fn = (fn##TYPE *)dlsym(handle, #fn);                                                        \
-    if (inner.fn == NULL) {                                                                           \
-        snprintf(inner_error, sizeof inner_error, "%s lacks the symbol %s", path, #fn);               \
-        return;                                                                                       \
-    }
-    INNER_FUNCTIONS(RESOLVE)
-#undef RESOLVE
-    inner_handle = handle;
-}
 
 /* ---- logging -------------------------------------------------------------------- */
 static void vlog_to(const fmi2CallbackFunctions *cb, const char *name, fmi2Status status, const char *fmt,
@@ -134,43 +97,8 @@ static void inner_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Stat
     if (status == fmi2Error) g->inner_logged_error = 1;
     if (g->host.logger == NULL || (status == fmi2OK && !g->logging_on)) return;
     if (category == NULL || string_problem(category, MAX_CATEGORY_BYTES) != NULL) category = "logAll";
-    if (message == NULL || string_problem(message, 1u << 20) != NULL) message = "(unprintable message)";
+    if (message == NULL || string_problem(message, MAX_INNER_MESSAGE_BYTES) != NULL) message = "(unprintable message)";
     g->host.logger(g->host.componentEnvironment, g->name, status, category, "%s", message);
-}
-
-/* ---- Python thread states for threads Python did not create ----------------------------
- * pythonfmu enters Python with PyGILState_Ensure/Release around every call.  In a thread Python
- * did not create (the workers of a multi-threaded master such as libcosim, or a C host's main
- * thread) each pair creates and destroys a Python thread state, which costs more than a get or
- * set itself (measured: 7 us against 0.7 us per fmi2GetReal from a C host).  Such a thread gets
- * one thread state instead (PyGILState_Ensure once, the GIL released at once), kept until the
- * interpreter ends: a few kB per host thread.  It is not freed when the thread ends, because that
- * would need the GIL, and a host that joins its workers while holding it would deadlock. */
-static struct {
-    int (*is_initialized)(void);
-    void *(*this_thread_state)(void);
-    int (*ensure)(void);
-    void *(*save_thread)(void);
-} py;
-static pthread_once_t py_once = PTHREAD_ONCE_INIT;
-static _Thread_local int thread_state_kept = 0;
-
-static void find_python(void) {
-    *(void **)&py.is_initialized = dlsym(RTLD_DEFAULT, "Py_IsInitialized");
-    *(void **)&py.this_thread_state = dlsym(RTLD_DEFAULT, "PyGILState_GetThisThreadState");
-    *(void **)&py.ensure = dlsym(RTLD_DEFAULT, "PyGILState_Ensure");
-    *(void **)&py.save_thread = dlsym(RTLD_DEFAULT, "PyEval_SaveThread");
-}
-
-static void keep_python_thread_state(void) {
-    if (thread_state_kept) return;
-    pthread_once(&py_once, find_python);
-    if (!py.is_initialized || !py.this_thread_state || !py.ensure || !py.save_thread || !py.is_initialized())
-        return; /* no Python (yet): try again on the next call */
-    thread_state_kept = 1;
-    if (py.this_thread_state() != NULL) return; /* a thread Python knows */
-    py.ensure();
-    py.save_thread();
 }
 
 fmi2Status check_phase(Guard *g, const char *call, unsigned allowed) {
@@ -229,9 +157,7 @@ static const char *instantiate_problem(fmi2String instanceName, fmi2Type fmuType
         snprintf(why, n, "fmuResourceLocation: %s", reason);
         return why;
     }
-    pthread_once(&inner_once, load_inner);
-    if (inner_handle == NULL) return inner_error;
-    return NULL;
+    return inner_load_problem();
 }
 
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
@@ -325,32 +251,32 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     return s;
 }
 
+/* What the inner library answered a phase transition (see track); on fmi2OK the instance is in `next`. */
+static fmi2Status moved_to(Guard *g, fmi2Status answer, enum Phase next) {
+    const fmi2Status s = track(g, answer);
+    if (s == fmi2OK) g->phase = next;
+    return s;
+}
+
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     PROLOGUE(fmi2EnterInitializationMode);
-    fmi2Status s = track(g, inner.fmi2EnterInitializationMode(g->inner));
-    if (s == fmi2OK) g->phase = INIT_MODE;
-    return s;
+    return moved_to(g, inner.fmi2EnterInitializationMode(g->inner), INIT_MODE);
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     PROLOGUE(fmi2ExitInitializationMode);
-    fmi2Status s = track(g, inner.fmi2ExitInitializationMode(g->inner));
-    if (s == fmi2OK) g->phase = STEP_COMPLETE;
-    return s;
+    return moved_to(g, inner.fmi2ExitInitializationMode(g->inner), STEP_COMPLETE);
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
     PROLOGUE(fmi2Terminate);
-    fmi2Status s = track(g, inner.fmi2Terminate(g->inner));
-    if (s == fmi2OK) g->phase = TERMINATED;
-    return s;
+    return moved_to(g, inner.fmi2Terminate(g->inner), TERMINATED);
 }
 
 fmi2Status fmi2Reset(fmi2Component c) {
     PROLOGUE(fmi2Reset);
-    fmi2Status s = track(g, inner.fmi2Reset(g->inner));
+    const fmi2Status s = moved_to(g, inner.fmi2Reset(g->inner), INSTANTIATED);
     if (s == fmi2OK) {
-        g->phase = INSTANTIATED;
         g->time = 0.0;
         fixed_defaults(g->fixed);
     }

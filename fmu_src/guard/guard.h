@@ -1,7 +1,7 @@
 /*
  * Declarations shared by the FMI guard's translation units (fmi2_guard.c: the FMI
- * functions; guard_state.c: FMU states and their serialized form; guard_text.c:
- * strings, URIs and number formatting).  The library is compiled with
+ * functions; guard_inner.c: pythonfmu's library and Python thread states; guard_state.c:
+ * FMU states and their serialized form; guard_text.c: strings, URIs and number formatting).  The library is compiled with
  * -fvisibility=hidden: only the fmi2* functions (FMI2_Export) are exported.
  */
 #pragma once
@@ -23,6 +23,7 @@ enum Phase { INSTANTIATED, INIT_MODE, STEP_COMPLETE, STEP_FAILED, TERMINATED, FA
 #define MAX_CATEGORY_BYTES 256u  /* a log category */
 #define MAX_URI_BYTES 16384u     /* fmuResourceLocation */
 #define MAX_STRING_BYTES 65536u  /* a String value */
+#define MAX_INNER_MESSAGE_BYTES (1u << 20)  /* a message pythonfmu logs: a longer one is replaced */
 
 #define GUARD_TAG 0x41565247u  /* "AVRG": marks a live Guard */
 #define STATE_TAG 0x41565253u  /* "AVRS": marks a live GuardState */
@@ -69,6 +70,12 @@ typedef struct {
 #undef DECLARE_INNER
 } InnerApi;
 extern InnerApi inner;
+
+/* ---- guard_inner.c ---- */
+/* Loads the inner library (once); NULL if it is loaded, else why it cannot be. */
+const char *inner_load_problem(void);
+/* Gives a host thread Python did not create one Python thread state, kept until exit. */
+void keep_python_thread_state(void);
 
 /* ---- guard_text.c ---- */
 /* 1 if s is a NUL-terminated, valid UTF-8 string of at most max_bytes bytes (no overlongs,

@@ -13,7 +13,7 @@
  *       60      4  u32 n_fixed, the number of fixed parameters (AVR_N_FIXED)
  *       64  12 n_fixed  per fixed parameter: u32 valueReference, f64 value
  *        h      8  u64 n, length of the slave's blob
- *      h+8      n  the slave's blob ("AVRS", see avr_slave.py)
+ *      h+8      n  the slave's blob (fmu_src/avr_fmustate.py)
  *    h+8+n      8  u64 CRC-64/XZ of every byte before it
  *
  * A state is accepted only if the size, magic, version, lengths and checksum are right,
@@ -38,12 +38,13 @@
 #define HEAD_FIXED_OFFSET 64u
 #define HEAD_BYTES (HEAD_FIXED_OFFSET + FIXED_ENTRY * AVR_N_FIXED + 8u)
 #define CRC_BYTES 8u
-#define SLAVE_MAGIC "AVRS"
-#define SLAVE_VERSION 2u
-#define SLAVE_HEAD 16u  /* "AVRS", u32 version, u32 json bytes, u32 core bytes; then json, core, u32 CRC-32 */
-/* What the slave's deserializer yields for a blob it refuses, followed by the reason (avr_slave.py) */
-#define SLAVE_REFUSED "\0AVR-REFUSED\0"
-#define SLAVE_REFUSED_BYTES (sizeof(SLAVE_REFUSED) - 1)
+/* The slave's blob: AVR_SLAVE_* generated from fmu_src/avr_fmustate.py (build_guard.py), and
+ * AVR_SLAVE_REFUSED, what the slave's deserializer yields for a blob it refuses, then the reason. */
+#include "avr_slave_blob.h"
+#define SLAVE_VERSION_AT AVR_SLAVE_MAGIC_BYTES
+#define SLAVE_JSON_BYTES_AT (SLAVE_VERSION_AT + sizeof(uint32_t))
+#define SLAVE_CORE_BYTES_AT (SLAVE_JSON_BYTES_AT + sizeof(uint32_t))
+#define SLAVE_REFUSED_BYTES (sizeof(AVR_SLAVE_REFUSED) - 1)
 
 _Static_assert(sizeof(AVR_GUID) - 1 < GUID_FIELD, "the GUID must fit its field");
 
@@ -115,14 +116,16 @@ static GuardState *live_state(Guard *g, const char *call, fmi2FMUstate state) {
 
 /* fmi2OK if the n bytes are a slave blob the slave will parse (header and lengths). */
 static fmi2Status check_slave_blob(Guard *g, const char *call, const fmi2Byte *blob, uint64_t n) {
-    if (n < SLAVE_HEAD + 4u || memcmp(blob, SLAVE_MAGIC, 4) != 0 || get_u32(blob + 4) != SLAVE_VERSION ||
-        (uint64_t)SLAVE_HEAD + get_u32(blob + 8) + get_u32(blob + 12) + 4u != n)
+    if (n < AVR_SLAVE_HEAD_BYTES + AVR_SLAVE_CRC_BYTES || memcmp(blob, AVR_SLAVE_MAGIC, AVR_SLAVE_MAGIC_BYTES) != 0 ||
+        get_u32(blob + SLAVE_VERSION_AT) != AVR_SLAVE_VERSION ||
+        (uint64_t)AVR_SLAVE_HEAD_BYTES + get_u32(blob + SLAVE_JSON_BYTES_AT) + get_u32(blob + SLAVE_CORE_BYTES_AT) +
+                AVR_SLAVE_CRC_BYTES != n)
         return refuse(g, call, "the state's inner blob has a bad header (this FMU's serializer never writes that)");
     return fmi2OK;
 }
 
 /* The slave checks a blob's contents (every value, the core's weights) when it deserializes
- * it, and yields SLAVE_REFUSED + the reason instead of raising (which pythonfmu would turn
+ * it, and yields AVR_SLAVE_REFUSED + the reason instead of raising (which pythonfmu would turn
  * into fmi2Fatal): read its verdict back; fmi2Error with the reason if it refused. */
 static fmi2Status slave_verdict(Guard *g, const char *call, fmi2FMUstate inner_state) {
     size_t n = 0;
@@ -131,7 +134,7 @@ static fmi2Status slave_verdict(Guard *g, const char *call, fmi2FMUstate inner_s
     fmi2Byte *copy = malloc(n + 1);
     if (copy == NULL) return refuse(g, call, "out of memory");
     s = track(g, inner.fmi2SerializeFMUstate(g->inner, inner_state, copy, n));
-    if (s == fmi2OK && memcmp(copy, SLAVE_REFUSED, SLAVE_REFUSED_BYTES) == 0) {
+    if (s == fmi2OK && memcmp(copy, AVR_SLAVE_REFUSED, SLAVE_REFUSED_BYTES) == 0) {
         copy[n] = '\0';
         const char *reason = copy + SLAVE_REFUSED_BYTES;
         s = refuse(g, call, "the state's contents are invalid: %.600s",

@@ -60,7 +60,7 @@ static void debug(const AvrInstance *inst, const char *fmt, ...) {
 
 static int phase_bit(AvrPhase phase) {
     int bit = 0;
-    while (bit < 31 && !((unsigned)phase & (1u << bit))) ++bit;
+    while (bit < AVR_N_PHASES - 1 && !((unsigned)phase & (1u << bit))) ++bit;
     return bit;
 }
 
@@ -69,7 +69,7 @@ AvrStatus avr_allowed(const AvrInstance *inst, const char *call, unsigned mask) 
     if ((unsigned)inst->phase & mask) return AVR_OK;
     if (mask == 0u) return avr_refuse(inst, call, "not provided by this FMU (see its modelDescription.xml)");
     char list[256] = "";
-    for (int bit = 0; bit < 4; ++bit) {
+    for (int bit = 0; bit < AVR_N_PHASES; ++bit) {
         if (!(mask & (1u << bit))) continue;
         size_t used = strlen(list);
         snprintf(list + used, sizeof list - used, "%s%s", used ? ", " : "", inst->phase_names[bit]);

@@ -26,6 +26,7 @@ typedef enum {
     AVR_TERMINATED = 1u << 3,
 } AvrPhase;
 #define AVR_ANY_PHASE (AVR_INSTANTIATED | AVR_INIT_MODE | AVR_STEP_MODE | AVR_TERMINATED)
+#define AVR_N_PHASES 4
 
 /* Relative tolerance on "doStep starts where the last step ended" (t0 + k h vs t + h differ by ulps). */
 #define AVR_TIME_MATCH_RTOL 1e-9

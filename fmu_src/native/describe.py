@@ -12,7 +12,8 @@ from __future__ import annotations
 import html
 import xml.etree.ElementTree as ET
 
-from .. import avr_core
+from ..avr_packaging.describe import xml_value
+from ..avr_packaging.method_page import method_html
 from .header import all_specs
 
 AUTHOR = "cassie-avr project"
@@ -30,12 +31,6 @@ _LOG_CATEGORIES = (("logStatusError", "Refused calls and errors (always logged)"
                    ("logAll", "Debug messages (with logging on)"))
 
 
-def _fmt(value) -> str:
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    return repr(value) if isinstance(value, float) else str(value)
-
-
 def _units(root: ET.Element, units: dict) -> None:
     element = ET.SubElement(root, "UnitDefinitions")
     for name, exponents in units.items():
@@ -43,12 +38,12 @@ def _units(root: ET.Element, units: dict) -> None:
 
 
 def _typed_attributes(spec, units: dict) -> dict:
-    attrs = {"start": _fmt(spec.default)}
+    attrs = {"start": xml_value(spec.default)}
     if spec.type in ("Real", "Integer"):
         if spec.min is not None:
-            attrs["min"] = _fmt(spec.min)
+            attrs["min"] = xml_value(spec.min)
         if spec.max is not None:
-            attrs["max"] = _fmt(spec.max)
+            attrs["max"] = xml_value(spec.max)
     if spec.type == "Real" and spec.unit in units:
         attrs["unit"] = spec.unit
     return attrs
@@ -130,14 +125,13 @@ def build_description(model_identifier: str, source_files) -> bytes:
 
 
 def documentation(fmi_version: int, model_identifier: str) -> str:
-    """``documentation/index.html``: the method (the core's own description) and the variables."""
+    """``documentation/index.html``: the FMI behaviour, the method (``docs/method.md``) and the variables."""
     specs = all_specs()
     rows = "\n".join(
         "<tr>" + "".join(f"<td>{html.escape(str(cell))}</td>" for cell in (
-            vr, s.name, s.causality, s.type, s.variability, s.unit, _fmt(s.default),
-            "" if s.min is None else _fmt(s.min), "" if s.max is None else _fmt(s.max), s.description)) + "</tr>"
+            vr, s.name, s.causality, s.type, s.variability, s.unit, xml_value(s.default),
+            "" if s.min is None else xml_value(s.min), "" if s.max is None else xml_value(s.max), s.description)) + "</tr>"
         for vr, s in enumerate(specs))
-    method = html.escape(avr_core.__doc__.split("Performance.")[0].strip())
     return f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>{model_identifier} (FMI {fmi_version}.0)</title></head><body>
 <h1>{model_identifier} (FMI {fmi_version}.0 co-simulation, native C)</h1>
@@ -150,9 +144,7 @@ a log message naming the variable and its range; a refused call changes nothing 
 FMU state can be saved, restored and serialized (all variables, weights and memories; the serialized form carries
 the GUID and a CRC-32 and is refused if corrupt or from another FMU). Outputs change only in doStep (no direct
 feedthrough). Same value references, variables and numerics as the pythonfmu FMU AdaptiveVelocityRegulator.</p>
-<h2>Method</h2>
-<pre>{method}</pre>
-<h2>Variables</h2>
+{method_html()}<h2>Variables</h2>
 <table border="1"><tr><th>valueReference</th><th>name</th><th>causality</th><th>type</th><th>variability</th>
 <th>unit</th><th>start</th><th>min</th><th>max</th><th>description</th></tr>
 {rows}

@@ -1,7 +1,8 @@
 /*
  * FMI 2.0 co-simulation API of the native AdaptiveVelocityRegulator FMU: a thin layer
  * over the version-independent instance (avr_instance.c).  Every function starts with
- * the one prologue BEGIN, which refuses a call outside the phases of its mask below.
+ * the one prologue BEGIN (avr_fmi_api.h), which refuses a call outside the phases of
+ * its mask below; the shapes both FMI versions share are written once in avr_fmi_api.h.
  */
 #include "avr_instance.h" /* first: see avr_types.h */
 
@@ -10,47 +11,39 @@
 
 #include "fmi2Functions.h"
 
+#define FMI_STATUS fmi2Status
+#define FMI_INSTANCE fmi2Component
+#include "avr_fmi_api.h"
+
 /* ---- allowed phases per function (FMI 2.0.4 section 4.2.4; stepFailed/stepCanceled never
  *      occur: a refused doStep changes nothing, and steps are never asynchronous) ---------- */
-#define ANY AVR_ANY_PHASE
 #define MASK_fmi2SetDebugLogging ANY
 #define MASK_fmi2SetupExperiment AVR_INSTANTIATED
 #define MASK_fmi2EnterInitializationMode AVR_INSTANTIATED
 #define MASK_fmi2ExitInitializationMode AVR_INIT_MODE
 #define MASK_fmi2Terminate AVR_STEP_MODE
 #define MASK_fmi2Reset ANY
-#define MASK_fmi2GetReal (AVR_INIT_MODE | AVR_STEP_MODE | AVR_TERMINATED)
-#define MASK_fmi2GetInteger MASK_fmi2GetReal
-#define MASK_fmi2GetBoolean MASK_fmi2GetReal
-#define MASK_fmi2GetString MASK_fmi2GetReal
-#define MASK_fmi2SetReal (AVR_INSTANTIATED | AVR_INIT_MODE | AVR_STEP_MODE)
-#define MASK_fmi2SetInteger MASK_fmi2SetReal
-#define MASK_fmi2SetBoolean MASK_fmi2SetReal
-#define MASK_fmi2SetString MASK_fmi2SetReal
+#define MASK_fmi2GetReal GET_PHASES
+#define MASK_fmi2GetInteger GET_PHASES
+#define MASK_fmi2GetBoolean GET_PHASES
+#define MASK_fmi2GetString GET_PHASES
+#define MASK_fmi2SetReal SET_PHASES
+#define MASK_fmi2SetInteger SET_PHASES
+#define MASK_fmi2SetBoolean SET_PHASES
+#define MASK_fmi2SetString SET_PHASES
 #define MASK_fmi2GetFMUstate ANY
 #define MASK_fmi2SetFMUstate ANY
 #define MASK_fmi2FreeFMUstate ANY
 #define MASK_fmi2SerializedFMUstateSize ANY
 #define MASK_fmi2SerializeFMUstate ANY
 #define MASK_fmi2DeSerializeFMUstate ANY
-#define MASK_fmi2GetDirectionalDerivative 0u /* not provided */
-#define MASK_fmi2SetRealInputDerivatives 0u  /* canInterpolateInputs = false */
-#define MASK_fmi2GetRealOutputDerivatives 0u /* maxOutputDerivativeOrder = 0 */
 #define MASK_fmi2DoStep AVR_STEP_MODE
-#define MASK_fmi2CancelStep 0u /* canRunAsynchronuously = false */
-#define MASK_fmi2GetStatus 0u  /* never fmi2Pending */
 #define MASK_fmi2GetRealStatus (AVR_STEP_MODE | AVR_TERMINATED)
-#define MASK_fmi2GetIntegerStatus 0u
 #define MASK_fmi2GetBooleanStatus (AVR_STEP_MODE | AVR_TERMINATED)
-#define MASK_fmi2GetStringStatus 0u
-
-/* The one prologue: the instance, the call's name, and its phase check. */
-#define BEGIN(fn)                                                           \
-    AvrInstance *inst = (AvrInstance *)c;                                   \
-    static const char call[] = #fn;                                         \
-    if (avr_allowed(inst, call, MASK_##fn) != AVR_OK) return fmi2Error;
-
-#define REFUSE(...) return (fmi2Status)avr_refuse(inst, call, __VA_ARGS__)
+/* Not provided, refused in every phase (NOT_PROVIDED below): fmi2GetDirectionalDerivative (not declared),
+ * fmi2SetRealInputDerivatives (canInterpolateInputs = false), fmi2GetRealOutputDerivatives
+ * (maxOutputDerivativeOrder = 0), fmi2CancelStep (canRunAsynchronuously = false), fmi2GetStatus (never
+ * fmi2Pending), fmi2GetIntegerStatus, fmi2GetStringStatus (no such status). */
 
 static const char *const PHASE_NAMES[] = {"instantiated", "initializationMode", "stepComplete", "terminated"};
 
@@ -84,15 +77,9 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     return inst;
 }
 
-void fmi2FreeInstance(fmi2Component c) {
-    AvrInstance *inst = (AvrInstance *)c;
-    if (inst == NULL) return;
-    void *cb = inst->env;
-    avr_free_instance(inst);
-    free(cb);
-}
+FREE_INSTANCE(fmi2FreeInstance)
 
-fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
+fmi2Status fmi2SetDebugLogging(fmi2Component instance, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[]) {
     BEGIN(fmi2SetDebugLogging)
     if (nCategories > 0 && categories == NULL) REFUSE("categories is NULL with nCategories = %zu", nCategories);
@@ -100,7 +87,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     return fmi2OK;
 }
 
-fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fmi2Real tolerance,
+fmi2Status fmi2SetupExperiment(fmi2Component instance, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     BEGIN(fmi2SetupExperiment)
     (void)toleranceDefined; /* a discrete-time regulator: no tolerance to honour */
@@ -108,32 +95,19 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined, fm
     return (fmi2Status)avr_setup(inst, call, startTime, stopTimeDefined == fmi2True, stopTime);
 }
 
-fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
+fmi2Status fmi2EnterInitializationMode(fmi2Component instance) {
     BEGIN(fmi2EnterInitializationMode)
     inst->phase = AVR_INIT_MODE;
     return fmi2OK;
 }
 
-fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
-    BEGIN(fmi2ExitInitializationMode)
-    return (fmi2Status)avr_exit_init(inst, call);
-}
-
-fmi2Status fmi2Terminate(fmi2Component c) {
-    BEGIN(fmi2Terminate)
-    inst->phase = AVR_TERMINATED;
-    return fmi2OK;
-}
-
-fmi2Status fmi2Reset(fmi2Component c) {
-    BEGIN(fmi2Reset)
-    avr_reset(inst);
-    return fmi2OK;
-}
+EXIT_INITIALIZATION_MODE(fmi2ExitInitializationMode)
+TERMINATE(fmi2Terminate)
+RESET(fmi2Reset)
 
 /* ---- variables ------------------------------------------------------------------------------- */
 #define GETTER(fn, ctype, type, FROM_DOUBLE)                                                          \
-    fmi2Status fn(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, ctype value[]) {        \
+    fmi2Status fn(fmi2Component instance, const fmi2ValueReference vr[], size_t nvr, ctype value[]) {        \
         BEGIN(fn)                                                                                     \
         if (nvr > 0 && value == NULL) REFUSE("NULL value array with nvr = %zu", nvr);                 \
         if (avr_check_get(inst, call, vr, nvr, type) != AVR_OK) return fmi2Error;                     \
@@ -141,7 +115,7 @@ fmi2Status fmi2Reset(fmi2Component c) {
         return fmi2OK;                                                                                \
     }
 #define SETTER(fn, ctype, type)                                                                        \
-    fmi2Status fn(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const ctype value[]) {   \
+    fmi2Status fn(fmi2Component instance, const fmi2ValueReference vr[], size_t nvr, const ctype value[]) {   \
         BEGIN(fn)                                                                                      \
         if (nvr > 0 && (vr == NULL || value == NULL)) REFUSE("NULL vr or value array with nvr = %zu", nvr); \
         for (size_t i = 0; i < nvr; ++i) /* all checked before any is applied */                      \
@@ -159,14 +133,14 @@ SETTER(fmi2SetReal, fmi2Real, AVR_REAL)
 SETTER(fmi2SetInteger, fmi2Integer, AVR_INTEGER)
 SETTER(fmi2SetBoolean, fmi2Boolean, AVR_BOOLEAN)
 
-fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
+fmi2Status fmi2GetString(fmi2Component instance, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
     BEGIN(fmi2GetString)
     (void)vr, (void)value;
     if (nvr > 0) REFUSE("this FMU has no String variables");
     return fmi2OK;
 }
 
-fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
+fmi2Status fmi2SetString(fmi2Component instance, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
     BEGIN(fmi2SetString)
     (void)vr, (void)value;
     if (nvr > 0) REFUSE("this FMU has no String variables");
@@ -174,101 +148,40 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 }
 
 /* ---- FMU state (avr_state.c) --------------------------------------------------------------------- */
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *state) {
-    BEGIN(fmi2GetFMUstate)
-    return (fmi2Status)avr_fmustate_get(inst, call, state);
-}
-
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate state) {
-    BEGIN(fmi2SetFMUstate)
-    return (fmi2Status)avr_fmustate_set(inst, call, state);
-}
-
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *state) {
-    BEGIN(fmi2FreeFMUstate)
-    avr_fmustate_free(state);
-    return fmi2OK;
-}
-
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate state, size_t *size) {
-    BEGIN(fmi2SerializedFMUstateSize)
-    return (fmi2Status)avr_fmustate_size(inst, call, state, size);
-}
-
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte serializedState[], size_t size) {
-    BEGIN(fmi2SerializeFMUstate)
-    return (fmi2Status)avr_fmustate_serialize(inst, call, state, (unsigned char *)serializedState, size);
-}
-
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size, fmi2FMUstate *state) {
-    BEGIN(fmi2DeSerializeFMUstate)
-    return (fmi2Status)avr_fmustate_deserialize(inst, call, (const unsigned char *)serializedState, size, state);
-}
+FMUSTATE_FUNCTIONS(fmi2FMUstate, fmi2Byte, fmi2GetFMUstate, fmi2SetFMUstate, fmi2FreeFMUstate,
+                   fmi2SerializedFMUstateSize, fmi2SerializeFMUstate, fmi2DeSerializeFMUstate)
 
 /* ---- not provided (the model description says so) ------------------------------------------------ */
-fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
-                                        const fmi2ValueReference vKnown_ref[], size_t nKnown,
-                                        const fmi2Real dvKnown[], fmi2Real dvUnknown[]) {
-    BEGIN(fmi2GetDirectionalDerivative)
-    (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown, (void)dvUnknown;
-    return fmi2Error;
-}
-
-fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                                       const fmi2Integer order[], const fmi2Real value[]) {
-    BEGIN(fmi2SetRealInputDerivatives)
-    (void)vr, (void)nvr, (void)order, (void)value;
-    return fmi2Error;
-}
-
-fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                                        const fmi2Integer order[], fmi2Real value[]) {
-    BEGIN(fmi2GetRealOutputDerivatives)
-    (void)vr, (void)nvr, (void)order, (void)value;
-    return fmi2Error;
-}
-
-fmi2Status fmi2CancelStep(fmi2Component c) {
-    BEGIN(fmi2CancelStep)
-    return fmi2Error;
-}
+NOT_PROVIDED(fmi2GetDirectionalDerivative, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
+             const fmi2ValueReference vKnown_ref[], size_t nKnown, const fmi2Real dvKnown[], fmi2Real dvUnknown[])
+NOT_PROVIDED(fmi2SetRealInputDerivatives, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer order[],
+             const fmi2Real value[])
+NOT_PROVIDED(fmi2GetRealOutputDerivatives, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer order[],
+             fmi2Real value[])
+NOT_PROVIDED0(fmi2CancelStep)
+NOT_PROVIDED(fmi2GetStatus, const fmi2StatusKind s, fmi2Status *value)
+NOT_PROVIDED(fmi2GetIntegerStatus, const fmi2StatusKind s, fmi2Integer *value)
+NOT_PROVIDED(fmi2GetStringStatus, const fmi2StatusKind s, fmi2String *value)
 
 /* ---- stepping and status ----------------------------------------------------------------------- */
-fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
+fmi2Status fmi2DoStep(fmi2Component instance, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
                       fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
     BEGIN(fmi2DoStep)
     (void)noSetFMUStatePriorToCurrentPoint;
     return (fmi2Status)avr_do_step(inst, call, currentCommunicationPoint, communicationStepSize);
 }
 
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
-    BEGIN(fmi2GetStatus)
-    (void)s, (void)value;
-    return fmi2Error;
-}
-
-fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
+fmi2Status fmi2GetRealStatus(fmi2Component instance, const fmi2StatusKind s, fmi2Real *value) {
     BEGIN(fmi2GetRealStatus)
     if (s != fmi2LastSuccessfulTime || value == NULL) REFUSE("only fmi2LastSuccessfulTime is provided");
     *value = inst->time;
     return fmi2OK;
 }
 
-fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
-    BEGIN(fmi2GetIntegerStatus)
-    (void)s, (void)value;
-    return fmi2Error;
-}
-
-fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
+fmi2Status fmi2GetBooleanStatus(fmi2Component instance, const fmi2StatusKind s, fmi2Boolean *value) {
     BEGIN(fmi2GetBooleanStatus)
     if (s != fmi2Terminated || value == NULL) REFUSE("only fmi2Terminated is provided");
     *value = fmi2False; /* the regulator never asks to end the simulation */
     return fmi2OK;
 }
 
-fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
-    BEGIN(fmi2GetStringStatus)
-    (void)s, (void)value;
-    return fmi2Error;
-}

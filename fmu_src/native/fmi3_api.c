@@ -13,14 +13,15 @@
 
 #include "fmi3Functions.h"
 
+#define FMI_STATUS fmi3Status
+#define FMI_INSTANCE fmi3Instance
+#include "avr_fmi_api.h"
+
 #define TIME_VR ((fmi3ValueReference)AVR_N_VARS)
 
 typedef char fmi3Boolean_is_one_byte[sizeof(fmi3Boolean) == 1 ? 1 : -1];
 
 /* ---- allowed phases per function (FMI 3.0 section 4.3, co-simulation without event mode) ------ */
-#define ANY AVR_ANY_PHASE
-#define GET_PHASES (AVR_INIT_MODE | AVR_STEP_MODE | AVR_TERMINATED)
-#define SET_PHASES (AVR_INSTANTIATED | AVR_INIT_MODE | AVR_STEP_MODE)
 #define MASK_fmi3SetDebugLogging ANY
 #define MASK_fmi3EnterInitializationMode AVR_INSTANTIATED
 #define MASK_fmi3ExitInitializationMode AVR_INIT_MODE
@@ -39,18 +40,9 @@ typedef char fmi3Boolean_is_one_byte[sizeof(fmi3Boolean) == 1 ? 1 : -1];
 #define MASK_fmi3SerializeFMUState ANY
 #define MASK_fmi3DeserializeFMUState ANY
 #define MASK_fmi3DoStep AVR_STEP_MODE
-#define MASK_NO_VARIABLES_GET GET_PHASES /* types this FMU has no variables of */
-#define MASK_NO_VARIABLES_SET SET_PHASES
-#define MASK_NOT_PROVIDED 0u /* event mode, clocks, configuration mode, ME, SE, derivatives */
-
-/* The one prologue: the instance, the call's name, and its phase check. */
-#define BEGIN_MASK(fn, mask)                                                \
-    AvrInstance *inst = (AvrInstance *)instance;                            \
-    static const char call[] = #fn;                                         \
-    if (avr_allowed(inst, call, mask) != AVR_OK) return fmi3Error;
-#define BEGIN(fn) BEGIN_MASK(fn, MASK_##fn)
-
-#define REFUSE(...) return (fmi3Status)avr_refuse(inst, call, __VA_ARGS__)
+/* fmi3_refused.c: getters and setters of types this FMU has no variables of (GET_PHASES, SET_PHASES),
+ * and the functions not provided at all (event mode, clocks, configuration mode, ME, SE, derivatives:
+ * refused in every phase). */
 
 static const char *const PHASE_NAMES[] = {"Instantiated", "InitializationMode", "StepMode", "Terminated"};
 
@@ -114,13 +106,7 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
                                         instanceEnvironment, logMessage);
 }
 
-void fmi3FreeInstance(fmi3Instance instance) {
-    AvrInstance *inst = (AvrInstance *)instance;
-    if (inst == NULL) return;
-    void *cb = inst->env;
-    avr_free_instance(inst);
-    free(cb);
-}
+FREE_INSTANCE(fmi3FreeInstance)
 
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
                                const fmi3String categories[]) {
@@ -139,22 +125,9 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     return fmi3OK;
 }
 
-fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
-    BEGIN(fmi3ExitInitializationMode)
-    return (fmi3Status)avr_exit_init(inst, call);
-}
-
-fmi3Status fmi3Terminate(fmi3Instance instance) {
-    BEGIN(fmi3Terminate)
-    inst->phase = AVR_TERMINATED;
-    return fmi3OK;
-}
-
-fmi3Status fmi3Reset(fmi3Instance instance) {
-    BEGIN(fmi3Reset)
-    avr_reset(inst);
-    return fmi3OK;
-}
+EXIT_INITIALIZATION_MODE(fmi3ExitInitializationMode)
+TERMINATE(fmi3Terminate)
+RESET(fmi3Reset)
 
 /* ---- variables of this FMU's types -------------------------------------------------------------- */
 static fmi3Status check_counts(AvrInstance *inst, const char *call, const fmi3ValueReference vr[], size_t nvr,
@@ -210,36 +183,8 @@ SETTER(fmi3SetInt32, fmi3Int32, AVR_INTEGER, READ_NUMBER)
 SETTER(fmi3SetBoolean, fmi3Boolean, AVR_BOOLEAN, READ_BYTE)
 
 /* ---- FMU state (avr_state.c) --------------------------------------------------------------------- */
-fmi3Status fmi3GetFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    BEGIN(fmi3GetFMUState)
-    return (fmi3Status)avr_fmustate_get(inst, call, FMUState);
-}
-
-fmi3Status fmi3SetFMUState(fmi3Instance instance, fmi3FMUState FMUState) {
-    BEGIN(fmi3SetFMUState)
-    return (fmi3Status)avr_fmustate_set(inst, call, FMUState);
-}
-
-fmi3Status fmi3FreeFMUState(fmi3Instance instance, fmi3FMUState *FMUState) {
-    BEGIN(fmi3FreeFMUState)
-    avr_fmustate_free(FMUState);
-    return fmi3OK;
-}
-
-fmi3Status fmi3SerializedFMUStateSize(fmi3Instance instance, fmi3FMUState FMUState, size_t *size) {
-    BEGIN(fmi3SerializedFMUStateSize)
-    return (fmi3Status)avr_fmustate_size(inst, call, FMUState, size);
-}
-
-fmi3Status fmi3SerializeFMUState(fmi3Instance instance, fmi3FMUState FMUState, fmi3Byte serializedState[], size_t size) {
-    BEGIN(fmi3SerializeFMUState)
-    return (fmi3Status)avr_fmustate_serialize(inst, call, FMUState, (unsigned char *)serializedState, size);
-}
-
-fmi3Status fmi3DeserializeFMUState(fmi3Instance instance, const fmi3Byte serializedState[], size_t size, fmi3FMUState *FMUState) {
-    BEGIN(fmi3DeserializeFMUState)
-    return (fmi3Status)avr_fmustate_deserialize(inst, call, (const unsigned char *)serializedState, size, FMUState);
-}
+FMUSTATE_FUNCTIONS(fmi3FMUState, fmi3Byte, fmi3GetFMUState, fmi3SetFMUState, fmi3FreeFMUState,
+                   fmi3SerializedFMUStateSize, fmi3SerializeFMUState, fmi3DeserializeFMUState)
 
 /* ---- stepping ------------------------------------------------------------------------------------ */
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,

@@ -4,21 +4,13 @@
  * Execution, derivatives).  Each exists so that every host resolves every symbol; each
  * refuses with fmi3Error and a log message, through the same prologue as fmi3_api.c.
  */
-#include "avr_instance.h"
+#include "avr_instance.h" /* first: see avr_types.h */
+
 #include "fmi3Functions.h"
 
-#if defined(__GNUC__)
-#pragma GCC diagnostic ignored "-Wunused-parameter" /* the refusing stubs use none */
-#endif
-
-#define GET_PHASES (AVR_INIT_MODE | AVR_STEP_MODE | AVR_TERMINATED)
-#define SET_PHASES (AVR_INSTANTIATED | AVR_INIT_MODE | AVR_STEP_MODE)
-
-/* The one prologue, as in fmi3_api.c. */
-#define BEGIN_MASK(fn, mask)                                                \
-    AvrInstance *inst = (AvrInstance *)instance;                            \
-    static const char call[] = #fn;                                         \
-    if (avr_allowed(inst, call, mask) != AVR_OK) return fmi3Error;
+#define FMI_STATUS fmi3Status
+#define FMI_INSTANCE fmi3Instance
+#include "avr_fmi_api.h"
 
 /* Getters and setters of types without variables: nothing to get or set is fine, anything else refused. */
 #define NO_VARIABLES(fn, mask, ctype, type_name)                                                               \
@@ -56,17 +48,7 @@ fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueRe
     return nValueReferences == 0 ? fmi3OK : (fmi3Status)avr_refuse(inst, call, "this FMU has no Binary variables");
 }
 
-/* Not provided at all: refused in every phase (mask 0). */
-#define NOT_PROVIDED(fn, ...)                          \
-    fmi3Status fn(fmi3Instance instance, __VA_ARGS__) { \
-        BEGIN_MASK(fn, 0u)                             \
-        return fmi3Error;                              \
-    }
-#define NOT_PROVIDED0(fn)                \
-    fmi3Status fn(fmi3Instance instance) { \
-        BEGIN_MASK(fn, 0u)               \
-        return fmi3Error;                \
-    }
+/* Not provided at all: refused in every phase (NOT_PROVIDED, avr_fmi_api.h). */
 NOT_PROVIDED0(fmi3EnterEventMode)
 NOT_PROVIDED0(fmi3EnterConfigurationMode)
 NOT_PROVIDED0(fmi3ExitConfigurationMode)

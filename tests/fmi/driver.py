@@ -22,6 +22,8 @@ from fmpy.fmi2 import FMU2Slave
 
 
 class Driver:
+    slave_class = FMU2Slave
+
     def __init__(self, fmu_dir):
         self.md = read_model_description(fmu_dir)
         self.unzip = fmu_dir
@@ -37,19 +39,22 @@ class Driver:
         except FMICallException as exc:
             return {"status": exc.status}
 
+    def _instantiate(self):
+        self.count += 1
+        self.fmu = self.slave_class(guid=self.md.guid, unzipDirectory=self.unzip,
+                                    modelIdentifier=self.md.coSimulation.modelIdentifier,
+                                    instanceName=f"driver{self.count}")
+        try:
+            self.fmu.instantiate(loggingOn=False)
+        except Exception:  # fmpy raises a plain Exception when instantiation returns NULL
+            self.fmu = None
+            return {"status": "instantiate-failed"}
+        self.states, self.blobs = [], []
+        return None
+
     def _call(self, op, *args):
         if op == "instantiate":
-            self.count += 1
-            self.fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self.unzip,
-                                 modelIdentifier=self.md.coSimulation.modelIdentifier,
-                                 instanceName=f"driver{self.count}")
-            try:
-                self.fmu.instantiate(loggingOn=False)
-            except Exception:  # fmpy raises a plain Exception when fmi2Instantiate returns NULL
-                self.fmu = None
-                return {"status": "instantiate-failed"}
-            self.states, self.blobs = [], []
-            return None
+            return self._instantiate()
         fmu = self.fmu
         if op == "setup":
             fmu.setupExperiment(startTime=args[0])
@@ -92,8 +97,8 @@ class Driver:
         return None
 
 
-def main():
-    driver = Driver(sys.argv[1])
+def main(driver_class=Driver):
+    driver = driver_class(sys.argv[1])
     try:
         if len(sys.argv) > 2:
             print(json.dumps([driver.call(*c) for c in json.loads(sys.argv[2])]), flush=True)

@@ -7,14 +7,13 @@ FMI 3.0 has no fmi3SetupExperiment: ``["setup", t0]`` only records the start tim
 the next ``["enter"]`` passes to fmi3EnterInitializationMode (so it is answered OK
 without reaching the FMU; the FMI 3.0 call-sequence model never sends it).
 """
-import json
 import sys
 from pathlib import Path
 
 from fmpy.fmi3 import FMU3Slave
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "fmi"))
-from driver import Driver  # noqa: E402  (tests/fmi/driver.py)
+from driver import Driver, main  # noqa: E402  (tests/fmi/driver.py)
 
 #: The FMU state methods the FMI 2.0 driver calls, spelled as FMI 3.0 spells them.
 FMU_STATE_NAMES = {"getFMUstate": "getFMUState", "setFMUstate": "setFMUState",
@@ -24,29 +23,22 @@ TYPED = {"Float64": ("getFloat64", "setFloat64"), "Int32": ("getInt32", "setInt3
 
 
 class Driver3(Driver):
+    slave_class = FMU3Slave
     start_time = 0.0
+
+    def _instantiate(self):
+        answer = super()._instantiate()
+        if self.fmu is not None:
+            for fmi2_name, fmi3_name in FMU_STATE_NAMES.items():
+                setattr(self.fmu, fmi2_name, getattr(self.fmu, fmi3_name))
+        return answer
 
     def _call(self, op, *args):
         fmu = self.fmu
-        if op == "instantiate":
-            self.count += 1
-            self.fmu = FMU3Slave(guid=self.md.guid, unzipDirectory=self.unzip,
-                                 modelIdentifier=self.md.coSimulation.modelIdentifier,
-                                 instanceName=f"driver{self.count}")
-            try:
-                self.fmu.instantiate(loggingOn=False)
-            except Exception:  # fmpy raises a plain Exception when instantiation returns NULL
-                self.fmu = None
-                return {"status": "instantiate-failed"}
-            self.states, self.blobs = [], []
-            for fmi2_name, fmi3_name in FMU_STATE_NAMES.items():
-                setattr(self.fmu, fmi2_name, getattr(self.fmu, fmi3_name))
-        elif op == "setup":
+        if op == "setup":
             self.start_time = args[0]
         elif op == "enter":
             fmu.enterInitializationMode(startTime=self.start_time)
-        elif op == "step":
-            fmu.doStep(args[0], args[1])
         elif op in ("set", "get"):
             var = self.vars[args[0]]
             getter, setter = TYPED[var.type]
@@ -54,23 +46,10 @@ class Driver3(Driver):
                 getattr(fmu, setter)([var.valueReference], [args[1]])
                 return None
             return {"value": getattr(fmu, getter)([var.valueReference])[0]}
-        else:  # exit, terminate, reset, free and the FMU state ops: the FMI 2.0 driver's, with FMI 3.0 names
+        else:  # instantiate, exit, step, terminate, reset, free and the FMU state ops: the FMI 2.0 driver's
             return super()._call(op, *args)
         return None
 
 
-def main():
-    driver = Driver3(sys.argv[1])
-    try:
-        if len(sys.argv) > 2:
-            print(json.dumps([driver.call(*c) for c in json.loads(sys.argv[2])]), flush=True)
-            return
-        for line in sys.stdin:
-            print(json.dumps(driver.call(*json.loads(line))), flush=True)
-    finally:
-        if driver.fmu is not None:
-            driver.fmu.freeInstance()
-
-
 if __name__ == "__main__":
-    main()
+    main(Driver3)

@@ -12,6 +12,10 @@
  * Without REPEATS every step's outputs are printed (%.17g).  With REPEATS the S lines are
  * run REPEATS times over (time continuing) and only timing is printed: the median and
  * mean wall time of one set+doStep+get, in microseconds.
+ *
+ * The environment variable FMI2_HOST_RESOURCES, if set, is the fmuResourceLocation URI
+ * passed to fmi2Instantiate (a pythonfmu FMU needs its resources folder; the native FMU
+ * needs none: "file:///" by default).
  */
 #if !defined(_WIN32)
 #define _POSIX_C_SOURCE 200809L /* clock_gettime, dlopen */
@@ -87,8 +91,9 @@ int main(int argc, char **argv) {
     LOAD(fmi2ExitInitializationMode) LOAD(fmi2SetReal) LOAD(fmi2SetInteger) LOAD(fmi2SetBoolean)
     LOAD(fmi2GetReal) LOAD(fmi2DoStep) LOAD(fmi2Terminate) LOAD(fmi2FreeInstance)
     fmi2CallbackFunctions callbacks = {logger, calloc, free, NULL, NULL};
-    fmi2Component c = fmi2Instantiate("fmi2_host", fmi2CoSimulation, argv[2], "file:///", &callbacks, fmi2False,
-                                      fmi2False);
+    const char *resources = getenv("FMI2_HOST_RESOURCES");
+    fmi2Component c = fmi2Instantiate("fmi2_host", fmi2CoSimulation, argv[2], resources ? resources : "file:///",
+                                      &callbacks, fmi2False, fmi2False);
     if (c == NULL) { fprintf(stderr, "fmi2Instantiate returned NULL\n"); return 4; }
     FILE *script = fopen(argv[3], "r");
     if (script == NULL) { fprintf(stderr, "cannot open %s\n", argv[3]); return 1; }

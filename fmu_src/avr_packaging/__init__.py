@@ -1,0 +1,11 @@
+"""Build-time helpers of ``build.py`` (never packed into an FMU): reproducible archives and
+content GUIDs (:mod:`.archive`), the pythonfmu FMUs' model description and documentation
+(:mod:`.describe`, :mod:`.pages`), the method rendered from ``docs/method.md`` (:mod:`.method_page`),
+the fix of pythonfmu's linux64 library (:mod:`.pythonfmu_fix`) and the CassiePlant FMU's
+vendored modules and models (:mod:`.vendor`).  The C parts are built beside their sources:
+``fmu_src/guard/build_guard.py`` and ``fmu_src/native/build_native.py``.
+
+Named ``avr_packaging``, not ``packaging``: pythonfmu's builder puts ``fmu_src/`` on
+``sys.path`` (to import the slave), where a ``packaging`` folder would shadow PyPA's
+``packaging`` that matplotlib and others import.
+"""
