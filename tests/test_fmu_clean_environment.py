@@ -15,6 +15,8 @@ import subprocess
 import sys
 from pathlib import Path
 
+from plant.model import menagerie_root
+
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SUBSET = [
     "tests/test_fmu_compliance.py::test_fmpy_validation_finds_no_problems",
@@ -33,8 +35,10 @@ SUBSET = [
 def test_fmu_tests_pass_without_path_and_leave_the_temp_folder_empty(tmp_path):
     tmpdir, basetemp = tmp_path / "tmpdir", tmp_path / "basetemp"
     tmpdir.mkdir()
-    env = {"PATH": "/usr/bin:/bin", "HOME": os.environ.get("HOME", str(tmp_path)), "TMPDIR": str(tmpdir),
-           "MENAGERIE_ROOT": os.environ["MENAGERIE_ROOT"]}
+    env = {"PATH": "/usr/bin:/bin", "HOME": os.environ.get("HOME", str(tmp_path)), "TMPDIR": str(tmpdir)}
+    root = menagerie_root()  # the model loader's default when MENAGERIE_ROOT is unset
+    if root is not None:
+        env["MENAGERIE_ROOT"] = str(root.resolve())
     proc = subprocess.run([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", f"--basetemp={basetemp}",
                            *SUBSET], cwd=REPO_ROOT, env=env, capture_output=True, text=True, timeout=900)
     assert proc.returncode == 0, proc.stdout[-4000:] + proc.stderr[-2000:]
