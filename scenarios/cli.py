@@ -4,7 +4,7 @@
     python -m scenarios validate FILE [FILE ...]
     python -m scenarios run NAME|FILE|all|paper [...] [--model M] [--out DIR]
                             [--regulator fmu|native|native-fmi3|inprocess] [--jobs N] [--fmu PATH]
-                            [--duration S] [--rebuild-fmu] [--overwrite | --resume]
+                            [--duration S] [--no-plots] [--rebuild-fmu] [--overwrite | --resume]
                             [--plant inprocess|fmu] [--plant-fmu PATH]
     python -m scenarios report DIR
 
@@ -216,6 +216,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "file in dist/, built if missing or stale)")
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--duration", type=float, default=None, help="override every scenario's duration_s (quick runs)")
+    sp.add_argument("--no-plots", action="store_true",
+                    help="write no PNG plots (time series and summary only: campaign tasks, which plot "
+                         "the whole campaign themselves, or any run where ~1 s per scenario matters)")
     sp.add_argument("--plant", choices=("inprocess", "fmu"), default="inprocess",
                     help="the MuJoCo plant in-process (default) or the CassiePlant FMU through fmpy")
     sp.add_argument("--plant-fmu", type=Path, default=None,
