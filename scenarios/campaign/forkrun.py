@@ -113,7 +113,7 @@ def serve(warm_models: list[str]) -> int:
 
 # --------------------------------------------------------------------------- client side
 class ForkServer:
-    """One server process (started by :func:`acquire`), serving one run at a time."""
+    """One server process (started by :func:`warm` or :func:`run_forked`), serving one run at a time."""
 
     def __init__(self, env: dict[str, str], warm_models: tuple[str, ...]) -> None:
         self.key = _key(env, warm_models)
@@ -151,7 +151,10 @@ class ForkServer:
         try:
             return self._read(timeout)["exit"]
         except TimeoutError:
-            os.kill(child, signal.SIGKILL)
+            try:
+                os.kill(child, signal.SIGKILL)
+            except ProcessLookupError:  # it ended just now (and was reaped)
+                pass
             self._read(SERVER_START_S)
             return None
 
@@ -168,8 +171,7 @@ class ForkServer:
         try:
             self.proc.wait(10)
         except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+            self.kill()
 
 
 _IDLE: list[ForkServer] = []
