@@ -131,3 +131,48 @@ def test_smoke_campaign_with_fork_runs_gives_the_same_rows(tmp_path, built_fmu):
         assert not (out / ".tmp").exists() and not (out / ".dask").exists()
     assert len(got["fork"]) == 8 and all(row["status"] == "complete" for row in got["fork"])
     assert got["fork"] == got["plain"]
+
+
+def test_interrupt_with_fork_runs_kills_the_runs_then_resume_finishes(tmp_path, built_fmu):
+    """Ctrl-C as a terminal sends it (SIGINT to the CLI's process group): exit 130, no
+    server or forked run left alive; ``--resume`` runs only what was not complete."""
+    env = {**os.environ, "MENAGERIE_ROOT": str(Path(os.environ["MENAGERIE_ROOT"]).resolve())}
+    cli_cmd = [sys.executable, "-c", "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
+               "from scenarios.cli import main; sys.exit(main())", "campaign"]
+    out = tmp_path / "out"
+    args = [str(SMOKE), "--out", str(out), "--workers", "2", "--fmu", str(built_fmu), "--fork-runs"]
+    cli = subprocess.Popen(cli_cmd + args, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                           text=True, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 180
+        while not ((out / "campaign.csv").is_file() and len(_rows(out)) >= 2):
+            assert time.monotonic() < deadline, "no sample finished"
+            time.sleep(0.1)
+        forked = [p for p in psutil.Process(cli.pid).children(recursive=True)
+                  if "scenarios.campaign.forkrun" in p.cmdline()]  # the servers and their runs
+        os.killpg(cli.pid, signal.SIGINT)
+        _, err = cli.communicate(timeout=60)
+    finally:
+        if cli.poll() is None:
+            cli.kill()
+            cli.wait()
+    assert cli.returncode == 130 and err.startswith("interrupted: "), err
+    assert forked
+    psutil.wait_procs(forked, timeout=30)
+    assert not [p for p in forked if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    before = _rows(out)
+    done = {x["sample"] for x in before}
+    r = subprocess.run(cli_cmd + args + ["--resume"], env=env, cwd=tmp_path, capture_output=True, text=True,
+                       timeout=300)
+    assert r.returncode == 0, r.stderr
+    after = _rows(out)
+    assert sorted((x["sample"], x["arm"]) for x in after) == [(f"s{i:04d}", a) for i in range(4)
+                                                             for a in ("adaptive", "pd_only")]
+    assert [x for x in after if x["sample"] in done] == before  # not run again
+    assert all(len(list((out / "runs" / s).glob("try*"))) == 1 for s in done)
+    assert not (out / ".tmp").exists() and not (out / ".dask").exists()
+
+
+def _rows(out: Path) -> list[dict[str, str]]:
+    with open(out / "campaign.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
