@@ -1,6 +1,7 @@
 """Campaign throughput on Dask: the same 8-sample campaign with 1 and 2 local workers.
 
     python benchmarks/bench_campaign.py [--duration 10] [--repeat 1] [--fmu PATH] [--json FILE]
+                                        [--baseline-repo DIR]
 
 The campaign is the built-in ``smoke`` one (mass/COM Latin hypercube, damping, seed, a
 2-speed grid) with 4 draws x 2 speeds = 8 samples x 2 arms of ``--duration`` simulated
@@ -17,10 +18,17 @@ fastest campaign of each counts). Printed:
 - per-task overhead = the task's wall time (its ``scenarios run`` process, start to
   exit) minus the co-simulation loops of its arms (``wall_s`` in summary.json), per
   task and per arm (target <= 0.5 s per task);
-- what that overhead is made of, from one ``scenarios run`` of a sample under cProfile
-  (profiling inflates Python-heavy parts; read the shares, not the absolute seconds):
-  interpreter start and imports, plant model compilation, FMU set-up, writing the run's
-  plots and time series.
+- what that overhead is made of, from one ``scenarios run`` of a sample as a campaign
+  task runs it (``--no-plots``), under cProfile (profiling inflates Python-heavy parts;
+  read the shares, not the absolute seconds): interpreter start and imports, the
+  model's check and compilation, FMU set-up, writing the time series (and plots, when a
+  tree still draws them in every task).
+
+Set-ups, interleaved (load from other processes hits them alike): this tree as it is
+(each task a new ``python -m scenarios run --no-plots`` process), this tree with
+``--fork-runs`` (each task's run forked from a warm server per worker), and with
+``--baseline-repo DIR`` the code in DIR (another checkout, e.g. ``git archive main | tar
+-x -C DIR``; same interpreter and FMU), so that before/after are measured in one run.
 
 The machine may be shared: the numbers are only as steady as its load.
 """
@@ -36,17 +44,21 @@ import sys
 import tempfile
 import time
 from pathlib import Path
+from types import SimpleNamespace
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
 SMOKE = REPO_ROOT / "scenarios" / "campaigns" / "smoke.toml"
 #: (file, function) under cProfile -> the part of a task it measures
-PARTS = {("scenarios/plantio.py", "load_plant_model"): "plant model compilation (overhead)",
-         ("scenarios/output.py", "write_plots"): "plots, matplotlib (overhead)",
+PARTS = {("scenarios/plantio.py", "check_plant"): "model check before the run, a compile (overhead)",
+         ("scenarios/plantio.py", "load_plant_model"): "plant model compilation (overhead)",
+         ("scenarios/plots.py", "write_plots"): "plots, matplotlib (overhead)",
          ("scenarios/output.py", "write_timeseries"): "time series CSV (overhead)",
          ("scenarios/master.py", "run_arm"): "arms: co-simulation incl. FMU start (work)",
-         ("scenarios/master.py", "start"): "  of which FMU extract + instantiate"}
+         ("scenarios/regulators.py", "start"): "  of which regulator start (FMU extract + instantiate)"}
+#: what a run process imports (the imports of a campaign task's run, matplotlib not among them)
+RUN_IMPORTS = "import scenarios.cli, scenarios.run_session, scenarios.master, scenarios.output, mujoco, fmpy, plant.sim"
 
 
 def campaign_file(folder: Path, duration: float) -> Path:
@@ -57,10 +69,17 @@ def campaign_file(folder: Path, duration: float) -> Path:
     return path
 
 
-def run_campaign(cfile: Path, out: Path, workers: int, fmu: str) -> dict:
+def repo_env(repo: Path) -> dict[str, str]:
+    """The environment that runs ``repo``'s code (its folder first on the path; also the cwd)."""
+    return {**os.environ, "PYTHONPATH": str(repo)}
+
+
+def run_campaign(cfile: Path, out: Path, workers: int, fmu: str, repo: Path = REPO_ROOT,
+                 extra: tuple[str, ...] = ()) -> dict:
     t0 = time.perf_counter()
     r = subprocess.run([sys.executable, "-m", "scenarios", "campaign", str(cfile), "--out", str(out),
-                        "--workers", str(workers), "--fmu", fmu], capture_output=True, text=True)
+                        "--workers", str(workers), "--fmu", fmu, *extra], capture_output=True, text=True,
+                       env=repo_env(repo), cwd=repo)
     wall = time.perf_counter() - t0
     if r.returncode != 0:
         raise SystemExit(f"campaign with {workers} worker(s) failed ({r.returncode}):\n{r.stderr}")
@@ -78,14 +97,16 @@ def run_campaign(cfile: Path, out: Path, workers: int, fmu: str) -> dict:
 
 
 def overhead_breakdown(sample: Path, folder: Path, fmu: str) -> dict:
-    """One ``scenarios run`` of a sample under cProfile; seconds per part, and the imports."""
+    """One ``scenarios run`` of a sample as a campaign task runs it, under cProfile;
+    seconds per part, and the imports (in a separate process)."""
+    from scenarios.campaign.task import run_command
+
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "-c", "import scenarios.cli, scenarios.master, scenarios.output, mujoco, fmpy, "
-                    "matplotlib.pyplot, plant.sim"], check=True)
+    subprocess.run([sys.executable, "-c", RUN_IMPORTS], check=True)
     imports = time.perf_counter() - t0
     prof = folder / "run.prof"
-    subprocess.run([sys.executable, "-m", "cProfile", "-o", str(prof), "-m", "scenarios", "run", str(sample),
-                    "--out", str(folder / "profiled"), "--fmu", fmu], check=True, capture_output=True)
+    cmd = run_command(SimpleNamespace(scenario_file=str(sample), regulator="fmu", fmu=fmu), folder / "profiled")
+    subprocess.run([sys.executable, "-m", "cProfile", "-o", str(prof), *cmd[1:]], check=True, capture_output=True)
     stats = pstats.Stats(str(prof))
     out = {"interpreter + imports (separate run)": imports}
     total = 0.0
@@ -98,29 +119,11 @@ def overhead_breakdown(sample: Path, folder: Path, fmu: str) -> dict:
     return out
 
 
-def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--duration", type=float, default=10.0, help="simulated seconds per arm (default 10)")
-    ap.add_argument("--fmu", default=None, help="the FMU (default: dist/, built if missing or stale)")
-    ap.add_argument("--repeat", type=int, default=1, help="campaigns per worker count; the fastest counts")
-    ap.add_argument("--json", default=None, help="also write the numbers to this file")
-    args = ap.parse_args(argv)
-    from scenarios.cli import ensure_fmu
-
-    fmu = str(Path(ensure_fmu(Path(args.fmu) if args.fmu else None)).resolve())
-    with tempfile.TemporaryDirectory(prefix="bench_campaign_") as tmp:
-        folder = Path(tmp)
-        cfile = campaign_file(folder, args.duration)
-        trials = {1: [], 2: []}
-        for k in range(args.repeat):  # interleaved: load from other processes hits both alike
-            for n in (1, 2):
-                trials[n].append(run_campaign(cfile, folder / f"w{n}-{k}", n, fmu))
-        runs = [min(trials[n], key=lambda r: r["wall_s"]) for n in (1, 2)]
-        parts = overhead_breakdown(folder / "w1-0" / "samples" / "s0000.toml", folder, fmu)
+def report(label: str, runs: list[dict], duration: float) -> dict:
+    """Print one tree's table and ratios; return its numbers."""
     one, two = runs
     scaling = one["wall_s"] / two["wall_s"]
-    print(f"campaign: 8 samples x 2 arms x {args.duration:g} s simulated, cpu_count = {os.cpu_count()}, "
-          f"load average {os.getloadavg()[0]:.2f} (other processes share the cores)")
+    print(f"\n== {label}: 8 samples x 2 arms x {duration:g} s simulated")
     print(f"{'workers':>8} {'wall s':>8} {'sum task s':>11} {'sum cosim s':>12} {'overhead/task s':>16} {'max':>6}")
     for r in runs:
         print(f"{r['workers']:>8} {r['wall_s']:>8.1f} {r['sum_task_wall_s']:>11.1f} {r['sum_cosim_s']:>12.1f} "
@@ -136,12 +139,50 @@ def main(argv=None) -> int:
     print(f"scaling wall(1)/wall(2) = {scaling:.2f} (target >= 1.8); per-task overhead "
           f"{two['overhead_per_task_s']:.2f} s with 2 workers, {one['overhead_per_task_s']:.2f} s with 1 "
           f"(target <= 0.5 s; {one['overhead_per_task_s'] / 2:.2f} s per arm)")
-    print("one task's run under cProfile (s):")
+    return {"runs": runs, "scaling": scaling, "fixed_s": fixed, "normalised_scaling": normalised}
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--duration", type=float, default=10.0, help="simulated seconds per arm (default 10)")
+    ap.add_argument("--fmu", default=None, help="the FMU (default: dist/, built if missing or stale)")
+    ap.add_argument("--repeat", type=int, default=1, help="campaigns per worker count; the fastest counts")
+    ap.add_argument("--baseline-repo", type=Path, default=None,
+                    help="also run the campaigns with the code in this folder (before/after in one run)")
+    ap.add_argument("--json", default=None, help="also write the numbers to this file")
+    args = ap.parse_args(argv)
+    from scenarios.cli import ensure_fmu
+
+    fmu = str(Path(ensure_fmu(Path(args.fmu) if args.fmu else None)).resolve())
+    trees = {"this tree": (REPO_ROOT, ()), "this tree, --fork-runs": (REPO_ROOT, ("--fork-runs",))}
+    if args.baseline_repo is not None:
+        trees = {f"baseline {args.baseline_repo}": (args.baseline_repo.resolve(), ()), **trees}
+    with tempfile.TemporaryDirectory(prefix="bench_campaign_") as tmp:
+        folder = Path(tmp)
+        cfile = campaign_file(folder, args.duration)
+        trials = {label: {1: [], 2: []} for label in trees}
+        for k in range(args.repeat):  # interleaved: load from other processes hits every set-up and count alike
+            for i, (label, (repo, extra)) in enumerate(trees.items()):
+                for n in (1, 2):
+                    trials[label][n].append(run_campaign(cfile, folder / f"t{i}-w{n}-{k}", n, fmu, repo, extra))
+        parts = overhead_breakdown(folder / "t0-w1-0" / "samples" / "s0000.toml", folder, fmu)
+    print(f"cpu_count = {os.cpu_count()}, load average {os.getloadavg()[0]:.2f} (other processes share the cores); "
+          f"the fastest of {args.repeat} campaign(s) per tree and worker count")
+    results = {label: report(label, [min(trials[label][n], key=lambda r: r["wall_s"]) for n in (1, 2)],
+                             args.duration) for label in trees}
+    labels = list(results)
+    print(f"\n{'':<48}" + "".join(f"{f'{n} worker(s)':>28}" for n in (1, 2)) + f"{'scaling':>9}")
+    for label in labels:
+        cells = "".join(f"{r['overhead_per_task_s']:>10.2f} s/task {r['wall_s']:>7.1f} s wall"
+                        for r in results[label]["runs"])
+        print(f"{label:<48}{cells}{results[label]['scaling']:>9.2f}")
+    print("(overhead per task = task wall - its arms' wall_s; wall = the whole campaign, CLI start to exit)")
+    print("\none task's run (this tree) under cProfile (s):")
     for k, v in sorted(parts.items(), key=lambda kv: -kv[1]):
-        print(f"  {k:<40} {v:7.2f}")
+        print(f"  {k:<55} {v:7.2f}")
     if args.json:
-        Path(args.json).write_text(json.dumps({"runs": runs, "trials": trials, "scaling": scaling,
-                                               "breakdown": parts}, indent=2))
+        Path(args.json).write_text(json.dumps({"results": results, "trials": trials, "breakdown": parts},
+                                              indent=2, default=str))
     return 0
 
 

@@ -3,8 +3,8 @@
     python -m scenarios list
     python -m scenarios validate FILE [FILE ...]
     python -m scenarios run NAME|FILE|all|paper [...] [--model M] [--out DIR]
-                            [--regulator fmu|native|inprocess] [--jobs N] [--fmu PATH]
-                            [--duration S] [--rebuild-fmu] [--overwrite | --resume]
+                            [--regulator fmu|native|native-fmi3|inprocess] [--jobs N] [--fmu PATH]
+                            [--duration S] [--no-plots] [--rebuild-fmu] [--overwrite | --resume]
                             [--plant inprocess|fmu] [--plant-fmu PATH]
     python -m scenarios report DIR
 
@@ -35,7 +35,8 @@ from typing import Sequence
 from fmu_src.avr_errors import AvrError
 from scenarios.errors import ScenarioError
 # load_build_module is re-exported: tests/conftest.py and the benchmarks import it from here
-from scenarios.fmus import DEFAULT_FMU, REPO_ROOT, ensure_fmu, ensure_plant_fmu, load_build_module  # noqa: F401
+from scenarios.fmus import (DEFAULT_FMU, REGULATOR_FMUS, REPO_ROOT, ensure_fmu, ensure_plant_fmu,  # noqa: F401
+                            fmu_version_problem, load_build_module)
 
 DEFAULT_OUT = Path("runs")
 
@@ -112,6 +113,8 @@ def _run_problems(args, scenarios: list, mode: str) -> list[str]:
         problems.append(f"--jobs {args.jobs}: must be >= 1")
     if args.fmu is not None and not Path(args.fmu).is_file():
         problems.append(f"--fmu {args.fmu}: no such file")
+    elif args.fmu is not None and args.regulator in REGULATOR_FMUS:
+        problems += filter(None, [fmu_version_problem(args.regulator, Path(args.fmu))])
     out_root = Path(args.out)
     out = store.out_problems(out_root)
     if not out and out_root.is_dir():
@@ -154,9 +157,9 @@ def _fail(problems: list[str], status: int) -> int:
 def _fmus(args) -> tuple[str | None, str | None]:
     """The regulator FMU and the plant FMU the run uses (None: in-process), built if needed."""
     fmu_path = plant_fmu = None
-    if args.regulator in ("fmu", "native"):
+    if args.regulator in REGULATOR_FMUS:
         try:
-            fmu_path = str(ensure_fmu(args.fmu, rebuild=args.rebuild_fmu, native=args.regulator == "native"))
+            fmu_path = str(ensure_fmu(args.fmu, rebuild=args.rebuild_fmu, regulator=args.regulator))
         except Exception as exc:
             raise AvrError(f"cannot get the FMU: {exc}") from exc
     if args.plant == "fmu":
@@ -203,14 +206,19 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("targets", nargs="+", metavar="NAME|FILE")
     sp.add_argument("--model", default=None, help="menagerie, osu or an MJCF path (overrides the files)")
     sp.add_argument("--out", default=str(DEFAULT_OUT), help="results folder (default: runs)")
-    sp.add_argument("--regulator", choices=("fmu", "native", "inprocess"), default="fmu",
-                    help="the pythonfmu FMU through fmpy (default), the native (C) FMI 2.0 FMU through fmpy, "
-                         "or the regulator core in-process")
+    sp.add_argument("--regulator", choices=(*REGULATOR_FMUS, "inprocess"), default="fmu",
+                    help="; ".join(f"{k}: {r.help} (default file {r.default.relative_to(REPO_ROOT)})"
+                                   for k, r in REGULATOR_FMUS.items())
+                    + "; inprocess: the regulator core called in-process, no FMU. Default: fmu")
     sp.add_argument("--jobs", type=int, default=1, help="parallel worker processes (default 1)")
-    sp.add_argument("--fmu", type=Path, default=None, help=f"FMU file (default {DEFAULT_FMU.relative_to(REPO_ROOT)}, "
-                                                          "built if missing)")
+    sp.add_argument("--fmu", type=Path, default=None,
+                    help="the regulator FMU file, of the --regulator's FMI version (default: the regulator's "
+                         "file in dist/, built if missing or stale)")
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--duration", type=float, default=None, help="override every scenario's duration_s (quick runs)")
+    sp.add_argument("--no-plots", action="store_true",
+                    help="write no PNG plots (time series and summary only: campaign tasks, which plot "
+                         "the whole campaign themselves, or any run where ~1 s per scenario matters)")
     sp.add_argument("--plant", choices=("inprocess", "fmu"), default="inprocess",
                     help="the MuJoCo plant in-process (default) or the CassiePlant FMU through fmpy")
     sp.add_argument("--plant-fmu", type=Path, default=None,

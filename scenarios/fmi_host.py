@@ -1,12 +1,14 @@
-"""The FMI 2.0 co-simulation host under the master: one FMU instance through fmpy.
+"""The FMI co-simulation host under the master: one FMU instance through fmpy.
 
 :class:`FmuInstance` does what every FMU the master runs needs (the regulator FMU in
-:mod:`scenarios.regulators`, the CassiePlant FMU in :mod:`scenarios.plant_fmu`): read the
-model description, extract into a fresh folder, instantiate with the process's one
-logger (the FMU's messages are kept per instance and go into every error), set
-parameters, set up the experiment and enter/exit initialization mode, check every
-status (anything but OK raises :class:`CosimError` carrying the FMU's log), and
-terminate/free/remove the folder in :meth:`FmuInstance.close` whatever failed.
+:mod:`scenarios.regulators`, FMI 2.0 or 3.0; the CassiePlant FMU in
+:mod:`scenarios.plant_fmu`, FMI 2.0): read the model description, extract into a fresh
+folder, instantiate with the process's one logger (the FMU's messages are kept per
+instance and go into every error), set values by type, set up the experiment and
+enter/exit initialization mode, check every status (anything but OK raises
+:class:`CosimError` carrying the FMU's log), and terminate/free/remove the folder in
+:meth:`FmuInstance.close` whatever failed. What differs between the FMI versions is in
+:mod:`scenarios.fmi_api`.
 """
 from __future__ import annotations
 
@@ -16,85 +18,42 @@ import os
 import shutil
 import tempfile
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from scenarios.errors import CosimError
+# FMI_CASTS and status_label are re-exported: the regulator paths know them from here
+from scenarios.fmi_api import FMI_APIS, FMI_CASTS, route_messages, status_label, unroute_messages  # noqa: F401
 
 log = logging.getLogger(__name__)
 
-FMI_STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
-#: Python type of each FMI 2.0 variable type (values set by name are cast to it).
-FMI_CASTS: dict[str, Callable[[Any], Any]] = {"Real": float, "Integer": int, "Boolean": bool}
-#: How many of an instance's latest messages are kept for its errors.
-LOG_KEEP = 200
-
-# fmpy's native logger proxy (which formats the FMU's printf-style messages) keeps ONE
-# process-wide pointer to the Python logger it forwards to, whichever callbacks struct
-# was registered last; a per-instance logger that is garbage-collected leaves it dangling
-# and the next FMU message from any instance crashes the process.  So there is one
-# logger for the whole process, alive as long as the module, routing messages by
-# instance name; names it does not know are printed as fmpy's default logger does.
-_LOG_ROUTES: dict[str, list[str]] = {}
 _INSTANCE_IDS = itertools.count(1)
-_SHARED_CALLBACKS = None
-
-
-def _route_fmu_message(component, instance_name, status, category, message) -> None:
-    label = FMI_STATUS[status] if 0 <= status < len(FMI_STATUS) else str(status)
-    name = instance_name.decode("utf-8", "replace") if isinstance(instance_name, bytes) else str(instance_name)
-    text = message.decode("utf-8", "replace") if isinstance(message, bytes) else str(message)
-    cat = category.decode("utf-8", "replace") if isinstance(category, bytes) else str(category)
-    messages = _LOG_ROUTES.get(name)
-    if messages is None:
-        log.info("[%s] %s %s: %s", label, name, cat, text)
-        return
-    messages.append(f"[{label}] {cat}: {text}")
-    del messages[:-LOG_KEEP]
-
-
-def _shared_callbacks():
-    """The process-lifetime fmi2CallbackFunctions with the routing logger."""
-    global _SHARED_CALLBACKS
-    if _SHARED_CALLBACKS is None:
-        from ctypes import byref
-
-        from fmpy import calloc, free
-        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                               fmi2CallbackLoggerTYPE)
-
-        callbacks = fmi2CallbackFunctions()
-        callbacks.logger = fmi2CallbackLoggerTYPE(_route_fmu_message)
-        callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-        callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        try:
-            from fmpy.logging import addLoggerProxy
-
-            addLoggerProxy(byref(callbacks))
-        except Exception as exc:  # pragma: no cover - fmpy's native proxy is optional
-            log.warning("fmpy logger proxy unavailable (%s): FMU messages are not formatted", exc)
-        _SHARED_CALLBACKS = callbacks
-    return _SHARED_CALLBACKS
-
-
-def status_label(status: int) -> str:
-    return FMI_STATUS[status] if 0 <= status < len(FMI_STATUS) else str(status)
 
 
 class FmuInstance:
-    """One FMI 2.0 co-simulation FMU instance (see the module docstring)."""
+    """One FMI co-simulation FMU instance (see the module docstring)."""
 
-    def __init__(self, fmu_path: str | Path, instance_name: str, *, unpack_dir: str | Path | None = None) -> None:
+    #: the FMI versions this kind of instance runs
+    FMI_VERSIONS: tuple[str, ...] = ("2.0",)
+
+    def __init__(self, fmu_path: str | Path, instance_name: str, *, unpack_dir: str | Path | None = None,
+                 fmi_versions: tuple[str, ...] | None = None) -> None:
         """``unpack_dir``: the folder under which the FMU is extracted when it starts (a
-        fresh subfolder, removed by :meth:`close`); None: the system temp folder."""
+        fresh subfolder, removed by :meth:`close`); None: the system temp folder.
+        ``fmi_versions``: the FMI versions accepted (default :data:`FMI_VERSIONS`)."""
         from fmpy import read_model_description
 
         self.fmu_path = Path(fmu_path)
         if not self.fmu_path.is_file():
             raise CosimError(f"FMU not found: {self.fmu_path}")
-        self.instance_name = f"{instance_name}-{next(_INSTANCE_IDS)}"  # unique: log messages are routed by it
+        self._number = next(_INSTANCE_IDS)
+        self.instance_name = f"{instance_name}-{self._number}"  # unique: log messages are routed by it
         self.md = read_model_description(str(self.fmu_path))
-        if self.md.fmiVersion != "2.0" or self.md.coSimulation is None:
-            raise CosimError(f"{self.fmu_path}: not an FMI 2.0 co-simulation FMU")
+        versions = fmi_versions or self.FMI_VERSIONS
+        if self.md.fmiVersion not in versions or self.md.fmiVersion not in FMI_APIS or self.md.coSimulation is None:
+            kind = "co-simulation" if self.md.coSimulation is not None else "model exchange only"
+            raise CosimError(f"{self.fmu_path}: an FMI {self.md.fmiVersion} FMU ({kind}); this needs an FMI "
+                             f"{' or '.join(versions)} co-simulation FMU")
+        self.fmi = FMI_APIS[self.md.fmiVersion]
         self.vars = {v.name: v for v in self.md.modelVariables}
         self.messages: list[str] = []
         self._fmu = None
@@ -124,7 +83,7 @@ class FmuInstance:
             raise
         except Exception as exc:  # instantiate raises a bare Exception on NULL
             raise self._fail(what, f"{type(exc).__name__}: {exc}") from None
-        if status:  # None (instantiate) or fmi2OK == 0 pass; Warning and worse do not
+        if status:  # None (instantiate) or OK == 0 pass; Warning and worse do not
             raise self._status_error(what, status)
         return status
 
@@ -136,37 +95,38 @@ class FmuInstance:
         """Extract into a fresh folder (ours before anything is extracted: :meth:`close`
         removes it whatever fails next) and instantiate with the shared logger."""
         from fmpy import extract
-        from fmpy.fmi2 import FMU2Slave
 
         self._unzip = tempfile.mkdtemp(prefix="fmu-", dir=self._unpack_dir)
         extract(str(self.fmu_path), self._unzip)
-        self._callbacks = _shared_callbacks()
-        _LOG_ROUTES[self.instance_name] = self.messages
+        route_messages(self.instance_name, self._number, self.messages)
         cwd = os.getcwd()
         try:
-            self._fmu = FMU2Slave(guid=self.md.guid, unzipDirectory=self._unzip,
-                                  modelIdentifier=self.md.coSimulation.modelIdentifier,
-                                  instanceName=self.instance_name)
+            self._fmu = self.fmi.slave(self.md, self._unzip, self.instance_name)
         finally:  # fmpy 0.3 changes into binaries/<platform> to load the library and stays there if that fails
             os.chdir(cwd)
-        self._call("fmi2Instantiate", lambda: self._fmu.instantiate(callbacks=self._callbacks, loggingOn=True))
+        self._call(self.fmi.instantiate_name, self.fmi.instantiate, self._fmu, self._number)
         self._instantiated = True
 
     def _initialize(self, t0: float, t_stop: float | None) -> None:
-        """fmi2SetupExperiment (``t_stop`` None: no stop time) and enter/exit initialization."""
-        fmu, comp = self._fmu, self._fmu.component
-        stop_defined = t_stop is not None
-        self._call("fmi2SetupExperiment", fmu.fmi2SetupExperiment, comp, 0, 0.0, float(t0), int(stop_defined),
-                   float(t_stop) if stop_defined else 0.0)
-        self._call("fmi2EnterInitializationMode", fmu.fmi2EnterInitializationMode, comp)
-        self._call("fmi2ExitInitializationMode", fmu.fmi2ExitInitializationMode, comp)
+        """Set up the experiment (``t_stop`` None: no stop time; no tolerance) and
+        enter/exit initialization mode."""
+        for what, fn, args in self.fmi.init_calls(self._fmu, t0, t_stop):
+            self._call(what, fn, *args)
         self._initialized = True
+
+    def _set(self, what: str, kind: str, vrs: list[int], vals: list[Any]) -> None:
+        """One set call of ``kind`` (``Real``, ``Integer``, ``Boolean``) on ``vrs``."""
+        if not vrs:
+            return
+        values = (self.fmi.ctypes[kind] * len(vals))(*(FMI_CASTS[kind](v) for v in vals))
+        fn = getattr(self._fmu, self.fmi.function("Set", kind))
+        self._call(what, fn, *self.fmi.array_args(self._fmu.component, self._vr_array(vrs), values))
 
     @staticmethod
     def _vr_array(vrs: list[int]):
-        from fmpy.fmi2 import fmi2ValueReference
+        from ctypes import c_uint
 
-        return (fmi2ValueReference * len(vrs))(*vrs)
+        return (c_uint * len(vrs))(*vrs)
 
     def close(self) -> None:
         fmu = self._fmu
@@ -176,17 +136,18 @@ class FmuInstance:
             if fmu is not None and self._instantiated:
                 if self._initialized:
                     try:
-                        fmu.fmi2Terminate(fmu.component)
+                        getattr(fmu, f"{self.fmi.prefix}Terminate")(fmu.component)
                     except Exception as exc:  # keep freeing: the instance must not leak
-                        log.warning("fmi2Terminate failed: %s", exc)
+                        log.warning("%sTerminate failed: %s", self.fmi.prefix, exc)
                 try:
                     fmu.freeInstance()
                 except Exception as exc:
-                    log.warning("fmi2FreeInstance failed: %s", exc)
+                    log.warning("%sFreeInstance failed: %s", self.fmi.prefix, exc)
+            elif fmu is not None:  # loaded, not instantiated: unload the library all the same
+                fmu.freeLibrary()
         finally:
             self._instantiated = self._initialized = False
-            if _LOG_ROUTES.get(self.instance_name) is self.messages:
-                del _LOG_ROUTES[self.instance_name]
+            unroute_messages(self.instance_name, self._number, self.messages)
             if self._unzip is not None:
                 shutil.rmtree(self._unzip, ignore_errors=True)
                 self._unzip = None

@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import importlib.util
 import logging
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
 from fmu_src.avr_errors import AvrError
 from scenarios.errors import CosimError
@@ -14,6 +15,7 @@ from scenarios.errors import CosimError
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DEFAULT_FMU = REPO_ROOT / "dist" / "AdaptiveVelocityRegulator.fmu"
 DEFAULT_NATIVE_FMU = REPO_ROOT / "dist" / "AdaptiveVelocityRegulatorNative_fmi2.fmu"
+DEFAULT_NATIVE3_FMU = REPO_ROOT / "dist" / "AdaptiveVelocityRegulatorNative_fmi3.fmu"
 DEFAULT_PLANT_FMU = REPO_ROOT / "dist" / "CassiePlant.fmu"
 
 log = logging.getLogger(__name__)
@@ -41,18 +43,60 @@ def _built(default: Path, sources: Iterable[Path], build: Callable[[object, Path
     return default
 
 
-def ensure_fmu(fmu: Path | None, *, rebuild: bool = False, native: bool = False) -> Path:
-    """The regulator FMU: ``fmu`` if given, else the default one (the pythonfmu FMU, or
-    with ``native`` the native FMI 2.0 FMU), built from ``fmu_src/`` and ``build.py``."""
+@dataclass(frozen=True)
+class RegulatorFmu:
+    """A ``--regulator`` that runs an FMU: its default file (the module constant named
+    ``default_name``), the FMI version it runs and how ``build.py`` builds that file
+    (``build(build_module, folder)``)."""
+
+    default_name: str
+    fmi_version: str
+    build: Callable[[Any, Path], str]
+    help: str
+
+    @property
+    def default(self) -> Path:
+        return globals()[self.default_name]  # looked up when asked: tests point the constant elsewhere
+
+
+#: The ``--regulator`` choices that run an FMU through fmpy (``inprocess`` runs the core).
+REGULATOR_FMUS: dict[str, RegulatorFmu] = {
+    "fmu": RegulatorFmu("DEFAULT_FMU", "2.0", lambda b, d: b.build_fmu(d),
+                        "the pythonfmu FMU (FMI 2.0) through fmpy's FMU2Slave"),
+    "native": RegulatorFmu("DEFAULT_NATIVE_FMU", "2.0", lambda b, d: b.build_native_fmu(2, d),
+                           "the native (C) FMI 2.0 FMU through fmpy's FMU2Slave"),
+    "native-fmi3": RegulatorFmu("DEFAULT_NATIVE3_FMU", "3.0", lambda b, d: b.build_native_fmu(3, d),
+                                "the native (C) FMI 3.0 FMU through fmpy's FMU3Slave"),
+}
+
+
+def fmu_version_problem(regulator: str, fmu: Path) -> str | None:
+    """What is wrong with running ``fmu`` as ``--regulator regulator`` (its FMI version), or None."""
+    from fmpy import read_model_description
+
+    want = REGULATOR_FMUS[regulator].fmi_version
+    try:
+        have = read_model_description(str(fmu)).fmiVersion
+    except Exception as exc:
+        return f"--fmu {fmu}: not a readable FMU ({type(exc).__name__}: {exc})"
+    if have != want:
+        others = [k for k, r in REGULATOR_FMUS.items() if r.fmi_version == have]
+        hint = f" (use --regulator {' or '.join(others)})" if others else ""
+        return f"--fmu {fmu}: an FMI {have} FMU; --regulator {regulator} runs FMI {want} FMUs{hint}"
+    return None
+
+
+def ensure_fmu(fmu: Path | None, *, rebuild: bool = False, regulator: str = "fmu") -> Path:
+    """The regulator FMU of ``--regulator regulator`` (:data:`REGULATOR_FMUS`): ``fmu`` if
+    given, else its default file in ``dist/``, built from ``fmu_src/`` and ``build.py``."""
     if fmu is not None:
         fmu = Path(fmu)
         if not fmu.is_file():
             raise AvrError(f"--fmu {fmu}: no such file")
         return fmu
-    default = DEFAULT_NATIVE_FMU if native else DEFAULT_FMU
+    kind = REGULATOR_FMUS[regulator]
     sources = [p for ext in ("py", "c", "h") for p in (REPO_ROOT / "fmu_src").rglob(f"*.{ext}")]
-    build = (lambda b, d: b.build_native_fmu(2, d)) if native else (lambda b, d: b.build_fmu(d))
-    return _built(default, sources + [REPO_ROOT / "build.py"], build, rebuild)
+    return _built(kind.default, sources + [REPO_ROOT / "build.py"], kind.build, rebuild)
 
 
 def ensure_plant_fmu(fmu: str | Path | None, *, rebuild: bool = False) -> Path:

@@ -204,10 +204,11 @@ def column_text(column: np.ndarray) -> list[str]:
     return texts[index].tolist()
 
 
-def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome]) -> dict[str, Any]:
-    """Write csv, plots and summary (last) into the folder ``dest``; return the summary
-    (its ``timings``: seconds spent writing the csv and the plots, the CPU time of both,
-    the process ``pid``).
+def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome], *,
+                  plots: bool = True) -> dict[str, Any]:
+    """Write csv, plots (unless ``plots`` is false: ``--no-plots``) and summary (last) into
+    the folder ``dest``; return the summary (its ``timings``: seconds spent writing the
+    csv and the plots, the CPU time of both, the process ``pid``).
 
     Only complete arms have rows; the folder is meant to be a fresh one that
     :mod:`scenarios.store` renames into place once this returns.
@@ -221,7 +222,7 @@ def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequ
     if results:
         write_timeseries(dest / "timeseries.csv", results)
     csv_done = time.perf_counter()
-    summary["plots"] = write_plots(dest, scenario, results)
+    summary["plots"] = write_plots(dest, scenario, results) if plots else []
     summary["timings"] = {"csv_s": csv_done - lap, "plots_s": time.perf_counter() - csv_done,
                           "cpu_s": time.process_time() - cpu0, "pid": os.getpid()}
     write_json(dest / "summary.json", summary)

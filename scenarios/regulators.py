@@ -1,12 +1,15 @@
 """The regulator paths the master's loop drives: the FMU or the core in-process.
 
-- :class:`FmuRegulator`: the FMI 2.0 co-simulation FMU (the pythonfmu or the native
-  one) through :class:`scenarios.fmi_host.FmuInstance`: parameters set by name with
-  type-correct calls, the per-step calls bound straight to the library;
+- :class:`FmuRegulator`: a co-simulation FMU through :class:`scenarios.fmi_host.FmuInstance`
+  (``--regulator fmu``: the pythonfmu FMU, ``native``: the native FMI 2.0 FMU,
+  ``native-fmi3``: the native FMI 3.0 FMU): parameters set by name with type-correct
+  calls, the per-step calls bound straight to the library;
 - :class:`InProcessRegulator`: the numpy regulator core called directly, with the FMU's
   data flow and casts.
 
-Both give bit-identical trajectories for the same scenario and seed.
+The pythonfmu FMU and the core in-process give bit-identical trajectories for the same
+scenario and seed; the native FMUs (C) agree with them to rounding (see
+tests/test_native_master.py).
 """
 from __future__ import annotations
 
@@ -16,8 +19,9 @@ from typing import Any, Callable, Mapping
 
 from scenarios.errors import CosimError
 from scenarios.fmi_host import FMI_CASTS, FmuInstance
+from scenarios.fmus import REGULATOR_FMUS
 
-REGULATORS = ("fmu", "native", "inprocess")
+REGULATORS = (*REGULATOR_FMUS, "inprocess")
 
 
 class RegulatorPath(abc.ABC):
@@ -92,14 +96,17 @@ class InProcessRegulator(RegulatorPath):
 
 
 class FmuRegulator(FmuInstance, RegulatorPath):
-    """The FMU through fmpy's FMU2Slave; every FMI call's status is checked."""
+    """The FMU through fmpy's FMU2Slave or FMU3Slave; every FMI call's status is checked."""
 
     kind = "fmu"
+    FMI_VERSIONS = ("2.0", "3.0")
 
-    def __init__(self, fmu_path: str | Path, instance_name: str = "avr", *, unpack_dir: str | Path | None = None) -> None:
+    def __init__(self, fmu_path: str | Path, instance_name: str = "avr", *, unpack_dir: str | Path | None = None,
+                 fmi_versions: tuple[str, ...] | None = None) -> None:
         """``unpack_dir``: the folder under which :meth:`start` extracts the FMU (a fresh
-        subfolder, removed by :meth:`close`); None: the system temp folder."""
-        super().__init__(fmu_path, instance_name, unpack_dir=unpack_dir)
+        subfolder, removed by :meth:`close`); None: the system temp folder.
+        ``fmi_versions``: the FMI versions accepted (default: 2.0 and 3.0)."""
+        super().__init__(fmu_path, instance_name, unpack_dir=unpack_dir, fmi_versions=fmi_versions)
         self._outputs = tuple(v.name for v in self.md.modelVariables if v.causality == "output")
 
     def output_names(self) -> tuple[str, ...]:
@@ -123,71 +130,59 @@ class FmuRegulator(FmuInstance, RegulatorPath):
                 problems.append(f"{name}: the FMU has no such variable")
             elif var.causality != "parameter":
                 problems.append(f"{name}: causality {var.causality}, not a parameter")
+            elif self.fmi.kind_of(var.type) is None:
+                problems.append(f"{name}: type {var.type}, not one of {', '.join(self.fmi.type_names.values())}")
         if problems:
             raise CosimError("cannot set FMU parameters: " + "; ".join(problems))
 
     def _set_parameters(self, parameters: Mapping[str, Any]) -> None:
-        """One fmi2Set call per type (value references from the model description)."""
-        by_type: dict[str, tuple[list[int], list[Any]]] = {"Real": ([], []), "Integer": ([], []), "Boolean": ([], [])}
+        """One set call per type (value references from the model description)."""
+        by_kind: dict[str, tuple[list[int], list[Any]]] = {k: ([], []) for k in FMI_CASTS}
         for name, value in parameters.items():
             var = self.vars[name]
-            vrs, vals = by_type[var.type]
+            vrs, vals = by_kind[self.fmi.kind_of(var.type)]
             vrs.append(var.valueReference)
-            vals.append(FMI_CASTS[var.type](value))
-        for kind, (vrs, vals) in by_type.items():
-            self._set(f"fmi2Set{kind} (parameters)", kind, vrs, vals)
+            vals.append(value)
+        for kind, (vrs, vals) in by_kind.items():
+            self._set(f"{self.fmi.function('Set', kind)} (parameters)", kind, vrs, vals)
+
+    def _variables(self, causality: str, kind: str) -> list[str]:
+        return [v.name for v in self.md.modelVariables
+                if v.causality == causality and self.fmi.kind_of(v.type) == kind]
 
     def _prepare_buffers(self) -> None:
-        """Preallocated ctypes buffers for the per-step calls (Real and Integer inputs, Real outputs)."""
-        from ctypes import c_double, c_int
-
-        inputs = [v for v in self.md.modelVariables if v.causality == "input"]
-        self._in_real = [v.name for v in inputs if v.type == "Real"]
-        self._in_int = [v.name for v in inputs if v.type == "Integer"]
-        self._in_bool = [v.name for v in inputs if v.type == "Boolean"]
-        if self._in_bool:
-            raise CosimError(f"unexpected Boolean inputs: {self._in_bool}")
-        self._vr_in_real = self._vr_array([self.vars[n].valueReference for n in self._in_real])
-        self._val_in_real = (c_double * len(self._in_real))()
-        self._vr_in_int = self._vr_array([self.vars[n].valueReference for n in self._in_int])
-        self._val_in_int = (c_int * len(self._in_int))()
-        outs = [self.vars[n] for n in self._outputs]
-        if any(v.type != "Real" for v in outs):
-            raise CosimError("every FMU output must be Real: " + ", ".join(v.name for v in outs if v.type != "Real"))
-        self._vr_out = self._vr_array([v.valueReference for v in outs])
-        self._val_out = (c_double * len(outs))()
+        """Preallocated ctypes buffers for the per-step calls (Real and Integer inputs,
+        Real outputs); any other input or output type is refused."""
+        kinds = {"input": ("Real", "Integer"), "output": ("Real",)}
+        odd = [f"{v.name} ({v.causality} {v.type})" for v in self.md.modelVariables
+               if v.causality in kinds and self.fmi.kind_of(v.type) not in kinds[v.causality]]
+        if odd:
+            raise CosimError("the master passes Real and Integer inputs and Real outputs only: " + ", ".join(odd))
+        self._in_real = self._variables("input", "Real")
+        self._in_int = self._variables("input", "Integer")
+        self._val_in_real = (self.fmi.ctypes["Real"] * len(self._in_real))()
+        self._val_in_int = (self.fmi.ctypes["Integer"] * len(self._in_int))()
+        self._val_out = (self.fmi.ctypes["Real"] * len(self._outputs))()
+        comp, vrs = self._fmu.component, lambda names: self._vr_array([self.vars[n].valueReference for n in names])
+        self._args_in_real = self.fmi.array_args(comp, vrs(self._in_real), self._val_in_real)
+        self._args_in_int = self.fmi.array_args(comp, vrs(self._in_int), self._val_in_int)
+        self._args_out = self.fmi.array_args(comp, vrs(self._outputs), self._val_out)
 
     def _bind_step_calls(self) -> None:
         """The four per-step FMI functions as ctypes prototypes on the loaded library,
-        called directly by :meth:`step`, which checks their statuses (fmpy's Python
-        wrapper around each call cost about 1.5 us, 5 us a step). :meth:`close` drops
-        them before the library is unloaded."""
-        from ctypes import CFUNCTYPE, POINTER, c_double, c_int, c_size_t, c_uint, c_void_p
-
-        dll = self._fmu.dll
-        reals = CFUNCTYPE(c_int, c_void_p, POINTER(c_uint), c_size_t, POINTER(c_double))
-        ints = CFUNCTYPE(c_int, c_void_p, POINTER(c_uint), c_size_t, POINTER(c_int))
-        self._set_real = reals(("fmi2SetReal", dll))
-        self._get_real = reals(("fmi2GetReal", dll))
-        self._set_int = ints(("fmi2SetInteger", dll))
-        self._do_step = CFUNCTYPE(c_int, c_void_p, c_double, c_double, c_int)(("fmi2DoStep", dll))
-
-    def _set(self, what: str, kind: str, vrs: list[int], vals: list[Any]) -> None:
-        if not vrs:
-            return
-        from ctypes import c_double, c_int
-
-        arr_vr = self._vr_array(vrs)
-        if kind == "Real":
-            self._call(what, self._fmu.fmi2SetReal, self._fmu.component, arr_vr, len(vrs), (c_double * len(vals))(*vals))
-        elif kind == "Integer":
-            self._call(what, self._fmu.fmi2SetInteger, self._fmu.component, arr_vr, len(vrs), (c_int * len(vals))(*vals))
-        else:
-            self._call(what, self._fmu.fmi2SetBoolean, self._fmu.component, arr_vr, len(vrs),
-                       (c_int * len(vals))(*[1 if v else 0 for v in vals]))
+        called directly by :meth:`step` on the preallocated arguments, which checks their
+        statuses (fmpy's Python wrapper around each call cost about 1.5 us, 5 us a step).
+        :meth:`close` drops them before the library is unloaded."""
+        dll, fmi = self._fmu.dll, self.fmi
+        self._set_real = fmi.array_function(dll, "Set", "Real")
+        self._get_real = fmi.array_function(dll, "Get", "Real")
+        self._set_int = fmi.array_function(dll, "Set", "Integer")
+        self._do_step, self._do_step_tail, self._check_step = fmi.bind_do_step(dll)
+        self._names = {op + kind: f"{fmi.function(op, kind)} ({what})"
+                       for op, kind, what in (("Set", "Real", "inputs"), ("Set", "Integer", "inputs"),
+                                              ("Get", "Real", "outputs"))}
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
-        comp = self._fmu.component
         self._t = t
         vals = self._val_in_real
         for i, n in enumerate(self._in_real):
@@ -200,28 +195,31 @@ class FmuRegulator(FmuInstance, RegulatorPath):
                 int_changed = True
         try:
             if self._in_real:
-                status = self._set_real(comp, self._vr_in_real, len(self._in_real), vals)
-                if status:
-                    raise self._status_error("fmi2SetReal (inputs)", status)
+                self._checked(self._set_real, self._args_in_real, "SetReal")
             if self._in_int and int_changed:  # step_index changes once a walking step: FMU inputs keep their value
-                status = self._set_int(comp, self._vr_in_int, len(self._in_int), self._val_in_int)
-                if status:
-                    raise self._status_error("fmi2SetInteger (inputs)", status)
+                self._checked(self._set_int, self._args_in_int, "SetInteger")
             self._first_step = False
-            status = self._do_step(comp, t, h, 1)
+            status = self._do_step(self._fmu.component, t, h, *self._do_step_tail)
             if status:
-                raise self._status_error("fmi2DoStep", status)
-            status = self._get_real(comp, self._vr_out, len(self._outputs), self._val_out)
-            if status:
-                raise self._status_error("fmi2GetReal (outputs)", status)
+                raise self._status_error(f"{self.fmi.prefix}DoStep", status)
+            if self._check_step is not None:
+                problem = self._check_step(t, h)
+                if problem:
+                    raise self._fail(f"{self.fmi.prefix}DoStep", problem)
+            self._checked(self._get_real, self._args_out, "GetReal")
         except CosimError:
             raise
         except Exception as exc:  # a ctypes argument error: never a traceback without the FMU log
             raise self._fail("FMI call", f"{type(exc).__name__}: {exc}") from None
         return dict(zip(self._outputs, self._val_out))
 
+    def _checked(self, fn, args: tuple, which: str) -> None:
+        status = fn(*args)
+        if status:
+            raise self._status_error(self._names[which], status)
+
     def _drop_bound_calls(self) -> None:
-        self._set_real = self._get_real = self._set_int = self._do_step = None
+        self._set_real = self._get_real = self._set_int = self._do_step = self._check_step = None
 
 
 class RlHzdRegulator(RegulatorPath):
@@ -271,10 +269,10 @@ def arm_regulator(arm, kind: str, fmu_path: str | Path | None = None, *,
 def make_regulator(kind: str, fmu_path: str | Path | None = None, *,
                    unpack_dir: str | Path | None = None) -> RegulatorPath:
     """``unpack_dir``: where an FMU is extracted (see :class:`FmuRegulator`)."""
-    if kind in ("fmu", "native"):  # the pythonfmu or the native FMI 2.0 FMU: the same FMI path
+    if kind in REGULATOR_FMUS:  # every FMU the same FMI path, of the kind's FMI version
         if fmu_path is None:
             raise CosimError(f"the {kind} regulator path needs an FMU file (fmu_path)")
-        return FmuRegulator(fmu_path, unpack_dir=unpack_dir)
+        return FmuRegulator(fmu_path, unpack_dir=unpack_dir, fmi_versions=(REGULATOR_FMUS[kind].fmi_version,))
     if kind == "inprocess":
         return InProcessRegulator()
     raise CosimError(f"regulator = {kind!r}: must be one of {', '.join(REGULATORS)}")

@@ -76,7 +76,8 @@ class RunSession:
         except OSError as exc:
             self.write_errors.append(f"{scenario.name}: results not written: {exc}")
             return None
-        return runner.Job(output.write_results, (staged, scenario, self.args.regulator, outcomes),
+        write = partial(output.write_results, plots=not self.args.no_plots)
+        return runner.Job(write, (staged, scenario, self.args.regulator, outcomes),
                           partial(self.published, scenario.name, replace))
 
     def published(self, name: str, replace: bool, summary, error: BaseException | None) -> None:

@@ -34,6 +34,9 @@ def add_parser(sub) -> None:
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--task-timeout", type=float, default=None, help="seconds per sample (overrides the file)")
     sp.add_argument("--retries", type=int, default=None, help="retries of a task whose worker/run process died")
+    sp.add_argument("--fork-runs", action="store_true",
+                    help="fork each sample's run from a warm process per worker (imports and the base model's "
+                         "check done once per worker, not once per sample); default: a new interpreter per run")
     sp.add_argument("--dry-run", action="store_true", help="validate and list the samples; run nothing")
     sp.set_defaults(func=cmd_campaign)
 
@@ -99,7 +102,8 @@ def cmd_campaign(args) -> int:
         if fmu is False:
             return 1
         opts = execute.RunOptions(workers=args.workers, scheduler=args.scheduler, regulator=args.regulator,
-                                  fmu=fmu, timeout_s=args.task_timeout, retries=args.retries)
+                                  fmu=fmu, timeout_s=args.task_timeout, retries=args.retries,
+                                  fork_runs=args.fork_runs)
         execute.run(campaign, cdir, values, opts, fmu)
     except execute.CampaignInterrupted as exc:
         print(f"interrupted: {exc.done} sample(s) finished in this run and are in {cdir.csv_path}, {exc.remaining} "

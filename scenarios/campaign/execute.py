@@ -53,6 +53,7 @@ class RunOptions:
     timeout_s: float | None = None  # per task; default from the campaign
     retries: int | None = None  # default from the campaign
     progress: bool | None = None  # tqdm's disable=None: on a terminal only
+    fork_runs: bool = False  # each run forked from the worker's warm server (scenarios.campaign.forkrun)
 
 
 @dataclass
@@ -224,7 +225,8 @@ def make_tasks(campaign: Campaign, cdir: CampaignDir, todo: list[str], opts: Run
     return [task_mod.Task(sample=sid, scenario_file=str(cdir.sample_file(sid).resolve()),
                           runs_dir=str((cdir.runs_dir / sid).resolve()), arms=tuple(campaign.arm_names()),
                           regulator=opts.regulator, fmu=fmu, timeout_s=timeout,
-                          tmp_root=str(cdir.tmp_dir.resolve()), env=task_mod.client_env())
+                          tmp_root=str(cdir.tmp_dir.resolve()), env=task_mod.client_env(), fork=opts.fork_runs,
+                          warm_models=(str(campaign.base_doc.get("model") or "menagerie"),))
             for sid in todo]
 
 
@@ -241,6 +243,8 @@ def run(campaign: Campaign, cdir: CampaignDir, values: dict[str, dict], opts: Ru
     t0 = time.perf_counter()
     with _signal(signal.SIGTERM, _raise_interrupt), _signal(signal.SIGINT, signal.getsignal(signal.SIGINT)):
         with open_client(opts, cdir, retries) as client:
+            if opts.fork_runs:  # every worker's fork server imports while the others do
+                client.run(task_mod.warm_fork_server, tasks[0])
             try:
                 tally = submit_and_collect(client, tasks, values, cdir, retries, opts.progress,
                                            f"campaign {campaign.name}")

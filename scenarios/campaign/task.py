@@ -1,10 +1,14 @@
 """One campaign task, as it runs on a Dask worker: one sample, all its arms.
 
-The sample's scenario file is run by a fresh ``python -m scenarios run`` process (a
-crash, a leak or a pythonfmu FMU that cannot share a process touches nothing else);
-the task reads the metrics back from that run's ``summary.json``. One task per sample,
-not per arm: the arms share the process start, the model compilation checks and the
-run's CSV/plot writing, and the sample's folder holds one normal run output.
+The sample's scenario file is run by a fresh ``python -m scenarios run --no-plots``
+process (a crash, a leak or a pythonfmu FMU that cannot share a process touches
+nothing else; the campaign's report draws the plots); the task reads the metrics back
+from that run's ``summary.json``. With ``fork`` (``campaign --fork-runs``) that process
+is forked from the worker's warm server (:mod:`scenarios.campaign.forkrun`: no
+interpreter start-up, imports and base-model check per run) instead of started anew.
+One task per sample, not per arm: the arms share the process start, the model
+compilation checks and the run's CSV writing, and the sample's folder holds one normal
+run output.
 
 - The run process dies with the worker (Linux ``PR_SET_PDEATHSIG``) and sits in its
   own session (a Ctrl-C on the terminal stops the campaign, not the runs one by one).
@@ -19,6 +23,7 @@ from __future__ import annotations
 
 import ctypes
 import json
+import logging
 import os
 import shutil
 import signal
@@ -29,6 +34,8 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+log = logging.getLogger(__name__)
 
 #: The metrics copied from each arm of ``summary.json`` into the campaign CSV.
 METRICS = ("fell", "t_fall_s", "steady_state_error_vx", "steady_state_error_vy", "convergence_time_s",
@@ -58,6 +65,8 @@ class Task:
     timeout_s: float
     tmp_root: str  # the campaign's scratch folder (TMPDIR of the run process)
     env: tuple[tuple[str, str], ...] = ()  # the client's settings the run must share (MENAGERIE_ROOT)
+    fork: bool = False  # run forked from the worker's warm server (--fork-runs), not as a new interpreter
+    warm_models: tuple[str, ...] = ()  # the models that server checks (compiles) once, ahead of the runs
 
 
 def client_env() -> tuple[tuple[str, str], ...]:
@@ -66,7 +75,7 @@ def client_env() -> tuple[tuple[str, str], ...]:
     return (("MENAGERIE_ROOT", str(Path(root).resolve())),) if root else ()
 
 
-def _die_with_parent() -> None:  # runs in the child between fork and exec: no allocation-heavy work
+def die_with_parent() -> None:  # runs in the child between fork and exec: no allocation-heavy work
     if _PRCTL is not None:
         _PRCTL(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
@@ -85,8 +94,12 @@ def _claim_out(runs_dir: Path) -> Path:
 
 def run_command(task: Task, out: Path) -> list[str]:
     cmd = [sys.executable, "-m", "scenarios", "run", task.scenario_file, "--out", str(out),
-           "--regulator", task.regulator]
+           "--regulator", task.regulator, "--no-plots"]  # the campaign's report plots the campaign
     return cmd + (["--fmu", task.fmu] if task.fmu else [])
+
+
+#: Thread pools of numerical libraries: one thread per run (a worker is one core).
+_THREADS = {"OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
 
 
 def run_sample(task: Task) -> dict[str, Any]:
@@ -94,32 +107,71 @@ def run_sample(task: Task) -> dict[str, Any]:
     out = _claim_out(Path(task.runs_dir))
     Path(task.tmp_root).mkdir(parents=True, exist_ok=True)
     tmp = tempfile.mkdtemp(prefix=f"{task.sample}-", dir=task.tmp_root)
-    env = {**os.environ, **dict(task.env), "TMPDIR": tmp, "OMP_NUM_THREADS": "1", "OPENBLAS_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     t0 = time.perf_counter()
     try:
-        proc = subprocess.Popen(run_command(task, out), stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
-                                preexec_fn=_die_with_parent, start_new_session=True)
-        try:
-            _, err = proc.communicate(timeout=task.timeout_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.communicate()
-            why = f"timeout: the run took longer than {task.timeout_s:g} s (task_timeout_s / --task-timeout)"
-            return _result(task, out, time.perf_counter() - t0, {}, why)
+        code, err = (_run_forked if task.fork else _run_process)(task, out, tmp)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     wall = time.perf_counter() - t0
-    tail = err.decode("utf-8", "replace")[-_TAIL:].strip()
-    if proc.returncode < 0:
-        name = signal.Signals(-proc.returncode).name
+    if code is None:
+        why = f"timeout: the run took longer than {task.timeout_s:g} s (task_timeout_s / --task-timeout)"
+        return _result(task, out, wall, {}, why)
+    tail = err[-_TAIL:].strip()
+    if code < 0:
+        name = signal.Signals(-code).name
         raise RunProcessDied(f"sample {task.sample}: the run process was killed by {name}; stderr: {tail}")
     summary_path = out / task.sample / "summary.json"
     try:
         summary = json.loads(summary_path.read_text())
     except (OSError, json.JSONDecodeError) as exc:
-        why = f"the run exited with status {proc.returncode} without a readable summary.json ({exc}); stderr: {tail}"
+        why = f"the run exited with status {code} without a readable summary.json ({exc}); stderr: {tail}"
         return _result(task, out, wall, {}, why)
-    return _result(task, out, wall, summary, tail or f"exit status {proc.returncode}")
+    return _result(task, out, wall, summary, tail or f"exit status {code}")
+
+
+def _run_process(task: Task, out: Path, tmp: str) -> tuple[int | None, str]:
+    """The run as a new ``python -m scenarios run`` process: (exit status or None after
+    the timeout, its stderr)."""
+    env = {**os.environ, **dict(task.env), "TMPDIR": tmp, **_THREADS}
+    proc = subprocess.Popen(run_command(task, out), stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env,
+                            preexec_fn=die_with_parent, start_new_session=True)
+    try:
+        _, err = proc.communicate(timeout=task.timeout_s)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.communicate()
+        return None, ""
+    return proc.returncode, err.decode("utf-8", "replace")
+
+
+def _server_env(task: Task) -> dict[str, str]:
+    """The environment of this worker's fork server for ``task`` (every run's but TMPDIR)."""
+    return {**os.environ, **dict(task.env), **_THREADS}
+
+
+def warm_fork_server(task: Task) -> None:
+    """Start this worker's fork server for runs like ``task``'s ahead of them (the campaign
+    calls it on every worker: ``client.run``); a failure leaves it to the first run."""
+    from scenarios.campaign import forkrun
+
+    try:
+        forkrun.warm(_server_env(task), task.warm_models)
+    except Exception as exc:
+        log.warning("the fork server did not start ahead of the runs (%s: %s)", type(exc).__name__, exc)
+
+
+def _run_forked(task: Task, out: Path, tmp: str) -> tuple[int | None, str]:
+    """The run forked from this worker's warm server (:mod:`scenarios.campaign.forkrun`)."""
+    from scenarios.campaign import forkrun
+
+    stderr = Path(tmp) / "run.stderr"
+    try:
+        code = forkrun.run_forked(run_command(task, out)[3:], _server_env(task), {"TMPDIR": tmp}, stderr,
+                                  task.timeout_s, task.warm_models)
+    except EOFError as exc:
+        raise RunProcessDied(f"sample {task.sample}: the fork server died during the run ({exc})") from None
+    err = stderr.read_text("utf-8", "replace") if stderr.is_file() else ""
+    return code, err
 
 
 def arm_status(summary: dict[str, Any], arm: str) -> str:
