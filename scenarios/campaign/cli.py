@@ -14,6 +14,7 @@ import sys
 from pathlib import Path
 
 from scenarios.errors import ScenarioError
+from scenarios.fmus import REGULATOR_FMUS
 
 log = logging.getLogger("scenarios.campaign")
 
@@ -29,7 +30,7 @@ def add_parser(sub) -> None:
     where.add_argument("--scheduler", metavar="ADDRESS", default=None,
                        help="an existing Dask scheduler (e.g. tcp://host:8786); workers need a shared file system")
     sp.add_argument("--resume", action="store_true", help="continue the campaign in --out (skips complete samples)")
-    sp.add_argument("--regulator", choices=("fmu", "inprocess"), default="fmu")
+    sp.add_argument("--regulator", choices=(*REGULATOR_FMUS, "inprocess"), default="fmu")
     sp.add_argument("--fmu", type=Path, default=None, help="FMU file (default: dist/, built if missing or stale)")
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--task-timeout", type=float, default=None, help="seconds per sample (overrides the file)")
@@ -120,13 +121,13 @@ def cmd_campaign(args) -> int:
 
 
 def _fmu(args):
-    """The FMU path for the fmu regulator (built when missing/stale), None in-process, False on error."""
-    if args.regulator != "fmu":
+    """The regulator's FMU path (built when missing/stale), None in-process, False on error."""
+    if args.regulator == "inprocess":
         return None
     from scenarios.fmus import ensure_fmu
 
     try:
-        return str(Path(ensure_fmu(args.fmu, rebuild=args.rebuild_fmu)).resolve())
+        return str(Path(ensure_fmu(args.fmu, rebuild=args.rebuild_fmu, regulator=args.regulator)).resolve())
     except Exception as exc:
         print(f"cannot get the FMU: {exc}", file=sys.stderr)
         return False
