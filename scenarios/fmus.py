@@ -96,7 +96,8 @@ def ensure_fmu(fmu: Path | None, *, rebuild: bool = False, regulator: str = "fmu
         return fmu
     kind = REGULATOR_FMUS[regulator]
     sources = [p for ext in ("py", "c", "h") for p in (REPO_ROOT / "fmu_src").rglob(f"*.{ext}")]
-    return _built(kind.default, sources + [REPO_ROOT / "build.py"], kind.build, rebuild)
+    # docs/method.md: every regulator FMU's documentation page renders it
+    return _built(kind.default, sources + [REPO_ROOT / "build.py", REPO_ROOT / "docs" / "method.md"], kind.build, rebuild)
 
 
 def ensure_plant_fmu(fmu: str | Path | None, *, rebuild: bool = False) -> Path:
