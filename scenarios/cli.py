@@ -5,7 +5,7 @@
     python -m scenarios run NAME|FILE|all|paper [...] [--model M] [--out DIR]
                             [--regulator fmu|native|native-fmi3|inprocess] [--jobs N] [--fmu PATH]
                             [--duration S] [--no-plots] [--rebuild-fmu] [--overwrite | --resume]
-                            [--plant inprocess|fmu] [--plant-fmu PATH]
+                            [--plant inprocess|fmu] [--plant-fmu PATH] [--render]
     python -m scenarios report DIR
 
 ``run`` checks everything before it simulates and names every problem at once: the
@@ -15,7 +15,8 @@ are refused unless ``--overwrite`` or ``--resume``; a second run on DIR is refus
 It builds the FMU at ``dist/AdaptiveVelocityRegulator.fmu`` if it is missing or stale
 (fmu path), runs each scenario x arm (``--jobs N``: in N spawned processes, each with
 its own FMU copy under DIR's scratch folder), writes each scenario's
-``DIR/<name>/{timeseries.csv,summary.json,*.png}`` complete and then renames it into
+``DIR/<name>/{timeseries.csv,summary.json,*.png}`` (and with ``--render`` each arm's
+``<arm>.mp4`` and ``<arm>.gif``, :mod:`scenarios.render`) complete and then renames it into
 place, and prints one table row per scenario x arm. Ctrl-C stops the run between two
 steps: complete scenarios are kept, started ones are marked ``interrupted`` (or, where
 earlier results existed, left as they were), one line is printed.
@@ -111,6 +112,9 @@ def _run_problems(args, scenarios: list, mode: str) -> list[str]:
     problems = []
     if args.jobs < 1:
         problems.append(f"--jobs {args.jobs}: must be >= 1")
+    if args.render and args.plant == "fmu":
+        problems.append("--render with --plant fmu: the CassiePlant FMU gives no MuJoCo state to render; "
+                        "render with --plant inprocess (the same plant)")
     if args.fmu is not None and not Path(args.fmu).is_file():
         problems.append(f"--fmu {args.fmu}: no such file")
     elif args.fmu is not None and args.regulator in REGULATOR_FMUS:
@@ -123,11 +127,17 @@ def _run_problems(args, scenarios: list, mode: str) -> list[str]:
 
 
 def cmd_run(args) -> int:
+    problems = []
+    if args.render:  # before anything imports mujoco: it reads MUJOCO_GL once
+        from scenarios.render import choose_gl_backend
+
+        problems = choose_gl_backend()
     from scenarios import store
     from scenarios.run_session import RunSession
 
     mode = "overwrite" if args.overwrite else "resume" if args.resume else "new"
-    scenarios, problems = _run_targets(args)
+    scenarios, target_problems = _run_targets(args)
+    problems += target_problems
     problems += _run_problems(args, scenarios, mode)
     if problems:
         return _fail(problems, 2)
@@ -223,6 +233,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the MuJoCo plant in-process (default) or the CassiePlant FMU through fmpy")
     sp.add_argument("--plant-fmu", type=Path, default=None,
                     help="CassiePlant FMU file (default dist/CassiePlant.fmu, built if missing or stale)")
+    sp.add_argument("--render", action="store_true",
+                    help="also write each arm's video, <arm>.mp4 and a small <arm>.gif, from a camera following "
+                         "the pelvis (MuJoCo offscreen: MUJOCO_GL egl or osmesa; not with --plant fmu)")
     again = sp.add_mutually_exclusive_group()
     again.add_argument("--overwrite", action="store_true",
                        help="replace the results of this run's scenarios already in --out")

@@ -64,6 +64,7 @@ class ArmResult:
     wall_s: float
     model_summary: dict = field(default_factory=dict)
     timings: dict = field(default_factory=dict)
+    track: Any = None  # the states to render (``run --render``: scenarios.render.StateTrack)
 
     @property
     def sim_s(self) -> float:
@@ -138,7 +139,8 @@ class _Steps:
 def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
             progress: Callable[[int], None] | None = None, model=None, model_summary: dict | None = None,
             stop: Callable[[], bool] | None = None,
-            plant: Callable[[Scenario, Any], Any] | None = None) -> ArmResult:
+            plant: Callable[[Scenario, Any], Any] | None = None,
+            recorder: Callable[[int, float, Any], None] | None = None) -> ArmResult:
     """Run one arm of ``scenario`` closed-loop; return its trajectory (nothing printed).
 
     ``progress(n)`` is called with the number of communication steps done since the
@@ -148,8 +150,10 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     (a cooperative Ctrl-C: raised here, never inside the FMU). The regulator is closed
     whatever happens. ``plant(scenario, model)`` makes the walker instead of
     ``CassieWalker(model)`` (``scenarios.plant_fmu``: the plant FMU); its ``close()``, if
-    any, is called at the end. The result's ``timings`` say where the time went
-    (:data:`TIMINGS`).
+    any, is called at the end. ``recorder(k, t, walker)`` is called at every
+    communication step before the plant advances (``run --render``:
+    :class:`scenarios.render.StateRecorder`; its ``track()`` goes into the result).
+    The result's ``timings`` say where the time went (:data:`TIMINGS`).
     """
     from plant.sim import CassieWalker
 
@@ -173,7 +177,7 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     try:
         regulator.start(arm.overrides_dict(), 0.0, scenario.n_comm_steps * scenario.comm_step_s)
         lap = _lap(timings, "regulator_start_s", lap)
-        _run_steps(scenario, arm, walker, regulator, n_plant, steps, progress, stop)
+        _run_steps(scenario, arm, walker, regulator, n_plant, steps, progress, stop, recorder)
         lap = _lap(timings, "loop_s", lap)
     finally:
         regulator.close()
@@ -187,7 +191,8 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     timings.update(steps.timings, cpu_s=time.process_time() - cpu0)
     return ArmResult(scenario=scenario.name, arm=arm.name, regulator=regulator.kind, model=scenario.model,
                      rows=rows, fell=steps.fell, t_fall_s=steps.t_fall, fall_reason=steps.reason, wall_s=wall,
-                     model_summary=dict(model_summary or {}), timings=timings)
+                     model_summary=dict(model_summary or {}), timings=timings,
+                     track=None if recorder is None else recorder.track())
 
 
 def _lap(timings: dict[str, float], key: str, since: float) -> float:
@@ -198,7 +203,8 @@ def _lap(timings: dict[str, float], key: str, since: float) -> float:
 
 
 def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n_plant: int, steps: _Steps,
-               progress: Callable[[int], None] | None, stop: Callable[[], bool] | None) -> None:
+               progress: Callable[[int], None] | None, stop: Callable[[], bool] | None,
+               recorder: Callable[[int, float, Any], None] | None = None) -> None:
     """The communication steps of :func:`run_arm` (see the module docstring), into ``steps``."""
     h, t0, n_steps = scenario.comm_step_s, 0.0, scenario.n_comm_steps
     outputs = regulator.output_names()
@@ -234,6 +240,8 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
             c2 = clock()
             table[k] = (t, *cmd, *f, *map(inputs.__getitem__, SENSED_INPUTS), *map(out.__getitem__, outputs),
                         *tel.values())
+            if recorder is not None:
+                recorder(k, t, walker)
             c3 = clock()
             walker.advance(n_plant)
             c4 = clock()

@@ -9,6 +9,8 @@ the claim's checks, and ``timings`` of the writing (``csv_s``, ``plots_s``, thei
 ``cpu_s``, and the ``pid`` of the process that wrote: with ``--jobs N`` a worker, see
 :mod:`scenarios.runner`).
 ``<dir>/velocity.png``, ``psi.png``, ``torso.png``: :mod:`scenarios.plots`.
+``<dir>/<arm>.mp4``, ``<arm>.gif`` (``run --render``): :mod:`scenarios.render`; listed
+in the summary's ``videos``, the time they took in its ``timings.videos_s``.
 
 Statuses: an arm is ``complete`` (it ran to the end or to a fall), ``failed`` (it
 raised; ``error`` says why) or ``interrupted`` (stopped by Ctrl-C, or never started
@@ -36,8 +38,16 @@ from scenarios.scenario import CHECK_OPS, CHECKABLE_METRICS, Scenario
 log = logging.getLogger(__name__)
 
 ARM_STATUSES = ("complete", "failed", "interrupted")
-#: Every file a scenario's results folder may hold (nothing else is ever written there).
+#: Every file a scenario's results folder may hold besides the videos (:func:`is_result_file`).
 RESULT_FILES = ("timeseries.csv", "summary.json", *PLOTS)
+
+
+def is_result_file(name: str) -> bool:
+    """Whether a scenario's results folder may hold a file ``name`` (nothing else is ever
+    written there): :data:`RESULT_FILES` and the arms' videos."""
+    from scenarios.render import is_video_name
+
+    return name in RESULT_FILES or is_video_name(name)
 
 
 @dataclass(frozen=True)
@@ -205,10 +215,11 @@ def column_text(column: np.ndarray) -> list[str]:
 
 
 def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome], *,
-                  plots: bool = True) -> dict[str, Any]:
-    """Write csv, plots (unless ``plots`` is false: ``--no-plots``) and summary (last) into
+                  plots: bool = True, videos: bool = False) -> dict[str, Any]:
+    """Write csv, plots (unless ``plots`` is false: ``--no-plots``), the videos of the
+    arms that carry states to render (``videos``: ``--render``) and summary (last) into
     the folder ``dest``; return the summary (its ``timings``: seconds spent writing the
-    csv and the plots, the CPU time of both, the process ``pid``).
+    csv, the plots and the videos, the CPU time of all, the process ``pid``).
 
     Only complete arms have rows; the folder is meant to be a fresh one that
     :mod:`scenarios.store` renames into place once this returns.
@@ -223,8 +234,13 @@ def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequ
         write_timeseries(dest / "timeseries.csv", results)
     csv_done = time.perf_counter()
     summary["plots"] = write_plots(dest, scenario, results) if plots else []
-    summary["timings"] = {"csv_s": csv_done - lap, "plots_s": time.perf_counter() - csv_done,
-                          "cpu_s": time.process_time() - cpu0, "pid": os.getpid()}
+    plots_s = time.perf_counter() - csv_done
+    if videos:
+        from scenarios.render import write_videos
+
+        summary["videos"], videos_s = write_videos(dest, scenario, results)
+    summary["timings"] = {"csv_s": csv_done - lap, "plots_s": plots_s, "cpu_s": time.process_time() - cpu0,
+                          "pid": os.getpid(), **({"videos_s": videos_s} if videos else {})}
     write_json(dest / "summary.json", summary)
     return summary
 
@@ -338,6 +354,8 @@ SUMMARY_SCHEMA = _obj(
     status=_one_of("complete", "failed", "interrupted"), error=_opt(STR), arms=_map(_ARM),
     model_summary=_obj(pelvis_mass_kg=_opt(NUM), pelvis_com_m=_opt(_VEC3), total_mass_kg=NUM),
     verdict=ANY_OBJECT, plots=_list(_one_of(*PLOTS)),
+    videos=_list(_Kind(lambda v: isinstance(v, str) and is_result_file(v) and v not in RESULT_FILES,
+                       "a file name <arm>.mp4 or <arm>.gif")),
 )
 def _check(value: Any, kind: _Kind, where: str, problems: list[str]) -> None:
     if not kind.ok(value):

@@ -157,6 +157,10 @@ def _section(name: str, s: dict[str, Any] | None, problem: str | None) -> list[s
     lines += _claim(s)
     for plot in s.get("plots") or []:
         lines += [f"![{name} {plot}]({name}/{plot})", ""]
+    videos = s.get("videos") or []
+    if videos:  # run --render: the GIFs shown, the MP4s linked
+        lines += ["Videos: " + ", ".join(f"[{v}]({name}/{v})" for v in videos if v.endswith(".mp4")), ""]
+        lines += [f"![{name} {v}]({name}/{v})" for v in videos if v.endswith(".gif")] + [""]
     return lines
 
 

@@ -47,7 +47,8 @@ class RunSession:
         with bar, _sigint_sets(self.stop):
             runner.run_tasks(tasks, regulator=self.args.regulator, fmu_path=self.fmu_path,
                              unpack_dir=self.results_dir.fmu_dir, jobs=jobs, stop=self.stop,
-                             on_outcome=self.on_outcome, progress=bar.update, plant_fmu=self.args.plant_fmu)
+                             on_outcome=self.on_outcome, progress=bar.update, plant_fmu=self.args.plant_fmu,
+                             render=self.args.render)
         self.wall_s = time.perf_counter() - wall0
 
     def on_outcome(self, scenario, outcome):
@@ -76,7 +77,7 @@ class RunSession:
         except OSError as exc:
             self.write_errors.append(f"{scenario.name}: results not written: {exc}")
             return None
-        write = partial(output.write_results, plots=not self.args.no_plots)
+        write = partial(output.write_results, plots=not self.args.no_plots, videos=self.args.render)
         return runner.Job(write, (staged, scenario, self.args.regulator, outcomes),
                           partial(self.published, scenario.name, replace))
 

@@ -80,10 +80,11 @@ class StopFlag:
 
 def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None, unpack_dir: str | None,
              stop: Callable[[], bool], progress: Callable[[int], None] | None = None,
-             origin: float | None = None, plant_fmu: str | None = None) -> ArmOutcome:
+             origin: float | None = None, plant_fmu: str | None = None, render: bool = False) -> ArmOutcome:
     """One scenario x arm (its own walker and regulator instance) as an outcome; the plant
     in-process, or the CassiePlant FMU at ``plant_fmu`` (``--plant fmu``). A complete
-    arm's timings say when it ran (s since ``origin``, a ``perf_counter``)."""
+    arm's timings say when it ran (s since ``origin``, a ``perf_counter``). ``render``:
+    the result carries the states to render (:class:`scenarios.render.StateRecorder`)."""
     from scenarios.master import arm_regulator, run_arm
     from scenarios.plantio import load_plant_model
 
@@ -99,8 +100,13 @@ def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
             from scenarios.plant_fmu import plant_factory
 
             plant = plant_factory(plant_fmu, unpack_dir=unpack_dir)
+        recorder = None
+        if render:
+            from scenarios.render import StateRecorder
+
+            recorder = StateRecorder(scenario.comm_step_s)
         result = run_arm(scenario, arm, reg, progress=progress, stop=stop, model=model, model_summary=summary,
-                         plant=plant)
+                         plant=plant, recorder=recorder)
     except KeyboardInterrupt:
         return ArmOutcome(arm, "interrupted")
     except Exception as exc:  # one arm's failure is reported, the run goes on
@@ -126,9 +132,9 @@ def _init_worker(event: Any, origin: float) -> None:
 
 
 def _worker_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
-                 unpack_dir: str | None, plant_fmu: str | None = None) -> ArmOutcome:
+                 unpack_dir: str | None, plant_fmu: str | None = None, render: bool = False) -> ArmOutcome:
     out = run_task(scenario, arm, regulator, fmu_path, unpack_dir, _WORKER["stop"].is_set,
-                   origin=_WORKER["origin"], plant_fmu=plant_fmu)
+                   origin=_WORKER["origin"], plant_fmu=plant_fmu, render=render)
     if out.status == "complete" and "startup" in _WORKER:  # reported once, with the first complete arm
         out.result.timings.update(_WORKER.pop("startup"))
     return out
@@ -152,22 +158,22 @@ OnOutcome = Callable[[Scenario, ArmOutcome], "Job | None"]
 
 def run_tasks(tasks: Sequence[Task], *, regulator: str, fmu_path: str | None, unpack_dir: Path | None, jobs: int,
               stop: StopFlag, on_outcome: OnOutcome, progress: Callable[[int], None] | None = None,
-              plant_fmu: str | None = None) -> None:
+              plant_fmu: str | None = None, render: bool = False) -> None:
     """Run every task (``jobs`` > 1: in that many spawned processes, longest first) and
     hand each outcome to ``on_outcome`` in the calling thread, which may answer a
     :class:`Job` to run; after a stop, the tasks not run are reported interrupted (not
     started). ``progress(n)``: communication steps done (``jobs == 1``) or arms done
-    (``jobs > 1``)."""
+    (``jobs > 1``). ``render``: each complete arm carries the states to render."""
     unpack = None if unpack_dir is None else str(unpack_dir)
     if jobs == 1:
         origin = time.perf_counter()
         for s, arm in tasks:
-            out = run_task(s, arm, regulator, fmu_path, unpack, stop, progress, origin, plant_fmu)
+            out = run_task(s, arm, regulator, fmu_path, unpack, stop, progress, origin, plant_fmu, render)
             if progress is not None and out.status == "complete":
                 progress(s.n_comm_steps - len(out.result.rows))  # the steps a fall skipped
             _run_here(on_outcome(s, _first_line(s, out)))
         return
-    arm_args = (regulator, fmu_path, unpack, plant_fmu)
+    arm_args = (regulator, fmu_path, unpack, plant_fmu, render)
     _Pool(jobs, stop, on_outcome, progress).run(longest_first(tasks), arm_args)
 
 

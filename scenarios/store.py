@@ -115,7 +115,7 @@ def _existing(root: Path, name: str) -> tuple[str, Any]:
         entries = sorted(os.listdir(path))
     except OSError as exc:
         return "blocked", f"{path}: cannot list it ({exc.strerror})"
-    foreign = [e for e in entries if e not in output.RESULT_FILES or not (path / e).is_file()]
+    foreign = [e for e in entries if not output.is_result_file(e) or not (path / e).is_file()]
     if foreign:
         return "blocked", (f"{path} holds files this tool does not write ({', '.join(foreign[:5])}); "
                            "move them away or choose another --out")
