@@ -20,6 +20,8 @@ import time
 from pathlib import Path
 
 import psutil
+
+from plant.model import menagerie_root
 import pytest
 
 from scenarios.campaign import forkrun
@@ -118,7 +120,7 @@ def test_a_forked_run_past_its_timeout_is_killed_and_the_server_goes_on(tmp_path
 
 
 def test_smoke_campaign_with_fork_runs_gives_the_same_rows(tmp_path, built_fmu):
-    env = {**os.environ, "MENAGERIE_ROOT": str(Path(os.environ["MENAGERIE_ROOT"]).resolve())}
+    env = {**os.environ, "MENAGERIE_ROOT": str(menagerie_root().resolve())}  # the loader's default
     got = {}
     for mode, extra in (("fork", ["--fork-runs"]), ("plain", [])):
         out = tmp_path / mode
@@ -136,7 +138,7 @@ def test_smoke_campaign_with_fork_runs_gives_the_same_rows(tmp_path, built_fmu):
 def test_interrupt_with_fork_runs_kills_the_runs_then_resume_finishes(tmp_path, built_fmu):
     """Ctrl-C as a terminal sends it (SIGINT to the CLI's process group): exit 130, no
     server or forked run left alive; ``--resume`` runs only what was not complete."""
-    env = {**os.environ, "MENAGERIE_ROOT": str(Path(os.environ["MENAGERIE_ROOT"]).resolve())}
+    env = {**os.environ, "MENAGERIE_ROOT": str(menagerie_root().resolve())}  # the loader's default
     cli_cmd = [sys.executable, "-c", "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
                "from scenarios.cli import main; sys.exit(main())", "campaign"]
     out = tmp_path / "out"

@@ -70,9 +70,13 @@ class Task:
 
 
 def client_env() -> tuple[tuple[str, str], ...]:
-    """The client's environment the runs must see, with paths made absolute."""
-    root = os.environ.get("MENAGERIE_ROOT")
-    return (("MENAGERIE_ROOT", str(Path(root).resolve())),) if root else ()
+    """The client's environment the runs must see, with paths made absolute: the Menagerie
+    folder the client's model loader uses (``MENAGERIE_ROOT`` or its default), so workers
+    started elsewhere (a remote scheduler's) load the same model."""
+    from plant.model import menagerie_root
+
+    root = menagerie_root()
+    return (("MENAGERIE_ROOT", str(root.resolve())),) if root is not None else ()
 
 
 def die_with_parent() -> None:  # runs in the child between fork and exec: no allocation-heavy work
