@@ -112,7 +112,9 @@ def test_a_killed_forked_run_or_server_is_a_dead_run_process(tmp_path, servers, 
 
 
 def test_a_forked_run_past_its_timeout_is_killed_and_the_server_goes_on(tmp_path, servers):
-    result = task_mod.run_sample(sample_task(tmp_path, "s0000", duration=20.0, timeout_s=3.0))
+    # 40 s of walking takes >= 2.5 s of wall even at the physics' limit here (~16 simulated s per
+    # wall s): a 1 s timeout always cuts it (a 20 s run under 3 s finished in time on a quiet machine)
+    result = task_mod.run_sample(sample_task(tmp_path, "s0000", duration=40.0, timeout_s=1.0))
     assert all(r["status"] == "failed" and r["error"].startswith("timeout: ") for r in result["rows"])
     assert len(servers) == 1 and servers[0].alive() and psutil.Process(servers[0].proc.pid).children() == []
     again = task_mod.run_sample(sample_task(tmp_path, "s0001"))
