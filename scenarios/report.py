@@ -19,7 +19,7 @@ from typing import Any
 from fmu_src.avr_errors import AvrError
 from scenarios.errors import ScenarioError
 from scenarios.formatting import show
-from scenarios.metrics import CONVERGENCE_TOL_MPS, STEADY_WINDOW_S
+from scenarios.metrics import CONVERGENCE_TOL_MPS, LEVEL_WINDOW_S, STEADY_WINDOW_S
 from scenarios.output import TABLE_COLUMNS, fmt, incomplete_arms, table_rows
 from scenarios.output import verdict as output_verdict
 
@@ -154,6 +154,7 @@ def _section(name: str, s: dict[str, Any] | None, problem: str | None) -> list[s
         lines += [f"**Run {s['status']}:** `{_md_escape(_why_incomplete(s))}`", ""]
     if s.get("arm_names") or s.get("arms"):
         lines += _arm_table(s)
+        lines += _level_table(s)
     lines += _claim(s)
     for plot in s.get("plots") or []:
         lines += [f"![{name} {plot}]({name}/{plot})", ""]
@@ -175,6 +176,24 @@ def _arm_table(s: dict[str, Any]) -> list[str]:
         if row.get("fell") and row.get("fall_reason"):
             cells[1] = f"yes ({_md_escape(row['fall_reason'])})"
         lines.append("| " + " | ".join(cells) + " |")
+    return lines + [""]
+
+
+def _level_table(s: dict[str, Any]) -> list[str]:
+    """Per command level (scenarios with more than one): each complete arm's
+    ``level_errors_vx`` (mean |step-averaged forward error| over the level's last seconds)."""
+    arms = {a: m for a, m in (s.get("arms") or {}).items()
+            if m.get("status") == "complete" and m.get("level_errors_vx")}
+    if not arms or max(len(m["level_errors_vx"]) for m in arms.values()) < 2:
+        return []
+    levels = max(arms.values(), key=lambda m: len(m["level_errors_vx"]))["level_errors_vx"]
+    head = ["arm"] + [f"{show(lv['vx_des'])} m/s from {show(lv['t_s'])} s" for lv in levels]
+    lines = [f"Forward error per command level (m/s, mean over each level's last "
+             f"{show(LEVEL_WINDOW_S)} s; `-`: shorter than that, or the level the arm fell in):", "",
+             "| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
+    for arm, m in arms.items():
+        cells = [fmt(lv.get("error_vx"), 3) for lv in m["level_errors_vx"]]
+        lines.append("| " + " | ".join([arm] + cells + ["-"] * (len(levels) - len(cells))) + " |")
     return lines + [""]
 
 

@@ -153,7 +153,7 @@ def test_interrupt_with_fork_runs_kills_the_runs_then_resume_finishes(tmp_path, 
             assert time.monotonic() < deadline, "no sample finished"
             time.sleep(0.1)
         forked = [p for p in psutil.Process(cli.pid).children(recursive=True)
-                  if "scenarios.campaign.forkrun" in p.cmdline()]  # the servers and their runs
+                  if "scenarios.campaign.forkrun" in _cmdline(p)]  # the servers and their runs
         os.killpg(cli.pid, signal.SIGINT)
         _, err = cli.communicate(timeout=60)
     finally:
@@ -175,6 +175,15 @@ def test_interrupt_with_fork_runs_kills_the_runs_then_resume_finishes(tmp_path, 
     assert [x for x in after if x["sample"] in done] == before  # not run again
     assert all(len(list((out / "runs" / s).glob("try*"))) == 1 for s in done)
     assert not (out / ".tmp").exists() and not (out / ".dask").exists()
+
+
+def _cmdline(p: psutil.Process) -> list[str]:
+    """``p``'s command line; [] for a process that has just ended (a zombie run not yet
+    reaped by its server, or one already gone): it is no longer running either way."""
+    try:
+        return p.cmdline()
+    except (psutil.ZombieProcess, psutil.NoSuchProcess):
+        return []
 
 
 def _rows(out: Path) -> list[dict[str, str]]:

@@ -482,3 +482,27 @@ def test_mean_offsets_over_the_last_5_s():
     assert m["mean_delta_swing_hip_pitch_last_s"] == pytest.approx(-0.08)
     assert metrics.summarize_arm(rows_from(t, 0.5, 0.5), fell=False, t_fall_s=None)[
         "mean_delta_swing_knee_last_s"] is None  # no such column: no number invented
+
+
+def test_report_tables_the_error_per_command_level(tmp_path):
+    """A staircase's summary carries ``level_errors_vx``; the report tables it per arm."""
+    s = spec.resolve_targets(["compare_staircase"])[0]
+    t = np.arange(4000) * 0.005  # 20 s: two 10 s levels
+    vx_des = np.where(t < 10.0, 0.2, 0.4)
+
+    class R:
+        def __init__(self, arm, vx):
+            self.arm, self.fell, self.t_fall_s = arm, False, None
+            self.rows = rows_from(t, vx, vx_des)
+            self.wall_s, self.fall_reason, self.model_summary = 1.0, None, {}
+
+    (tmp_path / s.name).mkdir()
+    output.write_results(tmp_path / s.name, s, "inprocess",
+                         [output.ArmOutcome("adaptive", "complete", result=R("adaptive", vx_des + 0.01)),
+                          output.ArmOutcome("pd_only", "complete", result=R("pd_only", vx_des + 0.1))])
+    levels = json.loads((tmp_path / s.name / "summary.json").read_text())["arms"]["pd_only"]["level_errors_vx"]
+    assert [(lv["t_s"], lv["vx_des"]) for lv in levels] == [(0.0, 0.2), (10.0, 0.4)]
+    assert levels[1]["error_vx"] == pytest.approx(0.1)
+    text = report.write_report(tmp_path)[0].read_text()
+    assert "| arm | 0.2 m/s from 0 s | 0.4 m/s from 10 s |" in text
+    assert "| adaptive | 0.010 | 0.010 |" in text and "| pd_only | 0.100 | 0.100 |" in text
