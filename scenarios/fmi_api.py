@@ -20,11 +20,14 @@ import os
 from ctypes import CFUNCTYPE, POINTER, byref, c_bool, c_double, c_int, c_int32, c_size_t, c_uint, c_void_p
 from typing import Any, Callable
 
+from fmu_src.avr_specs import PYTHON_TYPES
+
 log = logging.getLogger("scenarios.fmi_host")
 
 FMI_STATUS = ("OK", "Warning", "Discard", "Error", "Fatal", "Pending")
 #: Python type of each of the host's variable kinds (values set by name are cast to it).
-FMI_CASTS: dict[str, Callable[[Any], Any]] = {"Real": float, "Integer": int, "Boolean": bool}
+#: Python cast per FMI 2.0 type name: the slave's own table (``fmu_src.avr_specs``).
+FMI_CASTS: dict[str, Callable[[Any], Any]] = PYTHON_TYPES
 #: How many of an instance's latest messages are kept for its errors.
 LOG_KEEP = 200
 

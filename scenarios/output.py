@@ -20,6 +20,7 @@ complete (:func:`verdict`): an incomplete run is never a pass.
 """
 from __future__ import annotations
 
+import dataclasses
 import json
 import logging
 import os
@@ -101,10 +102,7 @@ def scenario_header(scenario: Scenario, regulator: str) -> dict[str, Any]:
             "joint_damping_scale": scenario.joint_damping_scale,
             "pushes": [{"t_s": p.t_s, "force_n": list(p.force_n), "duration_s": p.duration_s}
                        for p in scenario.pushes],
-            "terrain": None if scenario.terrain is None else {
-                "max_height_m": scenario.terrain.max_height_m, "max_slope_deg": scenario.terrain.max_slope_deg,
-                "seed": scenario.terrain.seed, "size_m": scenario.terrain.size_m,
-                "flat_radius_m": scenario.terrain.flat_radius_m},
+            "terrain": None if scenario.terrain is None else dataclasses.asdict(scenario.terrain),
         },
         "claim": claim_dict(scenario),
     }

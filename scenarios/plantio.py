@@ -5,6 +5,7 @@ off itself (``CassieWalker.set_pelvis_force``) on communication-step boundaries.
 """
 from __future__ import annotations
 
+import dataclasses
 import functools
 import logging
 import os
@@ -26,9 +27,7 @@ def build_perturbation(scenario: "Scenario", nominal_torso_mass_kg: float | None
     when that is None (validation before loading) the plant's nominal pelvis mass is used.
     """
     t = scenario.terrain
-    terrain = None if t is None else dict(max_height_m=t.max_height_m, max_slope_deg=t.max_slope_deg,
-                                          seed=t.seed, size_m=t.size_m,
-                                          flat_radius_m=t.flat_radius_m)
+    terrain = None if t is None else dataclasses.asdict(t)  # Terrain's fields are TerrainSpec's
     pert = _perturbation(scenario.torso_mass_kg, scenario.torso_added_mass_kg, scenario.torso_com_offset_m,
                          scenario.joint_damping_scale, terrain, nominal_torso_mass_kg)
     return None if pert.is_nominal else pert

@@ -53,11 +53,6 @@ class RegulatorPath(abc.ABC):
         self.close()
 
 
-def _fmi_type(spec) -> str:
-    kind = str(spec.type).lower()
-    return "Boolean" if kind.startswith("bool") else "Integer" if kind.startswith("int") else "Real"
-
-
 class InProcessRegulator(RegulatorPath):
     """The regulator core called directly, with the FMU's data flow and casts."""
 
@@ -67,7 +62,7 @@ class InProcessRegulator(RegulatorPath):
         from fmu_src import avr_core
 
         self._core = avr_core
-        self._input_types = [(s.name, FMI_CASTS[_fmi_type(s)]) for s in self._core.INPUT_SPECS]
+        self._input_types = [(s.name, FMI_CASTS[s.type]) for s in self._core.INPUT_SPECS]
         self._outputs = tuple(s.name for s in self._core.OUTPUT_SPECS)
         self._step_fn: Callable[[Any, float], dict] | None = None
 
@@ -76,14 +71,12 @@ class InProcessRegulator(RegulatorPath):
 
     def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
         core = self._core
-        types = {s.name: FMI_CASTS[_fmi_type(s)] for s in core.PARAM_SPECS}
+        types = {s.name: FMI_CASTS[s.type] for s in core.PARAM_SPECS}
         unknown = sorted(set(parameters) - set(types))
         if unknown:
             raise CosimError(f"unknown regulator parameter(s): {', '.join(unknown)}")
-        values = {s.name: s.default for s in core.PARAM_SPECS}
-        values.update(parameters)
-        params = core.RegulatorParams(**{n: types[n](v) for n, v in values.items()})
-        core.validate_params(params)
+        # cast as the FMU's setters do, then the core's own defaults and checks
+        params = core.params_from_overrides({n: types[n](v) for n, v in parameters.items()})
         self._step_fn = core.Regulator(params).step
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
@@ -228,9 +221,11 @@ class RlHzdRegulator(RegulatorPath):
     kind = "rl_hzd"
 
     def __init__(self, policy_path: str | Path | None = None) -> None:
+        from fmu_src.avr_core import RegulatorInputs
         from plant.constants import OFFSET_NAMES
         from scenarios.rl_hzd.policy import DEFAULT_POLICY
 
+        self._inputs = RegulatorInputs
         self._path = Path(policy_path or DEFAULT_POLICY)
         self._outputs = OFFSET_NAMES
         self._policy = None
@@ -249,9 +244,7 @@ class RlHzdRegulator(RegulatorPath):
             raise CosimError(f"cannot load the RL-HZD policy {self._path}: {exc}") from exc
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
-        from fmu_src.avr_core import RegulatorInputs
-
-        return self._policy.step(RegulatorInputs(**inputs), float(h))
+        return self._policy.step(self._inputs(**inputs), float(h))
 
     def close(self) -> None:
         self._policy = None
@@ -261,7 +254,7 @@ def arm_regulator(arm, kind: str, fmu_path: str | Path | None = None, *,
                   unpack_dir: str | Path | None = None) -> RegulatorPath:
     """The path that drives ``arm``: the RL-HZD policy for an ``rl_hzd`` arm, else
     :func:`make_regulator` of ``kind``."""
-    if getattr(arm, "controller", "regulator") == "rl_hzd":
+    if arm.controller == "rl_hzd":
         return RlHzdRegulator()
     return make_regulator(kind, fmu_path, unpack_dir=unpack_dir)
 

@@ -5,6 +5,8 @@ import numpy as np
 import pytest
 
 from plant.constants import OFFSET_NAMES
+from scenarios import master, output, spec
+from scenarios.metrics import level_errors_vx
 from scenarios.rl_hzd import policy as P
 from scenarios.rl_hzd import train as T
 from fmu_src.avr_core import RegulatorInputs
@@ -60,9 +62,6 @@ def test_training_is_reproducible_from_its_seed():
 
 
 # --------------------------------------------------------------------------- in the master
-from scenarios import master, spec  # noqa: E402
-from scenarios.metrics import level_errors_vx  # noqa: E402
-
 
 def test_rl_hzd_is_a_builtin_arm_without_parameters():
     s = spec.load_scenario(spec.SUITE_DIR / "compare_staircase_rl.toml", check_plant=False)
@@ -74,8 +73,6 @@ def test_rl_hzd_is_a_builtin_arm_without_parameters():
 def test_rl_hzd_arm_walks_in_the_master_and_writes_beside_the_regulator_arms(tmp_path):
     """A real 6 s closed loop: the policy's six offsets drive the plant; the CSV holds both
     arms (the policy's empty psi cells) and the level errors are per command level."""
-    from scenarios import output
-
     s = spec.override(spec.load_scenario(spec.SUITE_DIR / "compare_staircase_rl.toml"), duration_s=6.0)
     results = master.run_scenario(s, "inprocess", arms=("pd_only", "rl_hzd"))
     rl = results[1]

@@ -67,10 +67,6 @@ class HzdPolicy:
             self._held = self.action(inputs)
         return dict(zip(OFFSET_NAMES, map(float, self._held)))
 
-    def reset(self) -> None:
-        self._step = -1
-        self._held = np.zeros(len(OFFSET_NAMES))
-
 
 def save_policy(path: Path, weights: np.ndarray, settings: dict, curve: list[dict]) -> None:
     """Write weights with the training settings and curve (JSON, exact floats)."""

@@ -78,7 +78,7 @@ def episode_return(weights: np.ndarray, seed_words, model_source: str = "menager
     walker, policy = _walker(model_source), HzdPolicy(weights)
     commands = _commands(seed_words)
     n_steps = round(EPISODE_S / COMM_STEP_S)
-    total, counted = 0.0, 0
+    total = 0.0
     for k in range(n_steps):
         t = k * COMM_STEP_S
         for t_cmd, vx, vy in commands:
@@ -90,7 +90,6 @@ def episode_return(weights: np.ndarray, seed_words, model_source: str = "menager
         walker.advance(PLANT_STEPS_PER_COMM)
         if t < REWARD_FROM_S:
             continue
-        counted += 1
         if walker.fell():
             break
         e_vx, e_vy = u["vx"] - walker.vx_des_mps, u["vy"] - walker.vy_des_mps
