@@ -32,8 +32,14 @@ tracking at plant rate with fresh joint measurements.
   per-speed offset from the gait library makes it settle at ``v_des``.  There is
   no integral action anywhere in the nominal controller, so a model change
   (pelvis mass, COM) leaves a steady-state speed error for the regulator.
-* Heading hold: the stance hip yaw acts as a PD on the pelvis yaw (reference:
-  the yaw at start), the swing hip yaw lands the foot along that heading.
+* Heading and turning: the reference heading starts at the yaw at start and
+  turns at the commanded yaw rate (``yaw_rate_des``, rad/s, positive to the left,
+  through the rate limit ``yaw_accel_limit_radps2``, and only while walking).  The
+  stance hip yaw is a PD on the pelvis yaw about that reference (rate reference
+  ``yaw_rate_des``); the swing hip yaw lands the foot along the reference heading
+  advanced by half a step, ``yaw_rate_des * T / 2``, so that the stance hip yaw
+  swings symmetrically about zero while the pelvis turns over it.  Speeds stay in
+  the pelvis heading frame, so ``vx``/``vy`` mean the same when turning.
 * The gait speed follows the command through a rate limit
   (``accel_limit_mps2``).
 * Start from rest: ``stand_time_s`` standing on both feet (COM fed back through
@@ -195,6 +201,9 @@ class NominalController:
         self.vx_des = 0.0
         self.vy_des = 0.0
         self.cmd_vx = self.cmd_vy = 0.0
+        #: Turning rate of the reference heading (rad/s): the command through its rate limit.
+        self.yaw_rate_des = 0.0
+        self.cmd_yaw_rate = 0.0
         self._gaits = GaitLibrary.uniform(GaitParams())
         self.mode = "stand"
         self.stance = self.p.first_stance
@@ -226,7 +235,8 @@ class NominalController:
     # ----------------------------------------------------------- memory
     #: Everything the controller carries from one update to the next (the rest is fixed
     #: at construction from the model and the standing pose); the FMU state holds these.
-    MEMORY_FIELDS = ("offsets", "vx_des", "vy_des", "cmd_vx", "cmd_vy", "mode", "stance", "step_index",
+    MEMORY_FIELDS = ("offsets", "vx_des", "vy_des", "cmd_vx", "cmd_vy", "yaw_rate_des", "cmd_yaw_rate",
+                     "mode", "stance", "step_index",
                      "t_step_start", "tau", "vx_step_avg", "vy_filt", "vx_filt",
                      "_step_start_xy", "_swing_start", "_last_t", "yaw_ref")
 
@@ -265,13 +275,16 @@ class NominalController:
         self.gait = self._gaits.lookup(self.vx_des, self.vy_des)
 
     # ----------------------------------------------------------- interface
-    def set_command(self, vx: float, vy: float, gaits) -> None:
-        """Commanded speed (m/s) and the gait library (``lookup(vx, vy) -> GaitParams``).
+    def set_command(self, vx: float, vy: float, gaits, yaw_rate: float = 0.0) -> None:
+        """Commanded speed (m/s), the gait library (``lookup(vx, vy) -> GaitParams``)
+        and the commanded yaw rate (rad/s, positive turns left).
 
         The gait follows the command through a rate limiter
-        (``ControllerParams.accel_limit_mps2``) so walking starts from rest smoothly.
+        (``ControllerParams.accel_limit_mps2``, ``yaw_accel_limit_radps2``) so walking
+        starts from rest smoothly.
         """
         self.cmd_vx, self.cmd_vy, self._gaits = float(vx), float(vy), gaits
+        self.cmd_yaw_rate = float(yaw_rate)
         self.gait = None  # force a new lookup (the library may have changed)
         self._refresh_gait(0.0)
 
@@ -283,6 +296,10 @@ class NominalController:
             tx, ty = self.cmd_vx, self.cmd_vy
         nx = self.vx_des + max(-a, min(a, tx - self.vx_des))
         ny = self.vy_des + max(-a, min(a, ty - self.vy_des))
+        tw = self.cmd_yaw_rate if self.mode == "walk" else 0.0
+        if tw != self.yaw_rate_des:
+            aw = self.p.yaw_accel_limit_radps2 * dt
+            self.yaw_rate_des += max(-aw, min(aw, tw - self.yaw_rate_des))
         if nx != self.vx_des or ny != self.vy_des or self.gait is None:
             self.vx_des, self.vy_des = nx, ny
             self.gait = self._gaits.lookup(nx, ny)
@@ -363,9 +380,11 @@ class NominalController:
         phys, p = self.phys, self.p
         t = phys.time_s
         yaw, pitch, roll, vx_h, vy_h, roll_rate, pitch_rate, yaw_rate = phys.heading_state()
-        yaw_err = math.remainder(yaw - self.yaw_ref, math.tau)
         dt = max(t - self._last_t, 0.0)
         self._last_t = t
+        if self.yaw_rate_des:
+            self.yaw_ref = math.remainder(self.yaw_ref + self.yaw_rate_des * dt, math.tau)
+        yaw_err = math.remainder(yaw - self.yaw_ref, math.tau)
         self.vy_filt = _low_pass(self.vy_filt, vy_h, dt, p.vy_filter_tau_s)
         self.vx_filt = _low_pass(self.vx_filt, vx_h, dt, p.vx_filter_tau_s)
         self._refresh_gait(dt)
@@ -409,7 +428,7 @@ class NominalController:
         # Heading hold: hip yaw axes point up, so with the foot fixed the pelvis
         # yaw falls as the hip yaw rises.
         targets.q[s, "hip-yaw"] = q["hip-yaw"] + sensed.yaw_err
-        targets.qd[s, "hip-yaw"] = qd["hip-yaw"] + sensed.yaw_rate
+        targets.qd[s, "hip-yaw"] = qd["hip-yaw"] + sensed.yaw_rate - self.yaw_rate_des
         targets.q[s, "foot"] = q["foot"]
         targets.kp[s, "foot"] = 0.0
         targets.kd[s, "foot"] = 0.0
@@ -452,7 +471,8 @@ class NominalController:
         side = 1.0 if self.swing == "left" else -1.0
         phi = (_neutral_angle(self.vy_des, step_time_s, leg_length_m) + gait.lateral_offset_rad
                + side * gait.step_width_rad + offsets["delta_swing_hip_roll"]
-               + p.lateral_speed_gain * (self.vy_filt - self.vy_des))
+               + p.lateral_speed_gain * (self.vy_filt - self.vy_des)
+               + p.turn_lateral_gain * self.vx_des * self.yaw_rate_des)
         return theta, phi
 
     def _walking_targets(self, targets: _Targets, sensed: _Sensed) -> None:
@@ -479,7 +499,8 @@ class NominalController:
         targets.q[sw, "knee"] = knee + offsets["delta_swing_knee"] * b
         targets.q[sw, "hip-pitch"] = theta + sensed.pitch - kin.angle_offset(knee)
         targets.q[sw, "hip-roll"] = phi - sensed.roll
-        targets.q[sw, "hip-yaw"] = -sensed.yaw_err  # swing foot lands along the reference heading
+        # The swing foot lands along the reference heading half a step ahead.
+        targets.q[sw, "hip-yaw"] = -sensed.yaw_err + 0.5 * self.yaw_rate_des * gait.step_time_s
         targets.q[sw, "foot"] = self._level_foot(sensed.q[sw], sensed.pitch)
 
     def _write_servos(self, targets: _Targets) -> None:

@@ -28,7 +28,7 @@ class ControllerParams:
     #: Phase switching.
     switch_min_tau: float = 0.6
     switch_max_tau: float = 1.1
-    touchdown_force_n: float = 200.0
+    touchdown_force_n: float = 100.0
     #: A swing foot carrying at least this much (N) and at least as much as the stance
     #: foot has also touched down: on an up-slope the swing foot lands early and takes the
     #: weight gradually, below ``touchdown_force_n``; holding the stance until
@@ -60,6 +60,11 @@ class ControllerParams:
     lateral_speed_gain: float = 0.3
     #: Rate limit of the gait speed toward the command (m/s^2).
     accel_limit_mps2: float = 0.5
+    #: Rate limit of the reference heading's turning rate toward the command (rad/s^2).
+    yaw_accel_limit_radps2: float = 0.5
+    #: Landing lateral angle per unit of centripetal acceleration vx_des * yaw_rate_des
+    #: (rad per m/s^2): leans the step into the turn so the pelvis keeps no lateral speed.
+    turn_lateral_gain: float = -0.13
     swing_leg_max_length_m: float = 0.93
 
     def __post_init__(self):

@@ -63,6 +63,7 @@ class CassieWalker:
         self._fall_reason = None
         self.vx_des_mps = 0.0
         self.vy_des_mps = 0.0
+        self.yaw_rate_des_radps = 0.0
         self.set_command(0.0, 0.0)
 
     @property
@@ -79,10 +80,12 @@ class CassieWalker:
         """Simulated time (s)."""
         return self.physics.time_s
 
-    def set_command(self, vx_des_mps: float, vy_des_mps: float) -> None:
-        """Commanded forward/lateral speed (m/s, heading frame); selects the gait."""
+    def set_command(self, vx_des_mps: float, vy_des_mps: float, yaw_rate_des_radps: float = 0.0) -> None:
+        """Commanded forward/lateral speed (m/s, heading frame; selects the gait) and
+        turning rate (rad/s, positive turns left)."""
         self.vx_des_mps, self.vy_des_mps = float(vx_des_mps), float(vy_des_mps)
-        self.controller.set_command(self.vx_des_mps, self.vy_des_mps, self.gaits)
+        self.yaw_rate_des_radps = float(yaw_rate_des_radps)
+        self.controller.set_command(self.vx_des_mps, self.vy_des_mps, self.gaits, self.yaw_rate_des_radps)
 
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
         """Regulator joint offsets (rad); keys from ``OFFSET_KEYS``; unknown key -> KeyError."""
@@ -121,7 +124,8 @@ class CassieWalker:
         the servo gains, the walker's and the controller's memory (plain Python values)."""
         return {"physics": self.physics.physics_state().tolist(),
                 "walker": {"substep": self._substep, "fall_reason": self._fall_reason,
-                           "vx_des_mps": self.vx_des_mps, "vy_des_mps": self.vy_des_mps},
+                           "vx_des_mps": self.vx_des_mps, "vy_des_mps": self.vy_des_mps,
+                           "yaw_rate_des_radps": self.yaw_rate_des_radps},
                 "controller": self.controller.memory()}
 
     def set_state(self, state: Mapping) -> None:
@@ -150,6 +154,7 @@ class CassieWalker:
         self._substep = substep
         self._fall_reason = walker["fall_reason"]
         self.vx_des_mps, self.vy_des_mps = float(walker["vx_des_mps"]), float(walker["vy_des_mps"])
+        self.yaw_rate_des_radps = float(walker["yaw_rate_des_radps"])
 
     def set_pelvis_force(self, force_n) -> None:
         """Constant world-frame force (N, 3-vector) on the pelvis until changed."""
@@ -170,7 +175,7 @@ class CassieWalker:
         """Named floats for logging (SI units; stance 0 = left, 1 = right)."""
         ph, c = self.physics, self.controller
         p = ph.pelvis_position()
-        _, pitch, roll, vx, vy, _, _, _ = ph.heading_state()
+        yaw, pitch, roll, vx, vy, _, _, yaw_rate = ph.heading_state()
         fl, fr = ph.foot_normal_forces_n()
         return {
             "t": self.time_s,
@@ -182,6 +187,7 @@ class CassieWalker:
             "tau": float(c.tau), "step_index": float(c.step_index),
             "left_foot_force": float(fl), "right_foot_force": float(fr),
             "vx_des": self.vx_des_mps, "vy_des": self.vy_des_mps,
+            "yaw": yaw, "yaw_rate": yaw_rate, "yaw_rate_des": self.yaw_rate_des_radps,
         }
 
 

@@ -20,7 +20,7 @@ from plant.sim import CassieWalker, apply_regulator
 REG_KEYS = {"vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index"}
 TEL_KEYS = {"t", "pelvis_x", "pelvis_y", "pelvis_z", "vx", "vy", "vx_step_avg", "vy_signal",
             "pitch", "roll", "stance", "tau", "step_index", "left_foot_force",
-            "right_foot_force", "vx_des", "vy_des"}
+            "right_foot_force", "vx_des", "vy_des", "yaw", "yaw_rate", "yaw_rate_des"}
 
 
 @pytest.fixture(scope="module")
