@@ -136,7 +136,7 @@ def test_smoke_campaign_local_cluster(smoke_run):
     assert tries(out) == {f"s{i:04d}": 1 for i in range(4)}
     summary = json.loads((out / rs[0]["run_dir"] / "summary.json").read_text())
     assert summary["arms"]["adaptive"]["steady_state_error_vx"] == float(rs[0]["steady_state_error_vx"])
-    for f in ("campaign.md", "fall_rate.png", "errors.png", "factors.png", "paired.png", "samples/s0003.toml"):
+    for f in ("campaign.md", "fall_rate.png", "errors.png", "factors.png", "paired.png", "speeds.png", "samples/s0003.toml"):
         assert (out / f).is_file(), f
     assert "| adaptive | 4 | 0 | 0/4 = 0 %" in (out / "campaign.md").read_text()
     assert_clean(tmp, out)

@@ -3,7 +3,9 @@
 - ``fall_rate.png``: fall rate per arm with its 95 % Wilson interval;
 - ``errors.png``: the steady-state errors per arm (violin + box, every run a dot);
 - ``factors.png``: sse_vx against each factor, one colour per arm, falls on a top band;
-- ``paired.png``: the first arm's sse_vx against the second's, sample by sample.
+- ``paired.png``: the first arm's sse_vx against the second's, sample by sample;
+- ``speeds.png`` (a campaign that varies ``vx_des`` or ``vy_des``): the achieved speed
+  (mean over the last seconds) against the commanded one, per arm; falls marked.
 """
 from __future__ import annotations
 
@@ -16,6 +18,8 @@ from scenarios.campaign import analysis
 from scenarios.campaign.task import COMPLETE
 
 SSE_KEYS = (("steady_state_error_vx", "sse_vx (m/s)"), ("steady_state_error_vy", "sse_vy (m/s)"))
+#: Command factors of ``speeds.png`` and the metric each is achieved as.
+SPEED_FACTORS = (("vx_des", "mean_vx_last_s"), ("vy_des", "mean_vy_last_s"))
 
 
 def _plt():
@@ -155,8 +159,38 @@ def paired(data: analysis.CampaignData) -> str | None:
     return _save(fig, data.root, "paired.png")
 
 
+def speeds(data: analysis.CampaignData) -> str | None:
+    """Achieved vs commanded speed for each command factor the campaign varies."""
+    varied = [(f, m) for f, m in SPEED_FACTORS if f in data.factors]
+    if not varied:
+        return None
+    plt = _plt()
+    fig, axes = plt.subplots(1, len(varied), figsize=(4.8 * len(varied), 4.4), squeeze=False)
+    colors = _colors(data.arms)
+    done = [r for r in data.rows if r["status"] == COMPLETE]
+    for ax, (factor, metric) in zip(axes[0], varied):
+        cmds = sorted({float(r[factor]) for r in done})
+        span = (cmds[-1] - cmds[0]) or 1.0
+        for i, arm in enumerate(data.arms):
+            dx = (i - (len(data.arms) - 1) / 2) * 0.012 * span  # side by side at each command
+            walked = [r for r in done if r["arm"] == arm and not r["fell"] and r[metric] is not None]
+            fell = [r for r in done if r["arm"] == arm and r["fell"]]
+            ax.scatter([float(r[factor]) + dx for r in walked], [r[metric] for r in walked], s=14,
+                       color=colors[arm], alpha=0.7, label=arm)
+            if fell:
+                ax.scatter([float(r[factor]) + dx for r in fell], [cmds[0] - 0.1 * span] * len(fell), s=24,
+                           marker="x", color=colors[arm], label=f"{arm}: fell ({len(fell)})")
+        ax.plot([cmds[0], cmds[-1]], [cmds[0], cmds[-1]], "k--", lw=0.8, label="achieved = commanded")
+        ax.set_xlabel(f"commanded {factor} (m/s)")
+        ax.set_ylabel(f"achieved ({metric}, m/s)")
+        ax.grid(alpha=0.3)
+        ax.legend(fontsize=8)
+    fig.suptitle(f"{data.manifest['name']}: commanded vs achieved speed")
+    return _save(fig, data.root, "speeds.png")
+
+
 def write_plots(data: analysis.CampaignData) -> list[str]:
     if not any(r["status"] == COMPLETE for r in data.rows):
         return []
-    written = [fall_rate(data), errors(data), factors(data), paired(data)]
+    written = [fall_rate(data), errors(data), factors(data), paired(data), speeds(data)]
     return [w for w in written if w]
