@@ -20,7 +20,7 @@ from fmu_src.avr_errors import AvrError
 from scenarios.errors import ScenarioError
 from scenarios.formatting import show
 from scenarios.metrics import CONVERGENCE_TOL_MPS, LEVEL_WINDOW_S, STEADY_WINDOW_S
-from scenarios.output import TABLE_COLUMNS, fmt, incomplete_arms, table_rows
+from scenarios.output import TABLE_COLUMNS, fmt, incomplete_arms, summary_commands, table_rows
 from scenarios.output import verdict as output_verdict
 
 log = logging.getLogger(__name__)
@@ -72,12 +72,17 @@ def _num(v: Any) -> str:
     return show(v, REPORT_FLOAT_FORMAT, none="null", quote=False)
 
 
+def _turn(yaw_rate: float) -> str:
+    return f", turning {yaw_rate:g} rad/s" if yaw_rate else ""
+
+
 def _plant_line(s: dict[str, Any]) -> str:
     """Commands, perturbation as specified, and the plant as actually loaded (model summary)."""
     parts = []
-    cmds = s.get("commands") or []
+    cmds = summary_commands(s)
     if cmds:
-        parts.append("command " + ", ".join(f"({vx:g}, {vy:g}) m/s from {t:g} s" for t, vx, vy in cmds))
+        parts.append("command " + ", ".join(f"({vx:g}, {vy:g}) m/s{_turn(yaw_rate)} from {t:g} s"
+                                            for t, vx, vy, yaw_rate in cmds))
     p = s.get("perturbation") or {}
     if p.get("torso_mass_kg") is not None:
         parts.append(f"torso mass {p['torso_mass_kg']:g} kg")
