@@ -274,7 +274,7 @@ def fmt(v: Any, digits: int = 3) -> str:
 TABLE_COLUMNS = (
     ("scenario", "scenario", 0), ("arm", "arm", 0), ("fell", "fell", 0), ("t_fall_s", "t_fall_s", 2),
     ("steady_state_error_vx", "sse_vx", 3), ("steady_state_error_vy", "sse_vy", 3),
-    ("steady_state_error_vy_stride", "sse_vy2", 3),
+    ("steady_state_error_vy_stride", "sse_vy2", 3), ("steady_state_error_yaw_rate", "sse_yaw", 3),
     ("convergence_time_s", "t_conv_s", 2), ("wall_s", "wall_s", 1), ("realtime_factor", "rtf", 2),
 )
 

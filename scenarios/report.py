@@ -111,9 +111,10 @@ def render(out_dir: Path, entries: list | None = None) -> str:
     entries = collect(out_dir) if entries is None else entries
     lines = ["# Scenario report", ""]
     lines.append(f"Results folder: `{Path(out_dir)}`. One section per scenario; every arm is listed. "
-                 "Velocity errors are of the step-averaged velocity against the command: `sse_*` is the mean "
-                 f"|error| over the last {STEADY_WINDOW_S:g} s, `t_conv_s` the time from `perturbation_t_s` after "
-                 f"which both errors stay within {CONVERGENCE_TOL_MPS:g} m/s (null if never, or if the robot fell).")
+                 "Velocity errors are of the step-averaged velocity against the command: `sse_v*` is the mean "
+                 f"|error| over the last {STEADY_WINDOW_S:g} s, `sse_yaw` the |mean yaw rate - command| over the "
+                 f"same window (rad/s), `t_conv_s` the time from `perturbation_t_s` after which both velocity "
+                 f"errors stay within {CONVERGENCE_TOL_MPS:g} m/s (null if never, or if the robot fell).")
     lines.append("")
     lines += _overview(entries)
     for name, s, problem in entries:

@@ -31,6 +31,7 @@ CHECKABLE_METRICS = (
     "steady_state_error_vx",
     "steady_state_error_vy",
     "steady_state_error_vy_stride",
+    "steady_state_error_yaw_rate",
     "run_error_vx",
     "convergence_time_s",
     "mean_vx_last_s",
