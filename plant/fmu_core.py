@@ -8,7 +8,7 @@ module knows nothing of FMI.  It wraps :class:`plant.sim.CassieWalker` (MuJoCo a
   perturbation, mapped onto :class:`plant.perturbation.Perturbation` by
   :func:`perturbation_from_values`, whose ``problems()`` are the one validation (the
   scenario files run the same one): every message names the field and its range.
-* :data:`INPUT_SPECS` carry the command, the regulator's six joint offsets (the names
+* :data:`INPUT_SPECS` carry the command (speeds and yaw rate), the regulator's six joint offsets (the names
   of the regulator FMU's outputs) and an external force on the pelvis.
 * :data:`OUTPUT_SPECS` are the regulator's inputs under the regulator's names
   (``vx`` is the step-averaged forward speed, ``vy`` the filtered lateral speed; see
@@ -87,6 +87,8 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
 INPUT_SPECS: tuple[VarSpec, ...] = (
     _i("vx_des", -3.0, 3.0, "m/s", "Commanded forward speed (heading frame), m/s; selects the gait"),
     _i("vy_des", -3.0, 3.0, "m/s", "Commanded lateral speed (heading frame), m/s; selects the gait"),
+    _i("yaw_rate_des", -2.0, 2.0, "rad/s", "Commanded turning rate, rad/s, positive turns left (the reference "
+       "heading turns at it, rate-limited; the speeds stay in the heading frame)"),
     *(_i(k, -1.5, 1.5, "rad", f"Regulator offset {k[6:]} added to the virtual constraint, rad "
          "(signs in plant/controller.py)") for k in OFFSET_NAMES),
     _i("push_fx", -5000.0, 5000.0, "N", "External force on the pelvis COM, world x, N"),
@@ -106,6 +108,8 @@ OUTPUT_SPECS: tuple[VarSpec, ...] = (
     *(_o(f"pelvis_{axis}", "m", f"Pelvis position, world {axis}, m") for axis in "xyz"),
     _o("pelvis_vx", "m/s", "Instantaneous forward pelvis speed (heading frame), m/s"),
     _o("pelvis_vy", "m/s", "Instantaneous lateral pelvis speed (heading frame), m/s"),
+    _o("yaw", "rad", "Pelvis heading (yaw about world z), rad, wrapped to [-pi, pi]"),
+    _o("yaw_rate", "rad/s", "Pelvis yaw rate about world z, rad/s"),
     _o("stance", "1", "Stance leg: 0 left, 1 right", type="Integer"),
     _o("gait_phase", "1", "Phase of the current walking step, 0 at touch-down (0 while standing)"),
     *(_o(f"{side}_foot_force", "N", f"Contact normal force on the {side} foot, N") for side in SIDES),
@@ -201,9 +205,9 @@ def step_problem(step_size_s: float) -> str | None:
 
 def apply_inputs(walker: CassieWalker, inputs: Mapping) -> None:
     """Command (only when it changes: a new command re-selects the gait), offsets, force."""
-    vx, vy = float(inputs["vx_des"]), float(inputs["vy_des"])
-    if (vx, vy) != (walker.vx_des_mps, walker.vy_des_mps):
-        walker.set_command(vx, vy)
+    command = (float(inputs["vx_des"]), float(inputs["vy_des"]), float(inputs["yaw_rate_des"]))
+    if command != (walker.vx_des_mps, walker.vy_des_mps, walker.yaw_rate_des_radps):
+        walker.set_command(*command)
     walker.set_offsets({k: inputs[k] for k in OFFSET_NAMES})
     force = [inputs["push_fx"], inputs["push_fy"], inputs["push_fz"]]
     ph = walker.physics
@@ -226,7 +230,8 @@ def outputs(walker: CassieWalker) -> dict:
     out["step_index"] = int(reg["step_index"])
     out.update({n: float(tel[n]) for n in ("pelvis_x", "pelvis_y", "pelvis_z", "left_foot_force",
                                            "right_foot_force")})
-    out.update(pelvis_vx=float(tel["vx"]), pelvis_vy=float(tel["vy"]), stance=int(tel["stance"]),
+    out.update(pelvis_vx=float(tel["vx"]), pelvis_vy=float(tel["vy"]), yaw=float(tel["yaw"]),
+               yaw_rate=float(tel["yaw_rate"]), stance=int(tel["stance"]),
                gait_phase=float(tel["tau"]), plant_time=float(tel["t"]), fell=walker.fell())
     return out
 

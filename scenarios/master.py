@@ -13,7 +13,7 @@ the walker, which then advances ``h / SIM_DT_S`` plant steps. A fall stops the r
 (``t_fall_s`` = end of the step in which it was detected).
 
 The result is a numpy structured array, one row per communication step: ``t``,
-``cmd_vx_des``, ``cmd_vy_des``, ``push_fx/fy/fz``, ``in_<input>`` (the sensed
+``cmd_vx_des``, ``cmd_vy_des``, ``cmd_yaw_rate_des``, ``push_fx/fy/fz``, ``in_<input>`` (the sensed
 regulator inputs), ``out_<output>`` (every FMU output) and ``tel_<key>`` (the
 walker's telemetry), all sampled at ``t`` (outputs: computed at ``t``, applied over
 the step).
@@ -37,7 +37,8 @@ from scenarios.scenario import Arm, Scenario
 
 log = logging.getLogger(__name__)
 
-#: Regulator inputs sensed on the plant (vx_des/vy_des come from the command schedule).
+#: Regulator inputs sensed on the plant (vx_des/vy_des come from the command schedule; its
+#: yaw_rate_des goes to the plant only: the regulator has no such input).
 SENSED_INPUTS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
 #: Progress is reported every this many communication steps.
 PROGRESS_EVERY = 200
@@ -98,7 +99,8 @@ def plant_steps_per_comm(h: float, sim_dt: float) -> int:
 
 def _row_dtype(outputs: tuple[str, ...], sensed: Mapping[str, Any], telemetry: Mapping[str, Any]) -> np.dtype:
     fields: list[tuple[str, Any]] = [("t", "f8"), ("cmd_vx_des", "f8"), ("cmd_vy_des", "f8"),
-                                     ("push_fx", "f8"), ("push_fy", "f8"), ("push_fz", "f8")]
+                                     ("cmd_yaw_rate_des", "f8"), ("push_fx", "f8"), ("push_fy", "f8"),
+                                     ("push_fz", "f8")]
     for n in SENSED_INPUTS:
         fields.append((f"in_{n}", "i8" if n == "step_index" else "f8"))
     fields += [(f"out_{n}", "f8") for n in outputs]
@@ -209,7 +211,7 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
     h, t0, n_steps = scenario.comm_step_s, 0.0, scenario.n_comm_steps
     outputs = regulator.output_names()
     clock = time.perf_counter
-    command: tuple[float, float] | None = None
+    command: tuple[float, float, float] | None = None
     force = (0.0, 0.0, 0.0)
     table = None
     reg_s = plant_s = record_s = 0.0
@@ -229,7 +231,7 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
             sensed = walker.regulator_inputs()
             tel = walker.telemetry()
             inputs = {n: sensed[n] for n in SENSED_INPUTS}
-            inputs["vx_des"], inputs["vy_des"] = cmd
+            inputs["vx_des"], inputs["vy_des"], _ = cmd
             c0 = clock()
             out = regulator.step(t, h, inputs)
             c1 = clock()

@@ -4,18 +4,24 @@ The array has one row per communication step ``k`` (state at ``t = k*h`` and the
 regulator action applied over ``[t, t+h)``); the columns the metrics use are
 
 - ``t``: the communication point (s),
-- ``cmd_vx_des``, ``cmd_vy_des``: the command in force (m/s),
+- ``cmd_vx_des``, ``cmd_vy_des``: the command in force (m/s); ``cmd_yaw_rate_des``
+  its turning rate (rad/s),
 - ``tel_vx_step_avg`` (and ``tel_vy_step_avg`` if the plant reports it): the forward
   (lateral) velocity averaged over the last completed step (m/s),
 - ``in_vx``, ``in_vy``, ``in_step_index``: the regulator's inputs (used to rebuild a
   step average the plant does not report),
-- ``in_pitch``, ``in_roll``: torso angles (rad).
+- ``in_pitch``, ``in_roll``: torso angles (rad),
+- ``tel_yaw``: the pelvis heading (rad, wrapped to [-pi, pi]).
 
 Velocity error = step-averaged velocity - command (the quantity the paper regulates).
 Laterally the step average alternates with the left/right sway (the pelvis moves
 towards the stance foot every step), so the lateral metrics also come stride-averaged:
 the mean of the last two step averages (one left and one right step), the quantity the
 regulator's lateral networks learn from.
+
+Turning is judged on the heading itself: the mean yaw rate over a window is the change of
+the unwrapped heading over it divided by its length (the instantaneous yaw rate sways
+with every step, its mean is this).
 """
 from __future__ import annotations
 
@@ -131,6 +137,29 @@ def steady_state_error(rows: np.ndarray, axis: str = "vx", *, window_s: float = 
     return float(np.mean(np.abs(e[sel])))
 
 
+def steady_state_error_yaw_rate(rows: np.ndarray, *, window_s: float = STEADY_WINDOW_S,
+                                fell: bool = False) -> float | None:
+    """|mean yaw rate - mean commanded yaw rate| over the last ``window_s`` of the run
+    (rad/s), the window as in :func:`steady_state_error`.  The mean yaw rate is the
+    change of the unwrapped ``tel_yaw`` from the window's first row to its last over the
+    time between them; the command is averaged over the same steps.
+
+    ``None`` when the robot fell, the window holds fewer than two rows, or the rows lack
+    ``tel_yaw`` or ``cmd_yaw_rate_des``.
+    """
+    names = rows.dtype.names or ()
+    if fell or "tel_yaw" not in names or "cmd_yaw_rate_des" not in names:
+        return None
+    sel = np.nonzero(_last_window(rows, window_s))[0]
+    if len(sel) < 2:
+        return None
+    a, b = int(sel[0]), int(sel[-1])
+    yaw = np.unwrap(np.asarray(rows["tel_yaw"][a:b + 1], dtype=float))
+    span = float(rows["t"][b] - rows["t"][a])
+    commanded = float(np.mean(np.asarray(rows["cmd_yaw_rate_des"][a:b], dtype=float)))
+    return abs(float(yaw[-1] - yaw[0]) / span - commanded)
+
+
 def run_error_vx(rows: np.ndarray, *, startup_s: float = STARTUP_S, fell: bool = False) -> float | None:
     """Mean |step-averaged forward velocity error| over the whole run after ``startup_s``
     (the terrain judgement: over uneven ground the last seconds alone compare two arms on
@@ -237,6 +266,7 @@ def summarize_arm(rows: np.ndarray, *, fell: bool, t_fall_s: float | None, pertu
         "steady_state_error_vx": steady_state_error(rows, "vx", fell=fell),
         "steady_state_error_vy": steady_state_error(rows, "vy", fell=fell),
         "steady_state_error_vy_stride": steady_state_error(rows, "vy_stride", fell=fell),
+        "steady_state_error_yaw_rate": steady_state_error_yaw_rate(rows, fell=fell),
         "run_error_vx": run_error_vx(rows, fell=fell),
         "level_errors_vx": level_errors_vx(rows, fell=fell),
         "convergence_time_s": convergence_time(rows, t_from=perturbation_t_s, fell=fell),

@@ -94,7 +94,7 @@ def scenario_header(scenario: Scenario, regulator: str) -> dict[str, Any]:
         "seed": scenario.seed,
         "perturbation_t_s": scenario.perturbation_t_s,
         "arm_names": [a.name for a in scenario.arms],
-        "commands": [[c.t_s, c.vx_des, c.vy_des] for c in scenario.commands],
+        "commands": [[c.t_s, c.vx_des, c.vy_des, c.yaw_rate_des] for c in scenario.commands],
         "perturbation": {
             "torso_mass_kg": scenario.torso_mass_kg,
             "torso_added_mass_kg": scenario.torso_added_mass_kg,
@@ -106,6 +106,12 @@ def scenario_header(scenario: Scenario, regulator: str) -> dict[str, Any]:
         },
         "claim": claim_dict(scenario),
     }
+
+
+def summary_commands(summary: Mapping[str, Any]) -> list[list[float]]:
+    """The summary's command points as ``[t_s, vx_des, vy_des, yaw_rate_des]`` (a summary
+    written before the yaw-rate command has three numbers per point: its yaw rate was 0)."""
+    return [[*c, 0.0] if len(c) == 3 else list(c) for c in summary.get("commands") or []]
 
 
 def build_summary(scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome]) -> dict[str, Any]:
@@ -268,7 +274,7 @@ def fmt(v: Any, digits: int = 3) -> str:
 TABLE_COLUMNS = (
     ("scenario", "scenario", 0), ("arm", "arm", 0), ("fell", "fell", 0), ("t_fall_s", "t_fall_s", 2),
     ("steady_state_error_vx", "sse_vx", 3), ("steady_state_error_vy", "sse_vy", 3),
-    ("steady_state_error_vy_stride", "sse_vy2", 3),
+    ("steady_state_error_vy_stride", "sse_vy2", 3), ("steady_state_error_yaw_rate", "sse_yaw", 3),
     ("convergence_time_s", "t_conv_s", 2), ("wall_s", "wall_s", 1), ("realtime_factor", "rtf", 2),
 )
 
@@ -339,8 +345,8 @@ SUMMARY_SCHEMA = _obj(
     "scenario", "status", "arm_names", "arms",
     scenario=STR, description=_opt(STR), source=_opt(STR), tags=_list(STR), model=STR, regulator=STR,
     duration_s=NUM, comm_step_s=NUM, seed=INT, perturbation_t_s=NUM, arm_names=_list(STR),
-    commands=_list(_Kind(lambda v: isinstance(v, list) and len(v) == 3 and all(map(is_number, v)),
-                         "a list [t_s, vx_des, vy_des] of numbers")),
+    commands=_list(_Kind(lambda v: isinstance(v, list) and len(v) in (3, 4) and all(map(is_number, v)),
+                         "a list [t_s, vx_des, vy_des, yaw_rate_des] of numbers (older runs: no yaw_rate_des)")),
     perturbation=_obj(torso_mass_kg=_opt(NUM), torso_added_mass_kg=_opt(NUM), torso_com_offset_m=_VEC3,
                       joint_damping_scale=NUM,
                       pushes=_list(_obj("t_s", "force_n", "duration_s", t_s=NUM, force_n=_VEC3, duration_s=NUM)),

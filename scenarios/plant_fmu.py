@@ -48,7 +48,7 @@ class FmuPlant(FmuInstance):
         """``unpack_dir``: where the FMU is extracted (a fresh subfolder, removed by ``close``)."""
         super().__init__(fmu_path, instance_name, unpack_dir=unpack_dir)
         self._inputs = {n: 0.0 for n in INPUT_NAMES}
-        self.vx_des_mps = self.vy_des_mps = 0.0
+        self.vx_des_mps = self.vy_des_mps = self.yaw_rate_des_radps = 0.0
         self.time_s = 0.0
         self.start(parameters, 0.0, 0.0)
 
@@ -92,9 +92,10 @@ class FmuPlant(FmuInstance):
         self.out = values
 
     # ---- the walker's interface
-    def set_command(self, vx_des_mps: float, vy_des_mps: float) -> None:
+    def set_command(self, vx_des_mps: float, vy_des_mps: float, yaw_rate_des_radps: float = 0.0) -> None:
         self.vx_des_mps, self.vy_des_mps = float(vx_des_mps), float(vy_des_mps)
-        self._inputs.update(vx_des=self.vx_des_mps, vy_des=self.vy_des_mps)
+        self.yaw_rate_des_radps = float(yaw_rate_des_radps)
+        self._inputs.update(vx_des=self.vx_des_mps, vy_des=self.vy_des_mps, yaw_rate_des=self.yaw_rate_des_radps)
 
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
         unknown = [k for k in offsets if k not in OFFSET_KEYS]
@@ -129,7 +130,8 @@ class FmuPlant(FmuInstance):
                 "vx": o["pelvis_vx"], "vy": o["pelvis_vy"], "vx_step_avg": o["vx"], "vy_signal": o["vy"],
                 "pitch": o["pitch"], "roll": o["roll"], "stance": float(o["stance"]), "tau": o["gait_phase"],
                 "step_index": float(o["step_index"]), "left_foot_force": o["left_foot_force"],
-                "right_foot_force": o["right_foot_force"], "vx_des": self.vx_des_mps, "vy_des": self.vy_des_mps}
+                "right_foot_force": o["right_foot_force"], "vx_des": self.vx_des_mps, "vy_des": self.vy_des_mps,
+                "yaw": o["yaw"], "yaw_rate": o["yaw_rate"], "yaw_rate_des": self.yaw_rate_des_radps}
 
     def fell(self) -> bool:
         return bool(self.out["fell"])

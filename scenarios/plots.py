@@ -1,8 +1,9 @@
 """The three PNG plots of one scenario's results (matplotlib, Agg backend).
 
 ``velocity.png``: step-averaged velocity against the command per arm (faint: the
-instantaneous velocity); ``psi.png``: the networks' outputs and the joint offsets;
-``torso.png``: torso pitch and roll.
+instantaneous velocity; a scenario that commands a turn gets a third panel, the yaw rate
+averaged over the last second against its command); ``psi.png``: the networks' outputs
+and the joint offsets; ``torso.png``: torso pitch and roll.
 """
 from __future__ import annotations
 
@@ -16,6 +17,8 @@ from scenarios.scenario import Scenario
 
 PLOTS = ("velocity.png", "psi.png", "torso.png")
 PSI_NAMES = ("psi_x", "psi_y", "psi_pitch", "psi_roll")
+#: The yaw-rate panel's trailing mean, s (a few steps: the heading sways with every step).
+YAW_RATE_MEAN_S = 1.0
 #: Titles at the top of their axes: placed, not moved clear of tick labels at each draw
 #: (there are none above the axes here; the search was a tenth of the plotting time).
 TITLE_Y = 1.0
@@ -44,8 +47,12 @@ def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> li
 
 
 def _velocity(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
-    """Step-averaged (and, for vy, stride-averaged) velocity against the command."""
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    """Step-averaged (and, for vy, stride-averaged) velocity against the command; the
+    yaw rate against its command when the scenario turns."""
+    turns = any(c.yaw_rate_des for c in scenario.commands)
+    fig, axes = plt.subplots(3 if turns else 2, 1, figsize=(10, 8.5 if turns else 6), sharex=True)
+    if turns:
+        _yaw_rate(axes[2], results, colors)
     for ax, axis in zip(axes, ("vx", "vy")):
         for i, r in enumerate(results):
             c = colors[i % len(colors)]
@@ -65,11 +72,29 @@ def _velocity(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]
     if scenario.perturbation_t_s > 0:
         for ax in axes:
             ax.axvline(scenario.perturbation_t_s, color="grey", ls="-.", lw=0.8)
-    axes[0].legend(loc="best", fontsize=8)
-    axes[1].legend(loc="best", fontsize=8)
+    for ax in axes:
+        ax.legend(loc="best", fontsize=8)
     axes[0].set_title(f"{scenario.name}: velocity vs command (faint: instantaneous)", y=TITLE_Y)
     axes[-1].set_xlabel("t (s)")
     return fig, dict(left=0.08, right=0.98, bottom=0.09, top=0.94, hspace=0.08)
+
+
+def _yaw_rate(ax, results: Sequence[Any], colors: list[str]) -> None:
+    """Yaw rate per arm (faint: instantaneous; bold: the heading's change over the last
+    :data:`YAW_RATE_MEAN_S`) against the commanded yaw rate."""
+    for i, r in enumerate(results):
+        c, t = colors[i % len(colors)], r.rows["t"]
+        ax.plot(t, r.rows["tel_yaw_rate"], color=c, alpha=0.25, lw=0.6)
+        n = max(1, round(YAW_RATE_MEAN_S / metrics.comm_step(r.rows))) if len(t) > 1 else 0
+        if 0 < n < len(t):
+            yaw = np.unwrap(r.rows["tel_yaw"])
+            ax.plot(t[n:], (yaw[n:] - yaw[:-n]) / (t[n:] - t[:-n]), color=c, lw=1.4,
+                    label=f"{r.arm}: mean over {YAW_RATE_MEAN_S:g} s")
+        if r.fell:
+            ax.axvline(r.t_fall_s, color=c, ls=":", lw=1)
+    ax.plot(results[0].rows["t"], results[0].rows["cmd_yaw_rate_des"], "k--", lw=1.2, label="command")
+    ax.set_ylabel("yaw rate (rad/s)")
+    ax.grid(alpha=0.3)
 
 
 def _psi(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):

@@ -20,7 +20,7 @@ from fmu_src.avr_errors import AvrError
 from scenarios.errors import ScenarioError
 from scenarios.formatting import show
 from scenarios.metrics import CONVERGENCE_TOL_MPS, LEVEL_WINDOW_S, STEADY_WINDOW_S
-from scenarios.output import TABLE_COLUMNS, fmt, incomplete_arms, table_rows
+from scenarios.output import TABLE_COLUMNS, fmt, incomplete_arms, summary_commands, table_rows
 from scenarios.output import verdict as output_verdict
 
 log = logging.getLogger(__name__)
@@ -72,12 +72,17 @@ def _num(v: Any) -> str:
     return show(v, REPORT_FLOAT_FORMAT, none="null", quote=False)
 
 
+def _turn(yaw_rate: float) -> str:
+    return f", turning {yaw_rate:g} rad/s" if yaw_rate else ""
+
+
 def _plant_line(s: dict[str, Any]) -> str:
     """Commands, perturbation as specified, and the plant as actually loaded (model summary)."""
     parts = []
-    cmds = s.get("commands") or []
+    cmds = summary_commands(s)
     if cmds:
-        parts.append("command " + ", ".join(f"({vx:g}, {vy:g}) m/s from {t:g} s" for t, vx, vy in cmds))
+        parts.append("command " + ", ".join(f"({vx:g}, {vy:g}) m/s{_turn(yaw_rate)} from {t:g} s"
+                                            for t, vx, vy, yaw_rate in cmds))
     p = s.get("perturbation") or {}
     if p.get("torso_mass_kg") is not None:
         parts.append(f"torso mass {p['torso_mass_kg']:g} kg")
@@ -106,9 +111,10 @@ def render(out_dir: Path, entries: list | None = None) -> str:
     entries = collect(out_dir) if entries is None else entries
     lines = ["# Scenario report", ""]
     lines.append(f"Results folder: `{Path(out_dir)}`. One section per scenario; every arm is listed. "
-                 "Velocity errors are of the step-averaged velocity against the command: `sse_*` is the mean "
-                 f"|error| over the last {STEADY_WINDOW_S:g} s, `t_conv_s` the time from `perturbation_t_s` after "
-                 f"which both errors stay within {CONVERGENCE_TOL_MPS:g} m/s (null if never, or if the robot fell).")
+                 "Velocity errors are of the step-averaged velocity against the command: `sse_v*` is the mean "
+                 f"|error| over the last {STEADY_WINDOW_S:g} s, `sse_yaw` the |mean yaw rate - command| over the "
+                 f"same window (rad/s), `t_conv_s` the time from `perturbation_t_s` after which both velocity "
+                 f"errors stay within {CONVERGENCE_TOL_MPS:g} m/s (null if never, or if the robot fell).")
     lines.append("")
     lines += _overview(entries)
     for name, s, problem in entries:

@@ -31,6 +31,7 @@ CHECKABLE_METRICS = (
     "steady_state_error_vx",
     "steady_state_error_vy",
     "steady_state_error_vy_stride",
+    "steady_state_error_yaw_rate",
     "run_error_vx",
     "convergence_time_s",
     "mean_vx_last_s",
@@ -45,11 +46,13 @@ CHECK_OPS = ("<", "<=", ">", ">=", "==", "!=")
 
 @dataclass(frozen=True)
 class CommandPoint:
-    """From ``t_s`` on (until the next point), command (vx_des, vy_des) in m/s."""
+    """From ``t_s`` on (until the next point), command (vx_des, vy_des) in m/s (heading
+    frame) and yaw_rate_des in rad/s (positive turns left)."""
 
     t_s: float
     vx_des: float
     vy_des: float = 0.0
+    yaw_rate_des: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -133,15 +136,16 @@ class Scenario:
     def n_comm_steps(self) -> int:
         return to_step(self.duration_s, self.comm_step_s)
 
-    def command_at_step(self, k: int) -> tuple[float, float]:
-        """The command in force over communication step ``k`` (piecewise constant)."""
+    def command_at_step(self, k: int) -> tuple[float, float, float]:
+        """The command (vx_des, vy_des, yaw_rate_des) in force over communication step
+        ``k`` (piecewise constant)."""
         cmd = self.commands[0]
         for point in self.commands:
             if to_step(point.t_s, self.comm_step_s) <= k:
                 cmd = point
             else:
                 break
-        return cmd.vx_des, cmd.vy_des
+        return cmd.vx_des, cmd.vy_des, cmd.yaw_rate_des
 
     def push_force_at_step(self, k: int) -> tuple[float, float, float]:
         """Sum of the pushes active over communication step ``k``."""

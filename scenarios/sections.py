@@ -31,7 +31,7 @@ TOP_KEYS = (
     "perturbation_t_s", "torso_mass_kg", "torso_added_mass_kg", "torso_com_offset_m",
     "joint_damping_scale", "compare", "command", "push", "terrain", "regulator", "arm", "claim",
 )
-COMMAND_KEYS = ("t_s", "vx_des", "vy_des")
+COMMAND_KEYS = ("t_s", "vx_des", "vy_des", "yaw_rate_des")
 PUSH_KEYS = ("t_s", "force_n", "duration_s")
 TERRAIN_KEYS = ("max_height_m", "max_slope_deg", "seed", "size_m", "flat_radius_m")
 ARM_KEYS = ("name", "description", "regulator")
@@ -42,6 +42,8 @@ MAX_COMM_STEP_S = 1.0
 #: Command bounds, m/s: the regulator's walking envelope.
 MAX_ABS_VX_DES = 2.0
 MAX_ABS_VY_DES = 1.0
+#: Yaw-rate command bound, rad/s (the walker's gaits are calibrated within +-0.5 rad/s).
+MAX_ABS_YAW_RATE_DES = 1.0
 MAX_PUSH_FORCE_N = 2000.0
 ARM_DESCRIPTIONS = {"adaptive": "all Psi outputs, adaptation on", "pd_only": "adaptation off (PD terms only)",
                     "rl_hzd": "RL-HZD policy: ARS-trained on the nominal model, fixed (scenarios/rl_hzd)"}
@@ -137,10 +139,12 @@ def commands(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> tuple[Comma
         t = number(c, "t_s", f + ".t_s", probs, required=True, ge=0.0)
         vx = number(c, "vx_des", f + ".vx_des", probs, required=True, ge=-MAX_ABS_VX_DES, le=MAX_ABS_VX_DES)
         vy = number(c, "vy_des", f + ".vy_des", probs, default=0.0, ge=-MAX_ABS_VY_DES, le=MAX_ABS_VY_DES)
+        yaw_rate = number(c, "yaw_rate_des", f + ".yaw_rate_des", probs, default=0.0, ge=-MAX_ABS_YAW_RATE_DES,
+                          le=MAX_ABS_YAW_RATE_DES)
         grid.check_time(t, f + ".t_s", probs)
         grid.check_before_end(t, f + ".t_s", probs)
-        if t is not None and vx is not None and vy is not None:
-            out.append(CommandPoint(t, vx, vy))
+        if t is not None and vx is not None and vy is not None and yaw_rate is not None:
+            out.append(CommandPoint(t, vx, vy, yaw_rate))
     ts = [c.get("t_s") for c in tables]
     if ts and ts[0] != 0 and is_number(ts[0]):
         probs.add("command[0].t_s", ts[0], "the first command must be at t_s = 0")

@@ -1,7 +1,7 @@
 """Scenario files: TOML parsed into frozen dataclasses, validated before anything runs.
 
 A scenario file describes one closed-loop experiment: how long, which model, the
-communication step, a piecewise-constant velocity command schedule, plant
+communication step, a piecewise-constant velocity and yaw-rate command schedule, plant
 perturbations (torso mass, torso COM offset, joint damping, pushes, terrain),
 regulator parameter overrides (by FMU variable name), the arms to compare
 (e.g. ``adaptive`` vs ``pd_only``) and the paper's claim with machine-checkable
@@ -34,8 +34,10 @@ Layout of a file (every key below is known; anything else is an error)::
 
     [[command]]                     # piecewise constant, the first at t_s = 0
     t_s = 0.0
-    vx_des = 0.5
-    vy_des = 0.0
+    vx_des = 0.5                    # m/s, heading frame, |vx_des| <= 2
+    vy_des = 0.0                    # m/s, heading frame, |vy_des| <= 1 (optional, 0)
+    yaw_rate_des = 0.0              # rad/s, positive turns left, |yaw_rate_des| <= 1 (optional, 0);
+                                    # the plant's only: the regulator has no yaw-rate input
 
     [[push]]                        # constant world-frame force on the pelvis
     t_s = 2.5

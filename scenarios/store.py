@@ -92,7 +92,7 @@ def read_summary(path: Path) -> tuple[dict[str, Any] | None, list[str]]:
 def setup_of(summary: dict[str, Any]) -> dict[str, Any]:
     """What a summary's scenario simulated: :data:`SETUP_KEYS` and each arm's overrides."""
     arms = summary.get("arms") or {}
-    return {**{k: summary.get(k) for k in SETUP_KEYS},
+    return {**{k: summary.get(k) for k in SETUP_KEYS}, "commands": output.summary_commands(summary),
             "overrides": {n: (a or {}).get("overrides") for n, a in arms.items()}}
 
 

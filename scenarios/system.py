@@ -11,7 +11,9 @@ matches the FMUs it packs:
   step_index`` to the regulator, the regulator's six ``delta_*`` to the plant);
 * the nominal case as parameter sets (``resources/<instance>_nominal.ssv``): the
   plant's parameters at their start values and the command ``vx_des = 0.5 m/s`` on
-  both FMUs (the command is an input of both, set by the user, not a connection);
+  both FMUs (the command is an input of both, set by the user, not a connection),
+  ``yaw_rate_des = 0`` on the plant only (the regulator has no yaw-rate input: the
+  speeds it regulates are in the heading frame whatever the turning rate);
 * a default experiment of 30 s with a fixed 5 ms step (OSP annotation, which libcosim
   reads).
 
@@ -33,7 +35,8 @@ SYSTEM_NAME = "CassieAVR"
 PLANT, REGULATOR = "plant", "avr"
 STEP_S = 0.005
 STOP_S = 30.0
-NOMINAL_COMMAND = {"vx_des": "0.5", "vy_des": "0.0"}
+#: The nominal command, set on every FMU that has the input (yaw_rate_des: the plant only).
+NOMINAL_COMMAND = {"vx_des": "0.5", "vy_des": "0.0", "yaw_rate_des": "0.0"}
 FMU_MIME = "application/x-fmu-sharedlibrary"
 
 
@@ -68,13 +71,15 @@ def connections(comps) -> list[tuple[str, str, str]]:
 
 def nominal_values(comps) -> dict[str, list[tuple[str, str, str]]]:
     """Per instance (variable, type, start value as text): the plant's parameters and the
-    command on both FMUs; the regulator's own parameters stay at their defaults."""
+    command on each FMU that takes it as an input; the regulator's own parameters stay
+    at their defaults."""
     out = {}
     for name, _, md in comps:
         variables = {v.name: v for v in md.modelVariables}
         rows = [(v.name, v.type, v.start) for v in md.modelVariables
                 if name == PLANT and v.causality == "parameter"]
-        rows += [(n, variables[n].type, value) for n, value in NOMINAL_COMMAND.items()]
+        rows += [(n, variables[n].type, value) for n, value in NOMINAL_COMMAND.items()
+                 if n in variables and variables[n].causality == "input"]
         out[name] = rows
     return out
 

@@ -1,8 +1,9 @@
 """Run the CassieAVR system (``dist/CassieAVR.ssp``) in libcosim and in fmpy, and script it.
 
-Both FMUs take the command (``vx_des``, ``vy_des``) and the plant takes the push
+Both FMUs take the command's speeds (``vx_des``, ``vy_des``); the plant alone takes its
+yaw rate (``yaw_rate_des``: the regulator has no such input) and the push
 (``push_fx/fy/fz``); nothing in the system drives them (:data:`SCRIPTED`).  The SSP's
-parameter sets give the nominal start values (0.5 m/s, no push).  Over time:
+parameter sets give the nominal start values (0.5 m/s, no turn, no push).  Over time:
 
 * **libcosim**: an OSP scenario file (JSON: override events per variable and time),
   :func:`osp_scenario` writes one from a scenario TOML; ``execution.load_scenario``.
@@ -30,7 +31,8 @@ import numpy as np
 
 from scenarios import system
 
-SCRIPTED = ("vx_des", "vy_des", "push_fx", "push_fy", "push_fz")
+SCRIPTED = ("vx_des", "vy_des", "yaw_rate_des", "push_fx", "push_fy", "push_fz")
+#: The scripted inputs of both FMUs (the others are the plant's only).
 COMMAND = ("vx_des", "vy_des")
 #: What the runners record per communication point: (instance, variable).
 RECORDED = (("plant", "vx"), ("plant", "vy"), ("plant", "step_index"), ("plant", "pelvis_x"),
@@ -43,9 +45,7 @@ def schedule(scenario) -> list[tuple[float, dict[str, float]]]:
     """(time, values of :data:`SCRIPTED`) at t = 0 and wherever the scenario's command or push changes."""
     out, last = [], None
     for k in range(scenario.n_comm_steps):
-        vx, vy = scenario.command_at_step(k)
-        fx, fy, fz = scenario.push_force_at_step(k)
-        now = dict(zip(SCRIPTED, (vx, vy, fx, fy, fz)))
+        now = dict(zip(SCRIPTED, (*scenario.command_at_step(k), *scenario.push_force_at_step(k))))
         if now != last:
             out.append((k * scenario.comm_step_s, now))
             last = now

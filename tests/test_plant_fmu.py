@@ -70,11 +70,12 @@ def test_variables_have_units_and_the_regulators_names(plant_fmu, built_fmu):
         assert plant[name] == ("output", regulator[name][1]) and regulator[name][0] == "input", name
     deltas = [n for n, (c, _) in regulator.items() if n.startswith("delta_") and c == "output"]
     assert len(deltas) == 6 and all(plant[n] == ("input", "Real") for n in deltas)
-    for name in ("vx_des", "vy_des", "push_fx", "push_fy", "push_fz"):
+    for name in ("vx_des", "vy_des", "yaw_rate_des", "push_fx", "push_fy", "push_fz"):
         assert plant[name] == ("input", "Real")
+    assert "yaw_rate_des" not in regulator  # the turning rate is the plant's only: speeds are in the heading frame
     assert plant["fell"] == ("output", "Boolean")
-    assert {"pelvis_x", "pelvis_y", "pelvis_z", "pelvis_vx", "pelvis_vy", "stance", "left_foot_force",
-            "right_foot_force"} <= set(plant)
+    assert {"pelvis_x", "pelvis_y", "pelvis_z", "pelvis_vx", "pelvis_vy", "yaw", "yaw_rate", "stance",
+            "left_foot_force", "right_foot_force"} <= set(plant)
 
 
 def test_model_files_and_licenses_travel_inside_not_in_the_repository(plant_fmu):
@@ -293,7 +294,7 @@ import sys
 from pathlib import Path
 import numpy as np
 import plant.sim                                     # the host's own plant package, imported first
-from plant.fmu_core import advance, start
+from plant.fmu_core import INPUT_NAMES, advance, start
 from fmu_src.avr_core import Regulator, RegulatorInputs, RegulatorParams
 sys.path.insert(0, {tests!r})
 from plant_fmu_support import Plant
@@ -306,13 +307,13 @@ vr = {{v.name: v.valueReference for v in md.modelVariables}}
 reg = FMU2Slave(guid=md.guid, unzipDirectory=regulator_dir, modelIdentifier=md.coSimulation.modelIdentifier,
                 instanceName="avr")
 reg.instantiate(); reg.setupExperiment(startTime=0.0); reg.enterInitializationMode(); reg.exitInitializationMode()
-fmu = Plant(plant_dir).init(vx_des=0.5)
+fmu = Plant(plant_dir).init(vx_des=0.5, yaw_rate_des=0.3)
 walker = start(dict(model="menagerie", torso_mass_kg=10.33, torso_com_offset_x_m=0.0, torso_com_offset_y_m=0.0,
                     torso_com_offset_z_m=0.0, joint_damping_scale=1.0, terrain_max_height_m=0.0,
                     terrain_max_slope_deg=10.0, terrain_seed=0, terrain_size_m=20.0))
 core = Regulator(RegulatorParams())
-inputs = {{n: 0.0 for n in ("vx_des", "vy_des", "push_fx", "push_fy", "push_fz")}}
-inputs["vx_des"] = 0.5
+inputs = {{n: 0.0 for n in INPUT_NAMES}}
+inputs["vx_des"], inputs["yaw_rate_des"] = 0.5, 0.3
 deltas = ["delta_swing_hip_pitch", "delta_swing_knee", "delta_swing_hip_roll", "delta_stance_hip_roll",
           "delta_stance_hip_pitch", "delta_stance_knee"]
 for k in range(400):                                 # the FMU pair and the in-process pair side by side

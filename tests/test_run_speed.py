@@ -106,9 +106,9 @@ def test_jobs_run_in_the_workers_and_their_values_and_errors_come_back(tmp_path)
 # --------------------------------------------------------------------------- recording
 def test_recorder_gives_the_rows_of_a_structured_assignment_per_step():
     dtype = master._row_dtype(("a", "b"), {}, {"i": 3, "x": 1.5, "flag": True})
-    values = [(0.0, 0.5, -0.0, 1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 7, np.float64(1e-310), float("nan"),
-               2 ** 40, np.float32(0.1), True),
-              (0.005, 0.5, 0.0, 1.0, 2.0, 3.0, float("inf"), -1e300, 5e-324, 0.4, 0.5, 0.6, -8, 0.1 + 0.2,
+    values = [(0.0, 0.5, -0.0, 0.3, 1.0, 2.0, 3.0, 0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 7, np.float64(1e-310),
+               float("nan"), 2 ** 40, np.float32(0.1), True),
+              (0.005, 0.5, 0.0, -0.3, 1.0, 2.0, 3.0, float("inf"), -1e300, 5e-324, 0.4, 0.5, 0.6, -8, 0.1 + 0.2,
                float("-inf"), -(2 ** 52), 1e16, False)]
     expected = np.zeros(3, dtype=dtype)
     rec = master._Recorder(3, dtype)

@@ -85,10 +85,13 @@ def test_suite_paper_values():
 
 def test_good_file_and_schedule():
     s = parse(GOOD + "\n[[command]]\nt_s = 1.0\nvx_des = 0.2\nvy_des = 0.1\n"
+              "[[command]]\nt_s = 1.5\nvx_des = 0.3\nyaw_rate_des = -0.25\n"
               "[[push]]\nt_s = 0.5\nforce_n = [10, 0, 0]\nduration_s = 0.1\n")
     assert s.n_comm_steps == 400
-    assert s.command_at_step(0) == (0.5, 0.0) and s.command_at_step(199) == (0.5, 0.0)
-    assert s.command_at_step(200) == (0.2, 0.1)
+    assert s.command_at_step(0) == (0.5, 0.0, 0.0) and s.command_at_step(199) == (0.5, 0.0, 0.0)
+    assert s.command_at_step(200) == (0.2, 0.1, 0.0)  # yaw_rate_des defaults to 0
+    assert s.command_at_step(299) == (0.2, 0.1, 0.0) and s.command_at_step(300) == (0.3, 0.0, -0.25)
+    assert s.commands[2] == spec.CommandPoint(1.5, 0.3, 0.0, -0.25)
     assert s.push_force_at_step(99) == (0.0, 0.0, 0.0)
     assert s.push_force_at_step(100) == (10.0, 0.0, 0.0) and s.push_force_at_step(119) == (10.0, 0.0, 0.0)
     assert s.push_force_at_step(120) == (0.0, 0.0, 0.0)

@@ -84,6 +84,7 @@ def test_ssp_wires_the_fmus_name_to_name_with_the_nominal_parameters(ssp):
     assert wires == ({("plant", n, "avr", n) for n in regulator_inputs} | {("avr", n, "plant", n) for n in deltas})
     values = {p.name: p.value for p in system_run.ssp_parameter_set(ssp).parameters}
     assert values["plant.vx_des"] == values["avr.vx_des"] == 0.5 and values["plant.torso_mass_kg"] == 10.33
+    assert values["plant.yaw_rate_des"] == 0.0 and "avr.yaw_rate_des" not in values  # the plant's input only
 
 
 def test_osp_structure_runs_the_same_loop_as_the_ssp(system_dir, ssp):
@@ -139,19 +140,24 @@ def test_loop_in_our_master_with_the_plant_fmu(heavy_scenario, built_fmu, plant_
 # ---- scripting commands and pushes ----------------------------------------------------------
 @pytest.fixture(scope="module")
 def scripted():
-    """A short scenario: 0.5 m/s, then 0.3 m/s from 1.5 s; a 30 N push along x at 1.0 s for 0.1 s."""
+    """A short scenario: 0.5 m/s, then 0.3 m/s turning at 0.2 rad/s from 1.5 s; a 30 N push
+    along x at 1.0 s for 0.1 s."""
     base = spec.resolve_targets(["nominal"])[0]
     return dataclasses.replace(base, duration_s=2.0,
-                               commands=(spec.CommandPoint(0.0, 0.5, 0.0), spec.CommandPoint(1.5, 0.3, 0.0)),
+                               commands=(spec.CommandPoint(0.0, 0.5, 0.0), spec.CommandPoint(1.5, 0.3, 0.0, 0.2)),
                                pushes=(spec.Push(1.0, (30.0, 0.0, 0.0), 0.1),))
 
 
+#: The scripted inputs the tests read back: the command on both FMUs, its yaw rate and the push on the plant.
+SCRIPTED_READ = (("plant", "vx_des"), ("avr", "vx_des"), ("plant", "yaw_rate_des"), ("plant", "push_fx"))
+
+
 def _expected_inputs(scenario, n):
-    """plant.vx_des, avr.vx_des, plant.push_fx in force over communication steps 0..n-1 (our master's)."""
+    """:data:`SCRIPTED_READ` in force over communication steps 0..n-1 (our master's)."""
     rows = []
     for k in range(n):
-        vx_des = scenario.command_at_step(k)[0]
-        rows.append([vx_des, vx_des, scenario.push_force_at_step(k)[0]])
+        vx_des, _, yaw_rate_des = scenario.command_at_step(k)
+        rows.append([vx_des, vx_des, yaw_rate_des, scenario.push_force_at_step(k)[0]])
     return rows
 
 
@@ -161,7 +167,8 @@ def test_libcosim_scenario_file_scripts_commands_and_pushes(ssp, scripted, tmp_p
     from libcosimpy.CosimObserver import CosimObserver
 
     path = system_run.write_osp_scenario(scripted, tmp_path / "scenario.json")
-    assert json.loads(path.read_text())["events"]
+    events = json.loads(path.read_text())["events"]
+    assert {e["model"] for e in events if e["variable"] == "yaw_rate_des"} == {"plant"}  # the avr has none
     execution = CosimExecution.from_ssp_file(str(ssp))
     index, refs = system_run._libcosim_variables(execution)
     manager = CosimManipulator.create_scenario_manager()
@@ -172,22 +179,25 @@ def test_libcosim_scenario_file_scripts_commands_and_pushes(ssp, scripted, tmp_p
     seen = []
     for k in range(400):  # the inputs in force over step k, read after it
         assert execution.step()
-        seen.append([system_run._libcosim_value(observer, index[i], refs[i][v])
-                     for i, v in (("plant", "vx_des"), ("avr", "vx_des"), ("plant", "push_fx"))])
+        seen.append([system_run._libcosim_value(observer, index[i], refs[i][v]) for i, v in SCRIPTED_READ])
     assert seen == _expected_inputs(scripted, 400)
 
 
 def test_fmpy_input_csv_scripts_commands_and_pushes(ssp, scripted, tmp_path):
     from fmpy.ssp.simulation import simulate_ssp
+    from fmpy.ssp.ssd import read_ssd
 
     csv = tmp_path / "inputs.csv"
     csv.write_text(system_run.input_csv(scripted))
     variant = system_run.with_system_inputs(ssp, tmp_path / "CassieAVR_inputs.ssp")
+    ssd = read_ssd(str(variant), validate=True)
+    assert [(c.endElement, c.endConnector) for c in ssd.system.connections if c.startConnector == "yaw_rate_des"] \
+        == [("plant", "yaw_rate_des")]  # no connection to a regulator input that does not exist
     result = simulate_ssp(str(variant), stop_time=2.0 - 0.0025, step_size=0.005,
                           parameter_set=system_run.ssp_parameter_set(ssp), input=system_run.read_input_csv(csv))
     # fmpy records the connectors after copying the system inputs on (row k: the CSV at t_k);
     # the FMUs step with them from the next step on
-    got = np.stack([result["plant.vx_des"], result["avr.vx_des"], result["plant.push_fx"]], axis=1)
+    got = np.stack([result[f"{i}.{v}"] for i, v in SCRIPTED_READ], axis=1)
     assert got.tolist() == _expected_inputs(scripted, 400)
 
 

@@ -109,6 +109,8 @@ FACTORS: dict[str, FactorKind] = {
     "joint_damping_scale": FactorKind("number", _set_top("joint_damping_scale"), "joint damping multiplier"),
     "vx_des": FactorKind("number", _set_command("vx_des"), "commanded forward speed, m/s (the one [[command]])"),
     "vy_des": FactorKind("number", _set_command("vy_des"), "commanded lateral speed, m/s (the one [[command]])"),
+    "yaw_rate_des": FactorKind("number", _set_command("yaw_rate_des"),
+                               "commanded turning rate, rad/s, positive left (the one [[command]])"),
     "seed": FactorKind("integer", _set_top("seed"), "the regulator's network weight seed"),
     "terrain": FactorKind("terrain", _set_terrain, "\"flat\" or a [terrain] table"),
     "terrain_max_height_m": FactorKind("number", _set_terrain_key("max_height_m"), "terrain.max_height_m"),
