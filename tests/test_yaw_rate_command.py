@@ -87,12 +87,14 @@ def test_the_campaign_factor_sets_the_one_command():
 
 
 # ---- the metric on hand-made rows -----------------------------------------------------------
-def _turning_rows(rate: float, commanded: float, n: int = 2000) -> np.ndarray:
-    """n steps of 5 ms turning at ``rate`` from a heading of 1.5 rad: wraps through pi."""
+def _turning_rows(rate: float, commanded: float, n: int = 2000, sway: float = 0.0) -> np.ndarray:
+    """n steps of 5 ms turning at ``rate`` from a heading of 1.5 rad (wraps through pi),
+    plus a yaw sway of amplitude ``sway`` (rad) at a 0.53 s stride, like the walker's."""
     rows = np.zeros(n, dtype=[("t", "f8"), ("cmd_yaw_rate_des", "f8"), ("tel_yaw", "f8")])
     rows["t"] = np.arange(n) * H
     rows["cmd_yaw_rate_des"] = commanded
-    rows["tel_yaw"] = np.remainder(1.5 + rate * rows["t"] + math.pi, 2 * math.pi) - math.pi
+    heading = 1.5 + rate * rows["t"] + sway * np.sin(2 * math.pi * rows["t"] / 0.53)
+    rows["tel_yaw"] = np.remainder(heading + math.pi, 2 * math.pi) - math.pi
     return rows
 
 
@@ -103,6 +105,11 @@ def test_yaw_rate_error_is_the_heading_rate_against_the_command_over_the_steady_
     assert metrics.steady_state_error_yaw_rate(_turning_rows(0.3, 0.2)) == pytest.approx(0.1, abs=exact)
     assert metrics.steady_state_error_yaw_rate(_turning_rows(0.25, 0.3)) == pytest.approx(0.05, abs=exact)
     assert metrics.steady_state_error_yaw_rate(_turning_rows(0.3, 0.3), fell=True) is None
+    # The walker's per-step yaw sway (0.1 rad here, ~0.2 rad peak to peak as measured)
+    # must not read as turning: the two ends of a 5 s window alone would give up to
+    # 2 * 0.1 / 5 = 0.04 rad/s; the least-squares slope stays within 0.002 rad/s.
+    swaying = _turning_rows(0.3, 0.3, sway=0.1)
+    assert metrics.steady_state_error_yaw_rate(swaying) <= 0.002
     assert metrics.steady_state_error_yaw_rate(_turning_rows(0.3, 0.3, n=1)) is None  # no window
     no_yaw = np.zeros(10, dtype=[("t", "f8"), ("cmd_yaw_rate_des", "f8")])
     assert metrics.steady_state_error_yaw_rate(no_yaw) is None
