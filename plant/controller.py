@@ -19,7 +19,9 @@ tracking at plant rate with fresh joint measurements.
 * ``y_d`` are Bezier polynomials in ``tau``: the swing leg's absolute (world
   heading-frame) leg angle and lateral angle go from their lift-off values to the
   gait's landing values with the shape ``GaitParams.swing_shape``; the swing
-  foot height above the ground follows ``GaitParams.swing_height``; both are
+  foot height above the ground follows ``GaitParams.swing_height``, the ground
+  taken under the foot's target (the hip plus the leg's reach at the target
+  angles), not under the hip, so on slopes the foot lands where the ground is; both are
   turned into hip-pitch/knee/hip-roll targets by the rigid-spring leg kinematics
   (:class:`LegKinematics`), subtracting the measured pelvis pitch/roll.  The
   swing foot is held level.  The stance hip pitch and hip roll hold the torso
@@ -489,7 +491,8 @@ class NominalController:
         # Swing foot height -> leg length (world-frame target).
         height = bezier(gait.swing_height, self.tau / gait.height_end_tau)
         hip = phys.hip_position(sw)
-        z_ankle = phys.ground_height_m(hip[0], hip[1]) + self.ankle_height0 + height
+        gx, gy = self._swing_foot_xy(hip, theta, phi, sensed.yaw_err)
+        z_ankle = phys.ground_height_m(gx, gy) + self.ankle_height0 + height
         length = (hip[2] - z_ankle) / max(math.cos(theta) * math.cos(phi), MIN_LEG_COS)
         length = min(max(length, p.swing_leg_min_length_m), p.swing_leg_max_length_m)
         kin = self.kin[sw]
@@ -502,6 +505,16 @@ class NominalController:
         # The swing foot lands along the reference heading half a step ahead.
         targets.q[sw, "hip-yaw"] = -sensed.yaw_err + 0.5 * self.yaw_rate_des * gait.step_time_s
         targets.q[sw, "foot"] = self._level_foot(sensed.q[sw], sensed.pitch)
+
+    def _swing_foot_xy(self, hip, theta: float, phi: float, yaw_err: float) -> tuple[float, float]:
+        """World (x, y) (m) under the swing foot's target: the hip plus the leg's reach
+        along the heading at the target leg angles (the stance leg length as the reach),
+        so the foot's height follows the ground where the foot is, not under the hip."""
+        yaw = self.yaw_ref + yaw_err
+        c, s = math.cos(yaw), math.sin(yaw)
+        reach = self.p.stance_leg_length_m
+        fx, fy = reach * math.sin(theta), reach * math.sin(phi)
+        return hip[0] + c * fx - s * fy, hip[1] + s * fx + c * fy
 
     def _write_servos(self, targets: _Targets) -> None:
         """Servo gains and commands, one vectorised write each (bias = -kp q - kd qdot)."""

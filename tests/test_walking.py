@@ -105,23 +105,41 @@ def test_push_while_walking(menagerie, force_x):
     assert not r.fell, r.fall_reason
 
 
-def test_early_touchdown_on_an_up_slope_ends_the_step():
-    """Terrain seed 5 with +5 kg and COM +0.1 m: the swing foot lands early on the rising
-    ground and takes the weight gradually (below ``touchdown_force_n``).  Holding the stance
-    until ``switch_max_tau`` unloaded the stance leg and the torso pitched over at 3.8 s
-    (x = 2.2 m); with the weight-share touchdown the walker is still up at 8 s."""
+def _terrain_walk(seed: int, duration_s: float):
+    """The terrain_mass_com plant (+5 kg, COM +0.1 m, slopes <= 20 deg, heights <= 0.4 m)
+    on terrain ``seed``, 0.5 m/s from rest with the adaptive core every 5 ms."""
     from plant.constants import NOMINAL_PELVIS_MASS_KG
     from plant.sim import CassieWalker, apply_regulator
     from plant.terrain import TerrainSpec
 
-    terrain = TerrainSpec(max_height_m=0.4, max_slope_deg=20.0, seed=5, size_m=45.0)
+    terrain = TerrainSpec(max_height_m=0.4, max_slope_deg=20.0, seed=seed, size_m=45.0)
     pert = Perturbation(torso_mass_kg=NOMINAL_PELVIS_MASS_KG + 5.0, torso_com_offset_m=(0.1, 0.0, 0.0),
                         terrain=terrain)
     walker = CassieWalker(load_model("menagerie", pert))
     walker.set_command(0.5, 0.0)
     regulator = Regulator()
-    while walker.time_s < 8.0 and not walker.fell():
+    while walker.time_s < duration_s and not walker.fell():
         apply_regulator(walker, regulator, 0.005)
         walker.advance(10)
+    return walker
+
+
+def test_early_touchdown_on_an_up_slope_ends_the_step():
+    """Terrain seed 5 with +5 kg and COM +0.1 m: the swing foot lands early on the rising
+    ground and takes the weight gradually (below ``touchdown_force_n``).  Holding the stance
+    until ``switch_max_tau`` unloaded the stance leg and the torso pitched over at 3.8 s
+    (x = 2.2 m); with the weight-share touchdown the walker is still up at 8 s."""
+    walker = _terrain_walk(5, 8.0)
     assert not walker.fell(), walker.fall_reason
     assert walker.physics.pelvis_position()[0] > 3.0  # past the slope it fell on
+
+
+def test_swing_foot_height_follows_the_ground_under_the_foot():
+    """Terrain seed 7 (the suite's terrain_mass_com): a 0.2 m rise within 0.7 m, then a
+    crest.  With the swing height referred to the ground under the hip, the foot was
+    driven into the rise ahead of it and over the crest it reached for ground it was not
+    over; the walker, overspeeding from the COM offset, fell at 4.8 s (x = 3.4 m).
+    Referred to the ground under the foot's target it walks on (12 of 12 terrain seeds)."""
+    walker = _terrain_walk(7, 8.0)
+    assert not walker.fell(), walker.fall_reason
+    assert walker.physics.pelvis_position()[0] > 4.0  # past the crest it fell on
