@@ -13,6 +13,7 @@ import pytest
 
 from fmu_src.avr_core import Regulator, RegulatorParams
 from plant.gaits import GaitLibrary
+from plant import make_gaits
 from plant.make_gaits import COMM_STEPS, KEEP_TOL_MPS, PD_ONLY_PARAMS, VX_GRID, VY_GRID, simulate_walk
 from plant.model import Perturbation, load_model
 from plant.sim import CassieWalker, apply_regulator
@@ -154,3 +155,31 @@ def test_adaptive_removes_a_20kg_torso_error_fast_and_backward(vx):
     assert not adaptive.fell and not pd_only.fell
     e_adaptive, e_pd = abs(adaptive.steady_vx(40.0) - vx), abs(pd_only.steady_vx(40.0) - vx)
     assert e_adaptive <= ADAPTIVE_TOL_MPS and e_adaptive < e_pd, (e_adaptive, e_pd)
+
+
+def test_calibration_order_walks_from_rest_outward():
+    """Every point's walk from rest passes only through points calibrated before it: the
+    rectangle between (0, 0) and the point."""
+    order = make_gaits._order(VX_GRID, VY_GRID)
+    assert sorted(order) == sorted((i, j) for i in range(len(VX_GRID)) for j in range(len(VY_GRID)))
+    done = set()
+    i0, j0 = VX_GRID.index(0.0), VY_GRID.index(0.0)
+    for i, j in order:
+        before = {(a, b) for a in range(min(i, i0), max(i, i0) + 1) for b in range(min(j, j0), max(j, j0) + 1)}
+        assert before - {(i, j)} <= done, (VX_GRID[i], VY_GRID[j])
+        done.add((i, j))
+
+
+def test_update_keeps_a_verified_point_and_calibrates_a_new_one():
+    """``calibrate_grid`` with the committed library on the grid vx (0, 0.1), vy 0: the old
+    point 0 m/s still verifies and is kept as it is; 0.1 m/s, not in the library, is
+    calibrated from its neighbour to within the tolerances (16 s walks, as the tool's)."""
+    old = GaitLibrary.default()
+    lib, notes = make_gaits.calibrate_grid(lambda: load_model("menagerie"), (0.0, 0.1), (0.0,), old,
+                                           iterations=4, duration_s=16.0)
+    assert [(n["vx"], n["kept"]) for n in notes] == [(0.0, True), (0.1, False)]
+    assert lib.points[(0, 0)] == old.points[(old.vx_grid.index(0.0), old.vy_grid.index(0.0))]
+    last = notes[1]["history"][-1]
+    assert not last["fell"] and abs(last["err_vx"]) < make_gaits.VX_TOL_MPS and abs(last["err_vy"]) < make_gaits.VY_TOL_MPS
+    # between its neighbours' offsets (0 m/s: 0.058 rad, 0.25 m/s: 0.024 rad)
+    assert 0.024 < lib.points[(1, 0)].leg_angle_offset_rad < 0.058
