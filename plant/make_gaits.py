@@ -151,12 +151,11 @@ def _within(m: dict, vx_tol: float = VX_TOL_MPS, vy_tol: float = VY_TOL_MPS) -> 
     return not m["fell"] and abs(m["err_vx"]) < vx_tol and abs(m["err_vy"]) < vy_tol
 
 
-def calibrate_point(model_fn, vx, vy, start: GaitParams, iterations: int, duration_s: float,
-                    place=GaitLibrary.uniform):
+def calibrate_point(model_fn, vx, vy, start: GaitParams, iterations: int, duration_s: float, place):
     """Find the landing offsets that make the steady speed equal (vx, vy) (m/s).
 
-    ``place(gait)`` makes the library walked with a candidate gait (default: that gait
-    alone; :func:`main` puts it into the library at this grid point).  Each iteration
+    ``place(gait)`` makes the library walked with a candidate gait (:func:`calibrate_grid`
+    puts it into the library at this grid point).  Each iteration
     measures the second half's errors (:func:`measure_point`); the first update adds
     the mean regulator outputs to the offsets (fixed point), later ones use the secant
     through the last two (offset, error) pairs, per axis, step <= 0.05 rad.  A fall

@@ -19,9 +19,9 @@ towards the stance foot every step), so the lateral metrics also come stride-ave
 the mean of the last two step averages (one left and one right step), the quantity the
 regulator's lateral networks learn from.
 
-Turning is judged on the heading itself: the mean yaw rate over a window is the change of
-the unwrapped heading over it divided by its length (the instantaneous yaw rate sways
-with every step, its mean is this).
+Turning is judged on the heading itself: the mean yaw rate over a window is the
+least-squares slope of the unwrapped heading over it (the instantaneous yaw rate and the
+heading sway with every step; see :func:`steady_state_error_yaw_rate`).
 """
 from __future__ import annotations
 
