@@ -31,7 +31,8 @@ try:
     from .avr_errors import ParameterError
     from .avr_network import (INTERCEPT_RANGE, MAX_RATE_RANGE_HZ, NETWORK_NAMES, TAU_RC, TAU_REF,
                               Networks, NetworkSpec, SplitMix64, build_networks, lif_gain_bias,
-                              scaled_inputs, sphere_encoders)
+                              scaled_inputs, sphere_encoders, LN2, SQRT2, log1p_fixed,
+                              expm1_fixed)
     from .avr_params import (RegulatorInputs, RegulatorParams, network_key, params_from_overrides,
                              validate_inputs, validate_params)
     from .avr_regulator import WEIGHT_ROWS, RegulatorState, initial_state, step
@@ -43,7 +44,8 @@ except ImportError:  # inside the FMU the modules are top-level
     from avr_errors import ParameterError
     from avr_network import (INTERCEPT_RANGE, MAX_RATE_RANGE_HZ, NETWORK_NAMES, TAU_RC, TAU_REF,
                              Networks, NetworkSpec, SplitMix64, build_networks, lif_gain_bias,
-                             scaled_inputs, sphere_encoders)
+                             scaled_inputs, sphere_encoders, LN2, SQRT2, log1p_fixed,
+                             expm1_fixed)
     from avr_params import (RegulatorInputs, RegulatorParams, network_key, params_from_overrides,
                             validate_inputs, validate_params)
     from avr_regulator import WEIGHT_ROWS, RegulatorState, initial_state, step
@@ -60,7 +62,7 @@ __all__ = [
     "RegulatorParams", "params_from_overrides", "validate_params", "network_key",
     "RegulatorInputs", "validate_inputs",
     "NetworkSpec", "Networks", "SplitMix64", "sphere_encoders", "build_networks",
-    "lif_gain_bias", "scaled_inputs",
+    "lif_gain_bias", "scaled_inputs", "LN2", "SQRT2", "log1p_fixed", "expm1_fixed",
     "WEIGHT_ROWS", "RegulatorState", "initial_state", "step",
     "state_to_bytes", "state_from_bytes", "Regulator",
 ]

@@ -10,6 +10,16 @@ The random numbers are SplitMix64 counter streams keyed by (seed, network, field
 same networks from the same seed.  :func:`scaled_inputs` maps the measurements into the
 networks' unit balls; :func:`lif_rates_times_tau_rc` evaluates all neurons at once.
 The method: ``docs/method.md``.
+
+Bit-identical on every machine: everything here, and every call of the regulator, is a
+fixed sequence of float64 ``+ - * /``, ``sqrt`` and ``frexp`` (each exact or correctly
+rounded by IEEE 754), in a fixed order.  No libm or SIMD ``log1p``/``expm1``/``hypot``
+(their last bits differ between libraries and CPUs: numpy's AVX-512 ``log1p`` differs
+from glibc's on ~5% of arguments) and no BLAS (its summation order and FMA use depend
+on the CPU): :func:`log1p_fixed` and :func:`expm1_fixed` are short series, the dot
+products are sequential sums.  The C core (``native/avr_model.c``) performs the same
+operations in the same order, so the two cores give the same bits on every IEEE 754
+machine, and a run is reproducible across machines.
 """
 from __future__ import annotations
 
@@ -23,7 +33,8 @@ __all__ = [
     "TAU_RC", "TAU_REF", "MAX_RATE_RANGE_HZ", "INTERCEPT_RANGE", "NETWORK_NAMES",
     "NETWORK_DIMENSIONS", "INV_TAU_RC", "lif_gain_bias", "NetworkSpec", "SplitMix64",
     "sphere_encoders", "Networks", "build_networks", "lif_rates_times_tau_rc",
-    "scaled_inputs", "readonly",
+    "scaled_inputs", "input_currents", "readonly", "LN2", "SQRT2", "log1p_fixed", "expm1_fixed",
+    "EXPM1_FIXED_MAX",
 ]
 
 logger = logging.getLogger(__name__)
@@ -47,6 +58,73 @@ INV_TAU_RC = 1.0 / TAU_RC
 #: A tiny positive current for inactive neurons (keeps inf out of log1p's slow path).
 _TINY_CURRENT = 1e-300
 
+#: ln 2 and sqrt 2, rounded to nearest (the C core has them from the generated header).
+LN2 = float.fromhex("0x1.62e42fefa39efp-1")
+SQRT2 = float.fromhex("0x1.6a09e667f3bcdp+0")
+
+
+def _series_coefficients():
+    """``2 / (2i + 1)`` for i = 1..9 (atanh) and ``1 / i!`` for i = 1..20 (exp), each one
+    correctly rounded division of exact operands (20! is exact in float64)."""
+    atanh = tuple(2.0 / (2 * i + 1) for i in range(1, 10))
+    exp, factorial = [], 1.0
+    for i in range(1, 21):
+        factorial = factorial * i
+        exp.append(1.0 / factorial)
+    return atanh, tuple(exp)
+
+
+_ATANH_COEFFS, _EXP_COEFFS = _series_coefficients()
+#: :func:`expm1_fixed` serves 0 <= x <= EXPM1_FIXED_MAX (max rates >= 1 / (tau_ref + tau_rc)).
+EXPM1_FIXED_MAX = 1.0
+
+
+def _horner_tail(coefficients, z):
+    """``sum_i coefficients[i-1] z^i`` as ``(...((c_n z + c_{n-1}) z + ...) + c_1) z``."""
+    total = coefficients[-1] * z
+    for coefficient in coefficients[-2::-1]:
+        total += coefficient
+        total *= z
+    return total
+
+
+def expm1_fixed(x: np.ndarray) -> np.ndarray:
+    """``exp(x) - 1`` for ``0 <= x <= 1`` (array), the same bits on every machine.
+
+    The Taylor series to x^20, by Horner: the first omitted term is below 2e-20 x, so
+    the result is within a few ulp of the exact value.
+    """
+    x = np.asarray(x, dtype=np.float64)
+    if not np.all((x >= 0.0) & (x <= EXPM1_FIXED_MAX)):
+        raise ValueError(f"expm1_fixed needs 0 <= x <= {EXPM1_FIXED_MAX}")
+    return _horner_tail(_EXP_COEFFS, x)
+
+
+def log1p_fixed(y: np.ndarray) -> np.ndarray:
+    """``log(1 + y)`` for finite ``y >= 0`` (array, overwritten), the same bits on every machine.
+
+    ``u = 1 + y`` (rounded); ``u = m' 2^k`` with m' in [1/2, 1) (``frexp``, exact); ``m =
+    m' sqrt2`` in [0.707, 1.415); ``s = (m - 1) / (m + 1)``, |s| < 0.172; ``log u = (k -
+    1/2) ln2 + 2 atanh(s)`` with ``2 atanh(s) = s (2 + sum_{i=1..9} 2/(2i+1) s^(2i))``
+    (first omitted term < 3e-17 relative).  Error: ~2e-16 relative plus up to ~3e-16
+    absolute (the rounding of ``1 + y``, and of the two terms near u = 1), i.e. relative
+    ~1e-14 at the regulator's smallest argument, y = 1/40.
+    """
+    np.add(y, 1.0, out=y)
+    mantissa, exponent = np.frexp(y)
+    mantissa *= SQRT2
+    s = mantissa - 1.0
+    mantissa += 1.0
+    s /= mantissa
+    z = np.multiply(s, s, out=mantissa)
+    tail = _horner_tail(_ATANH_COEFFS, z)
+    tail += 2.0
+    tail *= s
+    result = np.subtract(exponent, 0.5, out=y)  # exact: a small integer minus 1/2
+    result *= LN2
+    result += tail
+    return result
+
 
 def readonly(array: np.ndarray) -> np.ndarray:
     """``array``, made read-only (states and networks share nothing mutable)."""
@@ -62,15 +140,17 @@ def lif_gain_bias(max_rates, intercepts, tau_rc: float = TAU_RC,
     A neuron with intercept c (rate 0 at ``e.x = c``, i.e. ``J = 1``) and maximum rate
     m (Hz, reached at ``e.x = 1``) needs ``J_max - 1 = 1 / expm1((1/m - tau_ref) /
     tau_rc)``, hence ``gain = (J_max - 1) / (1 - c)`` and ``bias = 1 - gain c``.
-    Requires ``m < 1/tau_ref`` and ``c < 1``.
+    Requires ``1/(tau_ref + tau_rc) <= m < 1/tau_ref`` (45.5-500 Hz for the defaults;
+    :func:`expm1_fixed`'s domain) and ``c < 1``.
     """
     max_rates = np.asarray(max_rates, dtype=np.float64)
     intercepts = np.asarray(intercepts, dtype=np.float64)
-    if np.any(max_rates >= 1.0 / tau_ref) or np.any(max_rates <= 0):
-        raise ValueError("max_rates must be in (0, 1/tau_ref) Hz")
+    lowest = 1.0 / (tau_ref + tau_rc * EXPM1_FIXED_MAX)
+    if np.any(max_rates >= 1.0 / tau_ref) or not np.all(max_rates >= lowest):
+        raise ValueError(f"max_rates must be in [{lowest:.6g}, {1.0 / tau_ref:.6g}) Hz")
     if np.any(intercepts >= 1.0):
         raise ValueError("intercepts must be < 1")
-    j_max_minus_1 = 1.0 / np.expm1((1.0 / max_rates - tau_ref) / tau_rc)
+    j_max_minus_1 = 1.0 / expm1_fixed((1.0 / max_rates - tau_ref) / tau_rc)
     gain = j_max_minus_1 / (1.0 - intercepts)
     bias = 1.0 - gain * intercepts
     return gain, bias
@@ -201,9 +281,9 @@ class Networks:
     ``longitudinal`` (input [vx, vx_des]), ``lateral`` ([vy, vy_des]) and ``torso``
     ([pitch, roll, pitch_rate, roll_rate]), all scaled into the unit ball.
 
-    ``stacked`` ((9, 3n), read-only) gives all 3n neurons' ``J - 1`` in one product
-    ``[x_long, x_lat, x_torso, 1] @ stacked``: rows 0-7 hold the transposed scaled
-    encoders block-diagonally, row 8 holds ``bias - 1``.
+    For :func:`input_currents` (read-only): ``encoder_rows`` (2, 3, n), the first two
+    columns of each network's scaled encoders ([d, k, i]: input d of network k, neuron
+    i); ``torso_rows`` (2, n), the torso network's last two; ``bias_minus_1`` (3, n).
     """
 
     n_neurons: int
@@ -211,20 +291,21 @@ class Networks:
     longitudinal: NetworkSpec
     lateral: NetworkSpec
     torso: NetworkSpec
-    stacked: np.ndarray = field(init=False, repr=False)
+    encoder_rows: np.ndarray = field(init=False, repr=False)
+    torso_rows: np.ndarray = field(init=False, repr=False)
+    bias_minus_1: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self):
         n_neurons = self.n_neurons
-        stacked = np.zeros((sum(NETWORK_DIMENSIONS) + 1, len(NETWORK_NAMES) * n_neurons))
-        row = 0
-        for index, (net, dims) in enumerate(zip(self, NETWORK_DIMENSIONS)):
+        for net, dims in zip(self, NETWORK_DIMENSIONS):
             if net.encoders.shape != (n_neurons, dims):
                 raise ValueError(f"{net.name}: encoders must have shape {(n_neurons, dims)}")
-            columns = slice(index * n_neurons, (index + 1) * n_neurons)
-            stacked[row:row + dims, columns] = net.scaled_encoders.T
-            row += dims
-        stacked[-1] = np.concatenate([net.bias for net in self]) - 1.0
-        object.__setattr__(self, "stacked", readonly(stacked))
+        rows = np.stack([net.scaled_encoders[:, :2].T for net in self], axis=1)
+        torso_rows = np.ascontiguousarray(self.torso.scaled_encoders[:, 2:].T)
+        bias_minus_1 = np.stack([net.bias for net in self]) - 1.0
+        for name, array in (("encoder_rows", rows), ("torso_rows", torso_rows),
+                            ("bias_minus_1", bias_minus_1)):
+            object.__setattr__(self, name, readonly(np.ascontiguousarray(array)))
 
     def __iter__(self):
         return iter((self.longitudinal, self.lateral, self.torso))
@@ -247,48 +328,66 @@ def build_networks(params) -> Networks:
     return Networks(n_neurons, seed, *nets)
 
 
+def input_currents(x: list[float], networks: Networks) -> np.ndarray:
+    """``J - 1`` of all neurons, (3, n), for the 8 scaled inputs ``x`` (:func:`scaled_inputs`).
+
+    Neuron i of a network with inputs x_0..x_{d-1}: ``((x_0 e_0 + x_1 e_1) [+ x_2 e_2]
+    [+ x_3 e_3]) + (bias - 1)`` with e the scaled encoder, in that order (as the C core).
+    """
+    first = np.array([[x[0], x[2], x[4]], [x[1], x[3], x[5]]])[:, :, None]
+    products = networks.encoder_rows * first
+    current = np.add(products[0], products[1], out=products[0])
+    torso = networks.torso_rows * np.array([[x[6]], [x[7]]])
+    current[2] += torso[0]
+    current[2] += torso[1]
+    current += networks.bias_minus_1
+    return current
+
+
 def lif_rates_times_tau_rc(current: np.ndarray) -> np.ndarray:
     """``tau_rc *`` LIFRate rate (dimensionless) for ``current = J - 1``, in place.
 
     ``tau_rc r = 1 / (tau_ref / tau_rc + log1p(1 / (J - 1)))`` where ``J > 1``, else 0
-    (exactly 0 Hz): one pass fewer than nengo's ``1 / (tau_ref + tau_rc log1p(..))``;
-    the regulator folds the factor ``1 / tau_rc`` (``INV_TAU_RC``) into four scalars.
-    Inactive neurons get a harmless positive current first (keeps inf, whose
-    special-value path in log1p is slow, out) and are zeroed by the last division.
+    (exactly 0 Hz), with :func:`log1p_fixed`: one pass fewer than nengo's ``1 / (tau_ref
+    + tau_rc log1p(..))``; the regulator folds the factor ``1 / tau_rc`` (``INV_TAU_RC``)
+    into four scalars.  Inactive neurons get a tiny positive current first (keeps inf
+    out) and are zeroed by the last division.
     """
     active = current > 0.0
     np.maximum(current, _TINY_CURRENT, out=current)
     np.divide(1.0, current, out=current)
-    np.log1p(current, out=current)
+    log1p_fixed(current)
     current += _TAU_RATIO
     np.divide(active, current, out=current)  # True -> 1.0, False -> 0.0
     return current
 
 
-def _into_unit_disc(first: float, second: float) -> tuple[float, float]:
-    norm = math.hypot(first, second)
+def _into_unit_ball(values: list[float]) -> list[float]:
+    """``values`` divided by their norm if it exceeds 1 (direction kept); the norm is
+    ``sqrt(((v0 v0 + v1 v1) + v2 v2) + ...)`` in that order (no overflow: the inputs and
+    scales are range-checked, |v| <= 1e4)."""
+    norm2 = values[0] * values[0]
+    for value in values[1:]:
+        norm2 = norm2 + value * value
+    norm = math.sqrt(norm2)
     if norm > 1.0:
-        return first / norm, second / norm
-    return first, second
+        return [value / norm for value in values]
+    return values
 
 
 def scaled_inputs(vx, vx_des, vy, vy_des, pitch, roll, pitch_rate, roll_rate,
                   params) -> list[float]:
-    """The 8 network inputs followed by a 1.0 (which multiplies the bias row of ``stacked``).
-
-    Longitudinal ``[vx, vx_des] / velocity_scale_mps``, lateral ``[vy, vy_des] /
-    velocity_scale_mps``, torso ``[pitch / angle_scale_rad, roll / angle_scale_rad,
-    pitch_rate / rate_scale_radps, roll_rate / rate_scale_radps]`` (python floats in
-    m/s, rad, rad/s), each then mapped into its unit ball by radial projection: a vector
-    of norm <= 1 is kept, a longer one divided by its norm (direction kept).
+    """The 8 network inputs: longitudinal ``[vx, vx_des] / velocity_scale_mps``, lateral
+    ``[vy, vy_des] / velocity_scale_mps``, torso ``[pitch / angle_scale_rad, roll /
+    angle_scale_rad, pitch_rate / rate_scale_radps, roll_rate / rate_scale_radps]``
+    (python floats in m/s, rad, rad/s), each then mapped into its unit ball by radial
+    projection (:func:`_into_unit_ball`): a vector of norm <= 1 is kept, a longer one
+    divided by its norm (direction kept).
     """
     velocity_scale, angle_scale = params.velocity_scale_mps, params.angle_scale_rad
     rate_scale = params.rate_scale_radps
-    long_x, long_des = _into_unit_disc(vx / velocity_scale, vx_des / velocity_scale)
-    lat_y, lat_des = _into_unit_disc(vy / velocity_scale, vy_des / velocity_scale)
-    torso = [pitch / angle_scale, roll / angle_scale, pitch_rate / rate_scale,
-             roll_rate / rate_scale]
-    norm = math.hypot(*torso)
-    if norm > 1.0:
-        torso = [value / norm for value in torso]
-    return [long_x, long_des, lat_y, lat_des, *torso, 1.0]
+    longitudinal = _into_unit_ball([vx / velocity_scale, vx_des / velocity_scale])
+    lateral = _into_unit_ball([vy / velocity_scale, vy_des / velocity_scale])
+    torso = _into_unit_ball([pitch / angle_scale, roll / angle_scale, pitch_rate / rate_scale,
+                             roll_rate / rate_scale])
+    return [*longitudinal, *lateral, *torso]

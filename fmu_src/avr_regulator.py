@@ -20,13 +20,15 @@ import numpy as np
 
 try:
     from .avr_errors import InputError, ParameterError, StateError
-    from .avr_network import INV_TAU_RC, NETWORK_NAMES, lif_rates_times_tau_rc, readonly, scaled_inputs
+    from .avr_network import (INV_TAU_RC, NETWORK_NAMES, input_currents, lif_rates_times_tau_rc,
+                               readonly, scaled_inputs)
     from .avr_params import network_key, validate_inputs
     from .avr_specs import (ANGLE_LIMIT_RAD, DELTA_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
                             VELOCITY_LIMIT_MPS)
 except ImportError:  # inside the FMU the modules are top-level
     from avr_errors import InputError, ParameterError, StateError
-    from avr_network import INV_TAU_RC, NETWORK_NAMES, lif_rates_times_tau_rc, readonly, scaled_inputs
+    from avr_network import (INV_TAU_RC, NETWORK_NAMES, input_currents, lif_rates_times_tau_rc,
+                             readonly, scaled_inputs)
     from avr_params import network_key, validate_inputs
     from avr_specs import (ANGLE_LIMIT_RAD, DELTA_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
                            VELOCITY_LIMIT_MPS)
@@ -43,7 +45,6 @@ STRIDE_READY = 4
 #: stride_boundaries from which the step in progress began at a change of step_index
 #: (it is complete at the next change)
 _STEP_SEEN_FROM_START = 2
-_N_NETWORKS = len(NETWORK_NAMES)
 
 
 @dataclass(frozen=True, eq=False)
@@ -265,26 +266,25 @@ def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, 
     """The networks' saturated outputs ``psi`` (x, y, pitch, roll; rad) with the weights
     from before this call, and the weights after this call's PES update."""
     vx, vy, vx_des, vy_des, pitch, roll, pitch_rate, roll_rate, step_index = values
-    scaled = np.array(scaled_inputs(vx, vx_des, vy, vy_des, pitch, roll, pitch_rate,
-                                    roll_rate, params))
+    scaled = scaled_inputs(vx, vx_des, vy, vy_des, pitch, roll, pitch_rate, roll_rate, params)
     # tau_rc * rates, (3, n): the factor 1 / tau_rc goes into scalars below
-    rates_tau = lif_rates_times_tau_rc(scaled @ networks.stacked).reshape(_N_NETWORKS, networks.n_neurons)
-    # Psi_raw[j] = weights[j] . rates[net(j)]: the needed entries of the (4, 3) product
-    # (one BLAS call beats gathering a (4, n) copy of the rates).
-    products = (weights @ rates_tau.T).ravel().tolist()
-    raw = [products[index] * INV_TAU_RC for index in _ROW_NETWORK_PRODUCTS]
+    rates_tau = lif_rates_times_tau_rc(input_currents(scaled, networks))
+    row_rates = rates_tau[_ROW_NETWORK]  # (4, n): each weight row's presynaptic rates
+    # Psi_raw[j] = weights[j] . rates[net(j)], summed in neuron order (a cumulative sum:
+    # sequential by definition, unlike BLAS or np.sum), then + 0.0 (no -0.0), as the C
+    # core's loop over the active neurons (the silent ones add exact zeros).
+    sums = np.cumsum(np.multiply(weights, row_rates), axis=1)[:, -1].tolist()
+    raw = [(0.0 + value) * INV_TAU_RC for value in sums]
     limit = params.psi_limit
     psi = [limit if value > limit else (-limit if value < -limit else value) for value in raw]
     if params.learning_rate != 0.0 and step_index >= params.learn_from_step:
         errors = _learning_errors(stride, vx, vx_des, vy_des, pitch, params)
-        weights = _pes_update(weights, rates_tau, raw, errors, dt, params)
+        weights = _pes_update(weights, row_rates, raw, errors, dt, params)
     return weights, psi
 
 
 #: The network each weight row reads: x longitudinal, y lateral, pitch and roll torso.
-_ROW_NETWORK = (0, 1, 2, 2)
-#: Index, in the flattened (4, 3) product weights @ rates.T, of each row with its network.
-_ROW_NETWORK_PRODUCTS = tuple(row * _N_NETWORKS + net for row, net in enumerate(_ROW_NETWORK))
+_ROW_NETWORK = [0, 1, 2, 2]
 
 
 def _learning_errors(stride: dict, vx: float, vx_des: float, vy_des: float, pitch: float,
@@ -302,25 +302,21 @@ def _learning_errors(stride: dict, vx: float, vx_des: float, vy_des: float, pitc
     return (vx_des - vx, e_y, params.pitch_des - pitch, e_roll)
 
 
-def _pes_update(weights, rates_tau, raw, errors, dt, params) -> np.ndarray:
+def _pes_update(weights, row_rates, raw, errors, dt, params) -> np.ndarray:
     """The weights after one PES step with conditional-integration anti-windup.
 
     The update moves raw[j] by ``-learning_rate dt/n E_j |rates|^2``, i.e. in the
     direction of -E_j; rows at or beyond the limit that it would push further out
-    (raw[j] and -E_j of the same sign) are skipped for this call.
+    (raw[j] and -E_j of the same sign) are skipped for this call.  Each weight becomes
+    ``coefficient * rate + weight`` (one rounding each, as the C core).
     """
     limit = params.psi_limit
-    alpha = -params.learning_rate * dt / rates_tau.shape[1] * INV_TAU_RC  # per unit of rates_tau
+    alpha = -params.learning_rate * dt / row_rates.shape[1] * INV_TAU_RC  # per unit of rates_tau
     coefficients = [0.0 if (value >= limit or value <= -limit) and value * error < 0.0
                     else alpha * error for value, error in zip(raw, errors)]
     if not any(coefficients):  # nothing to learn: keep (share) the read-only array
         return weights
-    # (4, 3) @ (3, n) = each row's coefficient times its network's rates, exactly (the
-    # zero terms add exact zeros); one BLAS call.  Setting 4 scalars is much cheaper
-    # than np.array of a nested list.
-    select = np.zeros((N_WEIGHT_ROWS, _N_NETWORKS))
-    select[0, 0], select[1, 1], select[2, 2], select[3, 2] = coefficients  # (row, _ROW_NETWORK[row])
-    new_weights = select @ rates_tau
+    new_weights = np.multiply(row_rates, np.array(coefficients)[:, None], out=row_rates)
     new_weights += weights
     return readonly(new_weights)
 

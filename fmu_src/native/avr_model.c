@@ -1,11 +1,11 @@
 /*
  * The regulator's numerics (see avr_model.h).  Each function mirrors the numpy core's
- * function of the same purpose, operation for operation and in the same order, so that
- * with IEEE float64, no FMA contraction (-ffp-contract=off) and no -ffast-math:
- *   - the networks are bit-identical to avr_core.build_networks on glibc (only +, *, /,
- *     sqrt, which are correctly rounded, and expm1 from the same libm);
- *   - a step differs from avr_core.step only by the summation order of the dot products
- *     (numpy hands them to BLAS), a few ulp per call.
+ * function of the same purpose, operation for operation and in the same order, using
+ * only +, -, *, /, sqrt and frexp-by-bits (each exact or correctly rounded by IEEE 754;
+ * no libm log1p/expm1/hypot, whose last bits differ between C libraries).  So with
+ * IEEE float64, no FMA contraction (-ffp-contract=off) and no -ffast-math, the networks
+ * and every call give the same bits as avr_core, on every machine (see avr_network's
+ * docstring for the numpy side).
  */
 #include "avr_model.h"
 
@@ -63,14 +63,54 @@ static void uniform_range(uint64_t key, int n, double lo, double hi, double *out
     for (int i = 0; i < n; ++i) out[i] = lo + (hi - lo) * avr_uniform(key, (uint64_t)i + 1);
 }
 
-/* ---- networks (avr_core._make_network, lif_gain_bias, Networks.stacked) ------------- */
+/* ---- fixed elementary functions (avr_network.expm1_fixed, log1p_fixed) ----------------- */
+
+/* exp(x) - 1 for 0 <= x <= 1: sum_{i=1..20} x^i / i! by Horner, the 1/i! as in
+ * avr_network._series_coefficients (20! is exact in a double). */
+static double expm1_fixed(double x) {
+    double coef[20], factorial = 1.0;
+    for (int i = 1; i <= 20; ++i) {
+        factorial = factorial * i;
+        coef[i - 1] = 1.0 / factorial;
+    }
+    double total = coef[19] * x;
+    for (int i = 18; i >= 0; --i) total = (total + coef[i]) * x;
+    return total;
+}
+
+/* log(1 + y) for finite y >= 0: u = 1 + y = m' 2^k with m' in [1/2, 1) (from u's bits,
+ * exact for u >= 1); m = m' sqrt2; s = (m - 1) / (m + 1); log u = (k - 1/2) ln2 +
+ * s (2 + sum_{i=1..9} 2/(2i+1) s^(2i)), Horner in s^2.  Straight-line code (no calls,
+ * no branches) so that the rate loop below vectorizes. */
+static inline double log1p_fixed(double y) {
+    double u = 1.0 + y, m;
+    uint64_t bits, m_bits;
+    memcpy(&bits, &u, sizeof bits);
+    m_bits = (bits & UINT64_C(0x000FFFFFFFFFFFFF)) | UINT64_C(0x3FE0000000000000); /* m' in [1/2, 1) */
+    memcpy(&m, &m_bits, sizeof m);
+    double k = (double)(int64_t)(bits >> 52) - 1022.0;
+    m = m * AVR_SQRT2;
+    double s = (m - 1.0) / (m + 1.0), z = s * s;
+    double tail = (2.0 / 19.0) * z;
+    tail = (tail + 2.0 / 17.0) * z;
+    tail = (tail + 2.0 / 15.0) * z;
+    tail = (tail + 2.0 / 13.0) * z;
+    tail = (tail + 2.0 / 11.0) * z;
+    tail = (tail + 2.0 / 9.0) * z;
+    tail = (tail + 2.0 / 7.0) * z;
+    tail = (tail + 2.0 / 5.0) * z;
+    tail = (tail + 2.0 / 3.0) * z;
+    return (k - 0.5) * AVR_LN2 + (tail + 2.0) * s;
+}
+
+/* ---- networks (avr_core._make_network, lif_gain_bias, Networks) ------------------------ */
 static void make_network(AvrNetworks *net, int k) {
     int n = net->n, d = DIMS[k];
     sphere_encoders(stream_key(net->seed, k, 0), n, d, net->encoders[k]);
     uniform_range(stream_key(net->seed, k, 1), n, AVR_MAX_RATE_LO_HZ, AVR_MAX_RATE_HI_HZ, net->max_rates[k]);
     uniform_range(stream_key(net->seed, k, 2), n, AVR_INTERCEPT_LO, AVR_INTERCEPT_HI, net->intercepts[k]);
     for (int i = 0; i < n; ++i) {
-        double j_max_minus_1 = 1.0 / expm1((1.0 / net->max_rates[k][i] - AVR_TAU_REF) / AVR_TAU_RC);
+        double j_max_minus_1 = 1.0 / expm1_fixed((1.0 / net->max_rates[k][i] - AVR_TAU_REF) / AVR_TAU_RC);
         double gain = j_max_minus_1 / (1.0 - net->intercepts[k][i]);
         net->gain[k][i] = gain;
         net->bias[k][i] = 1.0 - gain * net->intercepts[k][i];
@@ -142,62 +182,25 @@ void avr_core_free(AvrCore *core) {
 /* ---- one call (avr_core.step) -------------------------------------------------------- */
 #define V(name) values[AVR_VR_##name]
 
-/* a, b divided by their norm if it exceeds 1 (avr_core._ball2). */
-static void ball2(double *a, double *b) {
-    double r = hypot(*a, *b);
-    if (r > 1.0) *a /= r, *b /= r;
+/* v[0..d-1] divided by their norm if it exceeds 1; the norm is sqrt(((v0 v0 + v1 v1) + v2 v2) + ...)
+ * (avr_network._into_unit_ball; no overflow: inputs and scales are range-checked, |v| <= 1e4). */
+static void into_unit_ball(double *v, int d) {
+    double norm2 = v[0] * v[0];
+    for (int i = 1; i < d; ++i) norm2 = norm2 + v[i] * v[i];
+    double norm = sqrt(norm2);
+    if (norm > 1.0)
+        for (int i = 0; i < d; ++i) v[i] = v[i] / norm;
 }
 
-/* The 8 network inputs, scaled and radially projected into the unit ball (avr_core._scaled_values). */
+/* The 8 network inputs, scaled and radially projected into the unit ball (avr_network.scaled_inputs). */
 static void network_inputs(const double *values, double x[AVR_N_INPUTS]) {
     double vs = V(velocity_scale_mps), sa = V(angle_scale_rad), sr = V(rate_scale_radps);
     x[0] = V(vx) / vs, x[1] = V(vx_des) / vs;
     x[2] = V(vy) / vs, x[3] = V(vy_des) / vs;
     x[4] = V(pitch) / sa, x[5] = V(roll) / sa, x[6] = V(pitch_rate) / sr, x[7] = V(roll_rate) / sr;
-    ball2(&x[0], &x[1]);
-    ball2(&x[2], &x[3]);
-    double m = 0.0; /* 4-d norm, scaled so that huge inputs cannot overflow */
-    for (int i = 4; i < 8; ++i) m = fmax(m, fabs(x[i]));
-    if (m > 1.0) {
-        double s = 0.0;
-        for (int i = 4; i < 8; ++i) s += (x[i] / m) * (x[i] / m);
-        double norm = m * sqrt(s);
-        if (norm > 1.0)
-            for (int i = 4; i < 8; ++i) x[i] /= norm;
-    } else if (m > 0.0) {
-        double norm = sqrt(x[4] * x[4] + x[5] * x[5] + x[6] * x[6] + x[7] * x[7]);
-        if (norm > 1.0)
-            for (int i = 4; i < 8; ++i) x[i] /= norm;
-    }
-}
-
-/* log(1 + y) for finite y > 0, within ~1 ulp of a correctly rounded log1p, in straight-line
- * code (no calls, no branches) so that the rate loop below vectorizes; a libm log1p call per
- * neuron was half of a step's time.  Method: u = 1 + y rounded, e = (1 + y) - u exactly
- * (Fast2Sum); u = 2^k m with m in [sqrt(1/2), sqrt(2)) from u's bits; with f = m - 1 and
- * s = f / (2 + f), log(m) = 2 atanh(s) = f - (f^2/2 - s (f^2/2 + R)), R = sum_{n=1..9} 2 s^(2n) / (2n+1)
- * (|s| < 0.172: the next term is below 3e-17 relative); log(1 + y) = k ln2 + log(m) + e/u. */
-static inline double log1p_positive(double y) {
-    const double ln2_hi = 0x1.62e42p-1, ln2_lo = 0x1.fdf473de6af28p-22; /* ln2_hi: 21 bits, k ln2_hi exact */
-    double u = 1.0 + y;
-    double e = y >= 1.0 ? 1.0 - (u - y) : y - (u - 1.0);
-    uint64_t bits, m_bits, k_bits;
-    memcpy(&bits, &u, sizeof bits);
-    m_bits = (bits & UINT64_C(0x000FFFFFFFFFFFFF)) | UINT64_C(0x3FF0000000000000); /* m in [1, 2) */
-    k_bits = (bits >> 52) | UINT64_C(0x4330000000000000);                           /* 2^52 + biased exponent */
-    double m, k;
-    memcpy(&m, &m_bits, sizeof m);
-    memcpy(&k, &k_bits, sizeof k);
-    k = k - (0x1p52 + 1023.0);
-    int big = m > 1.4142135623730951;
-    m = big ? 0.5 * m : m;
-    k = big ? k + 1.0 : k;
-    double f = m - 1.0, s = f / (2.0 + f), z = s * s;
-    double r = z * (2.0 / 3 + z * (2.0 / 5 + z * (2.0 / 7 + z * (2.0 / 9 + z * (2.0 / 11 + z * (2.0 / 13 + z * (
-        2.0 / 15 + z * (2.0 / 17 + z * (2.0 / 19)))))))));
-    double hfsq = 0.5 * f * f;
-    double log_m = f - (hfsq - s * (hfsq + r));
-    return k * ln2_hi + (log_m + (k * ln2_lo + e / u));
+    into_unit_ball(x, 2);
+    into_unit_ball(x + 2, 2);
+    into_unit_ball(x + 4, 4);
 }
 
 /* The active neurons of network k for input x and their tau_rc * LIF rates
@@ -227,7 +230,7 @@ VECTOR_CLONES static int network_rates(const AvrNetworks *net, int k, const doub
     }
     for (int i = 0; i < m; ++i) {
         double j = rates[i] > 1e-300 ? rates[i] : 1e-300;
-        rates[i] = 1.0 / (TAU_RATIO + log1p_positive(1.0 / j));
+        rates[i] = 1.0 / (log1p_fixed(1.0 / j) + TAU_RATIO);
     }
     return m;
 }
