@@ -135,8 +135,7 @@ def test_offset_limit_binds_the_same_in_c(native_fmus, fmi):
     slave = AnySlave(native_fmus[fmi]).init(**params)
     out = np.array([slave.step(k, u) for k, u in enumerate(seq)])
     slave.close()
-    bad = np.argwhere(out != reference)
-    assert np.array_equal(out, reference), (bad[:5], out[tuple(bad[0])], reference[tuple(bad[0])], [OUTPUT_NAMES[j] for j in set(bad[:, 1])])
+    assert np.array_equal(out, reference)
 
 
 @pytest.mark.parametrize("seed", [0, 1])
