@@ -2,8 +2,8 @@
 
 :func:`neuron_rates` evaluates one network's LIFRate rates in Hz exactly as nengo writes
 them, ``1 / (tau_ref + tau_rc log1p(1 / (J - 1)))`` per network, where the core
-(``fmu_src.avr_network.lif_rates_times_tau_rc``) evaluates all three networks in one
-stacked product and folds ``1 / tau_rc`` into scalars; :func:`network_inputs` gives each
+(``fmu_src.avr_network.lif_rates_times_tau_rc``) evaluates all three networks at once
+with its fixed-series ``log1p`` and folds ``1 / tau_rc`` into scalars; :func:`network_inputs` gives each
 network's input as an array.  The tests compare the core against these.
 """
 import numpy as np

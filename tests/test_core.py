@@ -403,8 +403,8 @@ def test_first_update_is_the_pes_rule():
     a = -p.learning_rate * DT / p.n_neurons
     # y and roll learn from stride means: nothing before two steps are complete
     want = np.array([a * (0.1 - 0.4) * hx, 0.0 * hy, a * (0.0 - 0.05) * ht, 0.0 * ht])
-    # The core gets J - 1 from one stacked product (bias - 1 folded in), neuron_rates
-    # from scaled_encoders @ x + bias - 1: a few ulps apart.  That is ~1e-15 relative
+    # The core gets J - 1 from ordered sums with bias - 1 folded in and log1p_fixed, neuron_rates
+    # from scaled_encoders @ x + bias - 1 and numpy's log1p: a few ulps apart.  That is ~1e-15 relative
     # for most rates, more just above threshold where the rate rises like
     # 1/ln(1/(J-1)) but is tiny, hence an absolute floor of 1e-12 of the largest value.
     np.testing.assert_allclose(reg.state.weights, want, rtol=1e-12,

@@ -1,7 +1,8 @@
 """Our master runs the native FMUs: FMI 2.0 (``--regulator native``) and FMI 3.0
 (``--regulator native-fmi3``, fmpy's FMU3Slave): the same closed loop as the numpy core
-in-process, to the cross-check's tolerance, and the FMI 3.0 FMU bit for bit like the
-FMI 2.0 one (one C core behind both APIs); its errors carry the FMU's log."""
+in-process, bit for bit (the two cores compute the same doubles), and the FMI 3.0 FMU
+bit for bit like the FMI 2.0 one (one C core behind both APIs); its errors carry the
+FMU's log."""
 import json
 import math
 import subprocess
@@ -27,8 +28,7 @@ def test_master_native_regulator_matches_the_core_in_process(native_fmus, tmp_pa
     core = master.run_arm(s, "adaptive", master.make_regulator("inprocess"))
     assert len(native.rows) == len(core.rows) == 600 and not native.fell
     for name in native.rows.dtype.names:
-        # 1e-9 (the cross-check's bound): the cores differ by the summation order of dot products only
-        np.testing.assert_allclose(native.rows[name], core.rows[name], rtol=0, atol=1e-9, err_msg=name)
+        np.testing.assert_array_equal(native.rows[name], core.rows[name], err_msg=name)
 
 
 # nominal/adaptive sets Float64 and Int32 parameters (seed); push_fwd_30n/pd_only a Boolean
@@ -46,10 +46,7 @@ def test_master_native_fmi3_matches_fmi2_and_the_core(native_fmus, tmp_path, nam
     for col in fmi3.rows.dtype.names:
         # the same C core behind FMI 3.0 and FMI 2.0: the FMI 3.0 path must change nothing
         np.testing.assert_array_equal(fmi3.rows[col], fmi2.rows[col], err_msg=col)
-        # not bit-identical to numpy (dot products summed in another order, ~1e-14 per output);
-        # the closed loop carries that to at most 3.3e-10 (measured: the foot forces, ~100s of N);
-        # 1e-9 is the cross-check's bound
-        np.testing.assert_allclose(fmi3.rows[col], core.rows[col], rtol=0, atol=1e-9, err_msg=col)
+        np.testing.assert_array_equal(fmi3.rows[col], core.rows[col], err_msg=col)
 
 
 def test_native_fmi3_nan_input_is_a_cosim_error_with_the_fmu_log(native_fmus, tmp_path):

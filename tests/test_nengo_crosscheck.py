@@ -22,8 +22,8 @@ Conventions reconciled here (each checked by the assertions, not assumed):
 * Scaling.  nengo 4 scales PES by ``kappa * dt / n_neurons``, like the core.
 
 Tolerances: ``rtol=1e-9, atol=1e-10`` as required; the observed differences are
-~1e-14 relative (summation order of the dot products: nengo multiplies per network,
-the core in one stacked product).
+~1e-14 relative (summation order of the dot products, and the core's fixed-series log1p
+against numpy's: docs/method.md, "Numerics").
 """
 import numpy as np
 import pytest

@@ -28,7 +28,7 @@
 static const int DIMS[AVR_N_NETS] = {2, 2, 4};
 static const int FIRST_INPUT[AVR_N_NETS] = {0, 2, 4};
 
-/* ---- random numbers (avr_core.SplitMix64) ------------------------------------------ */
+/* ---- random numbers (avr_network.SplitMix64) ------------------------------------------ */
 uint64_t avr_splitmix64_mix(uint64_t z) {
     z = (z ^ (z >> 30)) * UINT64_C(0xBF58476D1CE4E5B9);
     z = (z ^ (z >> 27)) * UINT64_C(0x94D049BB133111EB);
@@ -43,7 +43,7 @@ static uint64_t stream_key(uint32_t seed, int net, int field) {
     return avr_splitmix64_mix(16u * (uint64_t)seed + 4u * (uint64_t)net + (uint64_t)field);
 }
 
-/* avr_core.sphere_encoders: rejection from the cube, candidates in stream order. */
+/* avr_network.sphere_encoders: rejection from the cube, candidates in stream order. */
 static void sphere_encoders(uint64_t key, int n, int d, double *out) {
     uint64_t index = 0;
     for (int have = 0; have < n;) {
@@ -103,7 +103,7 @@ static inline double log1p_fixed(double y) {
     return (k - 0.5) * AVR_LN2 + (tail + 2.0) * s;
 }
 
-/* ---- networks (avr_core._make_network, lif_gain_bias, Networks) ------------------------ */
+/* ---- networks (avr_network._make_network, lif_gain_bias, Networks) ------------------------ */
 static void make_network(AvrNetworks *net, int k) {
     int n = net->n, d = DIMS[k];
     sphere_encoders(stream_key(net->seed, k, 0), n, d, net->encoders[k]);
@@ -179,7 +179,7 @@ void avr_core_free(AvrCore *core) {
     core->n = 0;
 }
 
-/* ---- one call (avr_core.step) -------------------------------------------------------- */
+/* ---- one call (avr_regulator.step) -------------------------------------------------------- */
 #define V(name) values[AVR_VR_##name]
 
 /* v[0..d-1] divided by their norm if it exceeds 1; the norm is sqrt(((v0 v0 + v1 v1) + v2 v2) + ...)
@@ -204,7 +204,7 @@ static void network_inputs(const double *values, double x[AVR_N_INPUTS]) {
 }
 
 /* The active neurons of network k for input x and their tau_rc * LIF rates
- * (avr_core._lif_rates_times_tau_rc): indices into active[], rates into rates[]; returns
+ * (avr_network.lif_rates_times_tau_rc): indices into active[], rates into rates[]; returns
  * their number.  The currents are computed for all n; the active ones are packed
  * branch-free, then their rates computed in one straight loop that the compiler
  * vectorizes: no unpredictable branch per neuron, no work for silent ones. */
@@ -247,13 +247,13 @@ static double sparse_dot(const AvrCore *core, int k, const double *restrict w) {
     return sum;
 }
 
-/* Learning with anti-windup (the PES block of avr_core.step): raw = unsaturated outputs.
+/* Learning with anti-windup (avr_regulator._adapt, _pes_update): raw = unsaturated outputs.
  * A silent neuron's weight would change by coef * 0: it is left as it is. */
 static void learn(AvrCore *core, const double *values, double dt, const double raw[AVR_N_ROWS]) {
     int n = core->n;
     double alpha = -V(learning_rate) * dt / (double)n * INV_TAU_RC;
     double lim = V(psi_limit);
-    /* x and pitch: this call's error; y and roll: the stride error (avr_core._learning_errors) */
+    /* x and pitch: this call's error; y and roll: the stride error (avr_regulator._learning_errors) */
     int ready = core->stride_boundaries >= AVR_STRIDE_READY;
     double e_y = ready ? V(vy_des) - 0.5 * (core->vy_mean_prev + core->vy_mean_last) : 0.0;
     double e_roll = ready ? V(roll_des) - 0.5 * (core->roll_mean_prev + core->roll_mean_last) : 0.0;
@@ -300,7 +300,7 @@ static void clip_offsets(double *values, double limit) {
     }
 }
 
-/* The stride accumulators (avr_core._advance_stride): at a change of step_index the step
+/* The stride accumulators (avr_regulator._advance_stride): at a change of step_index the step
  * that ends is closed if it was seen from its start; this call starts the new step's sums. */
 static void advance_stride(AvrCore *c, int64_t si, double vy, double roll) {
     if (si == c->last_step_index) {
