@@ -83,12 +83,14 @@ static double expm1_fixed(double x) {
  * s (2 + sum_{i=1..9} 2/(2i+1) s^(2i)), Horner in s^2.  Straight-line code (no calls,
  * no branches) so that the rate loop below vectorizes. */
 static inline double log1p_fixed(double y) {
-    double u = 1.0 + y, m;
-    uint64_t bits, m_bits;
+    double u = 1.0 + y, m, k;
+    uint64_t bits, m_bits, k_bits;
     memcpy(&bits, &u, sizeof bits);
     m_bits = (bits & UINT64_C(0x000FFFFFFFFFFFFF)) | UINT64_C(0x3FE0000000000000); /* m' in [1/2, 1) */
+    k_bits = (bits >> 52) | UINT64_C(0x4330000000000000); /* 2^52 + biased exponent, exactly */
     memcpy(&m, &m_bits, sizeof m);
-    double k = (double)(int64_t)(bits >> 52) - 1022.0;
+    memcpy(&k, &k_bits, sizeof k);
+    k = k - (0x1p52 + 1022.0); /* exact; an int-to-double conversion would not vectorize with AVX2 */
     m = m * AVR_SQRT2;
     double s = (m - 1.0) / (m + 1.0), z = s * s;
     double tail = (2.0 / 19.0) * z;
