@@ -308,10 +308,11 @@ def _pes_update(weights, row_rates, raw, errors, dt, params) -> np.ndarray:
     The update moves raw[j] by ``-learning_rate dt/n E_j |rates|^2``, i.e. in the
     direction of -E_j; rows at or beyond the limit that it would push further out
     (raw[j] and -E_j of the same sign) are skipped for this call.  Each weight becomes
-    ``coefficient * rate + weight`` (one rounding each, as the C core).
+    ``coefficient * rate + weight`` (one rounding each, as the C core).  ``row_rates``
+    ((4, n), :func:`_adapt`'s own copy) is overwritten: it becomes the new weights.
     """
     limit = params.psi_limit
-    alpha = -params.learning_rate * dt / row_rates.shape[1] * INV_TAU_RC  # per unit of rates_tau
+    alpha = -params.learning_rate * dt / row_rates.shape[1] * INV_TAU_RC  # per unit of tau_rc * rate
     coefficients = [0.0 if (value >= limit or value <= -limit) and value * error < 0.0
                     else alpha * error for value, error in zip(raw, errors)]
     if not any(coefficients):  # nothing to learn: keep (share) the read-only array

@@ -15,6 +15,7 @@ FMU loads its own copy from ``resources/cassie_plant_lib/fmu_src/``.
 from __future__ import annotations
 
 import math
+import sys
 
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Status
@@ -35,11 +36,8 @@ INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED = PHASES
 TIME_MATCH_RTOL = 1e-9
 
 _VARIABLE_CLASSES = {"Real": Real, "Integer": Integer, "Boolean": Boolean, "String": String}
-
-
-def _bound(value, default: float) -> float:
-    return default if value is None else value
 _CASTS = {**PYTHON_TYPES, "String": str}
+_LARGEST = sys.float_info.max
 
 
 class SpecSlave(Fmi2Slave):
@@ -58,11 +56,16 @@ class SpecSlave(Fmi2Slave):
             self.register_variable(self._declare(spec))
         #: value reference -> (name, type) for the fast get/set paths
         self._by_vr = [(var.name, self._specs[var.name].type) for var in self.vars.values()]
-        #: value reference -> (name, min, max) of each Real input: :meth:`set_real`'s fast path
-        self._real_inputs = {
-            vr: (name, _bound(self._specs[name].min, -math.inf), _bound(self._specs[name].max, math.inf))
+        #: value reference -> (name, min, max) of each Real input, for :meth:`set_real`'s fast
+        #: path: for a float, ``min <= value <= max`` is exactly :func:`value_problem`'s rule
+        #: (the largest finite doubles where the table has no bound, so inf and nan fail).
+        #: Empty when a subclass adds rules of its own (:meth:`_value_problem`): every value
+        #: then takes the checking path.
+        own_rules = type(self)._value_problem is not SpecSlave._value_problem
+        self._real_inputs = {} if own_rules else {
+            vr: (name, -_LARGEST if spec.min is None else spec.min, _LARGEST if spec.max is None else spec.max)
             for vr, (name, var_type) in enumerate(self._by_vr)
-            if var_type == "Real" and self._specs[name].causality == "input"}
+            for spec in [self._specs[name]] if var_type == "Real" and spec.causality == "input"}
 
     def _declare(self, spec):
         extra = {} if spec.causality == "input" else {"initial": Fmi2Initial.exact}  # FMI: no `initial` on inputs
@@ -106,10 +109,10 @@ class SpecSlave(Fmi2Slave):
             self._set(name, value)
 
     def set_real(self, vrs, values):
-        # Fast path, the master's every step: Real inputs only, each a float inside its
-        # range (nan fails the comparison), not terminated.  Those are exactly the values
-        # set_problem allows, so they are stored as the generic path would; anything else,
-        # or any doubt, takes the generic path, which checks and refuses value by value.
+        # Fast path, the master's every step: Real inputs only (see _real_inputs), each a
+        # float inside its range, not terminated.  Those are exactly the values set_problem
+        # allows, so they are stored as the generic path would; anything else, or any
+        # doubt, takes the generic path, which checks and refuses value by value.
         if self._phase != TERMINATED:
             inputs, accepted = self._real_inputs, []
             for vr, value in zip(vrs, values):

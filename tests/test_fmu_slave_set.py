@@ -62,3 +62,16 @@ def test_nothing_is_set_after_terminate():
     with pytest.raises(FmiCallError, match="fmi2Terminate"):
         s.set_real([_vr(s, "vx")], [0.2])
     assert s._values["vx"] == 0.0
+
+
+def test_a_subclass_with_rules_of_its_own_has_every_value_checked():
+    class Stricter(AdaptiveVelocityRegulator):
+        def _value_problem(self, spec, value):
+            return "vx above 1" if spec.name == "vx" and value > 1.0 else super()._value_problem(spec, value)
+
+    plain, strict = AdaptiveVelocityRegulator(instance_name="plain"), Stricter(instance_name="strict")
+    assert plain._real_inputs and not strict._real_inputs
+    # the fast path's bounds are finite: inf and nan can never pass them
+    assert all(map(math.isfinite, [b for _, lo, hi in plain._real_inputs.values() for b in (lo, hi)]))
+    with pytest.raises(FmiCallError, match="vx above 1"):
+        strict.set_real([_vr(strict, "vx")], [2.0])
