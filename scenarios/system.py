@@ -9,11 +9,16 @@ matches the FMUs it packs:
 * connections name to name: every output of one that is an input of the other with the
   same name and type (the plant's ``vx, vy, pitch, roll, pitch_rate, roll_rate,
   step_index`` to the regulator, the regulator's six ``delta_*`` to the plant);
-* the nominal case as parameter sets (``resources/<instance>_nominal.ssv``): the
-  plant's parameters at their start values and the command ``vx_des = 0.5 m/s`` on
-  both FMUs (the command is an input of both, set by the user, not a connection),
-  ``yaw_rate_des = 0`` on the plant only (the regulator has no yaw-rate input: the
-  speeds it regulates are in the heading frame whatever the turning rate);
+* the nominal case as one parameter-set name, :data:`PARAMETER_SET`, bound to each
+  component (``resources/<instance>_nominal.ssv``, bare variable names as SSP 1.0 wants
+  for a component binding): the plant's parameters at their start values and the
+  command ``vx_des = 0.5 m/s`` on both FMUs (the command is an input of both, set by
+  the user, not a connection), ``yaw_rate_des = 0`` on the plant only (the regulator has
+  no yaw-rate input: the speeds it regulates are in the heading frame whatever the
+  turning rate).  One name for both because masters differ in how they pick a set:
+  libcosim applies each component's first binding, Ecos applies every component's
+  set of the one name given to ``init(parameter_set=...)``; fmpy's ``simulate_ssp``
+  reads no binding (:func:`scenarios.system_run.ssp_parameter_set` hands them over);
 * a default experiment of 30 s with a fixed 5 ms step (OSP annotation, which libcosim
   reads).
 
@@ -38,6 +43,8 @@ STOP_S = 30.0
 #: The nominal command, set on every FMU that has the input (yaw_rate_des: the plant only).
 NOMINAL_COMMAND = {"vx_des": "0.5", "vy_des": "0.0", "yaw_rate_des": "0.0"}
 FMU_MIME = "application/x-fmu-sharedlibrary"
+#: The name of the nominal parameter set of every component (Ecos: ``init(parameter_set=PARAMETER_SET)``).
+PARAMETER_SET = "nominal"
 
 
 def _q(tag: str) -> str:
@@ -152,7 +159,7 @@ def ssp_entries(plant_fmu: Path, regulator_fmu: Path) -> dict[str, bytes]:
     entries = {"SystemStructure.ssd": _ssd(comps)}
     for (name, fmu, _), (_, rows) in zip(comps, nominal_values(comps).items()):
         entries[f"resources/{fmu.name}"] = fmu.read_bytes()
-        entries[f"resources/{name}_nominal.ssv"] = _ssv(f"{name}_nominal", rows)
+        entries[f"resources/{name}_nominal.ssv"] = _ssv(PARAMETER_SET, rows)
     return entries
 
 

@@ -1,4 +1,4 @@
-"""Run the CassieAVR system (``dist/CassieAVR.ssp``) in libcosim and in fmpy, and script it.
+"""Run the CassieAVR system (``dist/CassieAVR.ssp``) in libcosim, fmpy and Ecos, and script it.
 
 Both FMUs take the command's speeds (``vx_des``, ``vy_des``); the plant alone takes its
 yaw rate (``yaw_rate_des``: the regulator has no such input) and the push
@@ -15,10 +15,25 @@ parameter sets give the nominal start values (0.5 m/s, no turn, no push).  Over 
   into the ``input`` functions.  fmpy applies system inputs one step late (it copies
   connections after each step).
 
-Exchange: both masters step the two FMUs with the inputs of the previous communication
-point (Jacobi); our own master (``python -m scenarios run NAME --plant fmu``) senses the
-plant, steps the regulator and hands its outputs to the plant in the same step
-(Gauss-Seidel), so the regulator's offsets reach the plant 5 ms earlier there.
+Each master with its own documented call on the same file (:func:`run_libcosim`,
+:func:`run_fmpy`, :func:`run_ecos`):
+
+* libcosim: ``CosimExecution.from_ssp_file(ssp)`` applies every component's first
+  parameter binding;
+* Ecos: ``EcosSimulation(ssp_path=ssp, step_size=...).init(parameter_set="nominal")``
+  applies every component's set of that name (hence one name for both,
+  :data:`scenarios.system.PARAMETER_SET`); :func:`run_ecos` hands it the SSP unpacked
+  (Ecos leaves its own unpacked copy of a ``.ssp`` behind);
+* fmpy 0.3: ``simulate_ssp(ssp, ..., parameter_set=...)`` reads no parameter binding
+  itself, so :func:`ssp_parameter_set` hands it the SSP's own bindings under their
+  hierarchical names (``plant.torso_mass_kg``), String values left out (fmpy cannot
+  set them).
+
+Exchange: all three step the two FMUs with the inputs of the previous communication
+point (Jacobi) and read the outputs after the step, so they give the same trajectory;
+our own master (``python -m scenarios run NAME --plant fmu``) senses the plant, steps
+the regulator and hands its outputs to the plant in the same step (Gauss-Seidel), so
+the regulator's offsets reach the plant 5 ms earlier there.
 """
 from __future__ import annotations
 
@@ -179,9 +194,10 @@ def run_fmpy(ssp: str | Path, duration_s: float, start_values: Mapping[str, Mapp
              inputs: Mapping[str, Callable[[float], float]] | None = None) -> np.ndarray:
     """Run the SSP with fmpy's ``simulate_ssp``; rows of :data:`RECORDED` after every step.
 
-    The SSP's parameter sets are passed as ``parameter_set`` (simulate_ssp does not read
-    them itself) with ``start_values`` on top; fmpy 0.3 cannot set String variables, so
-    String parameters must stay at their defaults.
+    The SSP's parameter bindings are passed as ``parameter_set`` (fmpy 0.3's simulate_ssp
+    reads none itself; it applies this set to each FMU before its initialization mode)
+    with ``start_values`` on top; fmpy 0.3 cannot set String variables, so String
+    parameters must stay at their defaults.
     """
     from fmpy.ssp.simulation import simulate_ssp
 
@@ -195,9 +211,64 @@ def run_fmpy(ssp: str | Path, duration_s: float, start_values: Mapping[str, Mapp
     return rows
 
 
+def run_ecos(ssp: str | Path, duration_s: float, parameter_set: str = system.PARAMETER_SET) -> np.ndarray:
+    """Run the SSP in Ecos (``ecospy``) for ``duration_s``; rows of :data:`RECORDED` after every step.
+
+    ``EcosSimulation(ssp_path=..., step_size=0.005).init(parameter_set=...)``: Ecos applies
+    each component's binding named ``parameter_set`` in initialization mode.  Ecos takes
+    the SSP file or its unpacked folder; it is given the folder, unpacked here into a
+    temporary folder that is removed afterwards, because Ecos 0.7.2 leaves its own
+    unpacked copy of a ``.ssp`` (``ecos_ssp_<uuid>``, 2 MB) in the system temp folder.
+    Ecos has no start values on top of a parameter set (values set before ``init`` are
+    not applied; a fixed parameter cannot change after it): other values need their
+    own parameter set.
+    """
+    import tempfile
+
+    ecos_simulation, ecos_lib = _ecospy()
+    n = int(round(duration_s / system.STEP_S))
+    rows = np.zeros(n, dtype=_dtype())
+    kinds = _dtype()
+    with tempfile.TemporaryDirectory(prefix="cassie_avr_ecos_") as unpacked:
+        with zipfile.ZipFile(ssp) as archive:
+            archive.extractall(unpacked)
+        with ecos_simulation(ssp_path=unpacked, step_size=system.STEP_S) as sim:
+            if not sim.init(parameter_set=parameter_set):
+                raise RuntimeError(f"Ecos could not initialise {ssp} with parameter set {parameter_set!r}: "
+                                   f"{ecos_lib.get_last_error()}")
+            getters = [({"i": sim.get_integer, "b": sim.get_bool}.get(kinds[f"{i}_{v}"].kind, sim.get_real),
+                        f"{i}::{v}") for i, v in RECORDED]
+            for k in range(n):
+                sim.step()
+                t = sim.get_time()
+                if abs(t - (k + 1) * system.STEP_S) > 0.5 * system.STEP_S:
+                    raise RuntimeError(f"Ecos step {k} reached t = {t!r} s: {ecos_lib.get_last_error()}")
+                rows[k] = ((k + 1) * system.STEP_S, *(get(name) for get, name in getters))
+            sim.terminate()
+    return rows
+
+
+def _ecospy():
+    """ecospy's EcosSimulation and EcosLib; its library needs TBB (Debian: libtbb12)."""
+    import os
+
+    path = os.environ.get("PATH")
+    try:
+        from ecospy import EcosLib, EcosSimulation
+    except OSError as exc:
+        raise RuntimeError(f"ecospy's library did not load ({exc}); on Debian it needs the package libtbb12") from exc
+    finally:  # importing ecospy puts its binaries/ first on PATH (for its proxyfmu, unused here)
+        if path is None:
+            os.environ.pop("PATH", None)
+        else:
+            os.environ["PATH"] = path
+    return EcosSimulation, EcosLib
+
+
 def ssp_parameter_set(ssp: str | Path, start_values=None):
-    """The SSP's parameter bindings (and ``start_values``) as one fmpy ParameterSet, names
-    prefixed with the instance, String parameters at their FMU default left out."""
+    """The SSP's parameter bindings (and ``start_values``) as one fmpy ParameterSet, each
+    name prefixed with its instance (SSP's hierarchical names, what fmpy matches),
+    String parameters at their FMU default left out."""
     from fmpy.ssp.ssd import Parameter, ParameterSet, read_ssd
 
     values: dict[str, tuple[str, str]] = {}

@@ -103,6 +103,67 @@ def test_osp_structure_runs_the_same_loop_as_the_ssp(system_dir, ssp):
     assert vx == list(from_ssp["plant_vx"]) and vx[-1] > 0.3
 
 
+# ---- one file, three masters' own calls, one trajectory ---------------------------------------
+#: 800 steps: the robot starts from rest and walks (10+ steps) by then; ~2 s per master.
+MASTERS_S = 4.0
+#: libcosim, fmpy and Ecos: the same Jacobi exchange, outputs read after each step.  fmpy
+#: and Ecos hand the FMUs the step 0.005 and give the same doubles; libcosim's step size
+#: is t(k+1) - t(k) from integer nanoseconds (ulps away from 0.005 s), measured 3e-14 here
+#: after 4 s.  1e-9 leaves room for that to grow on other machines while a master that
+#: samples, orders or parameterises differently (a 5 ms shift moves pelvis_x by ~2 mm)
+#: fails by orders of magnitude.
+MASTER_AGREEMENT = 1e-9
+
+
+def test_every_component_binds_the_one_nominal_parameter_set(ssp):
+    """Ecos applies a parameter set by name to every component that has one of that name:
+    both components' sets must share it (else Ecos leaves one FMU at its defaults)."""
+    from fmpy.ssp.ssd import read_ssd
+
+    names = {c.name: [pset.name for b in c.parameterBindings for pset in b.parameterValues]
+             for c in read_ssd(str(ssp), validate=True).system.elements}
+    assert names == {"plant": [system.PARAMETER_SET], "avr": [system.PARAMETER_SET]}
+
+
+@pytest.fixture(scope="module")
+def master_runs(ssp, tmp_path_factory):
+    """The nominal SSP, 4 s, in each master with its own documented call (see
+    scenarios.system_run), the system temp folder pointed at a fresh folder meanwhile."""
+    import tempfile
+
+    tmp = tmp_path_factory.mktemp("masters_tmp")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("TMPDIR", str(tmp))  # libcosim and Ecos unpack the SSP there, fmpy too:
+        mp.setattr(tempfile, "tempdir", str(tmp))  # (fmpy through Python's cached tempdir)
+        runs = {"libcosim": system_run.run_libcosim(ssp, MASTERS_S), "fmpy": system_run.run_fmpy(ssp, MASTERS_S),
+                "ecos": system_run.run_ecos(ssp, MASTERS_S)}
+    return runs, sorted(p.name for p in tmp.iterdir())
+
+
+@pytest.mark.parametrize("name", ["libcosim", "fmpy", "ecos"])
+def test_each_master_applies_the_nominal_command_from_the_ssp(master_runs, name):
+    """0.5 m/s on both FMUs (bound to their inputs today) is in force: Cassie walks forward
+    (1.4 m in 4 s), not in place (1.6 cm in 10 s when a master leaves the command at 0)."""
+    rows = master_runs[0][name]
+    assert len(rows) == round(MASTERS_S / system.STEP_S)
+    assert not rows["plant_fell"].any()
+    assert rows["plant_step_index"][-1] >= 8 and rows["plant_pelvis_x"][-1] > 1.0, rows[-1]
+    assert 0.3 < rows["plant_vx"][-1] < 0.7, rows["plant_vx"][-1]
+
+
+@pytest.mark.parametrize("name", ["fmpy", "ecos"])
+def test_fmpy_and_ecos_give_libcosims_trajectory(master_runs, name):
+    runs, _ = master_runs
+    rows, ref = runs[name], runs["libcosim"]
+    for column in ref.dtype.names:
+        np.testing.assert_allclose(rows[column].astype(float), ref[column].astype(float), rtol=0,
+                                   atol=MASTER_AGREEMENT, err_msg=f"{name}: {column}")
+
+
+def test_the_masters_leave_nothing_in_the_temp_folder(master_runs):
+    assert master_runs[1] == []
+
+
 # ---- the loop in three masters (30 s each) --------------------------------------------------
 def test_loop_in_libcosim_from_the_ssp_file(ssp, libcosim_rows):
     fell, error = _verdict(libcosim_rows)
