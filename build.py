@@ -46,7 +46,8 @@ from fmu_src.native import build_native  # noqa: E402
 from fmu_src.native.build_native import compile_native  # noqa: E402,F401 (the tests' sanitizer build)
 from fmu_src.avr_packaging import pages, vendor  # noqa: E402
 from fmu_src.avr_packaging.archive import content_guid, read_entries, sha256_of, write_zip  # noqa: E402
-from fmu_src.avr_packaging.describe import DEFAULT_EXPERIMENT, UNITS, model_description  # noqa: E402
+from fmu_src.avr_packaging.describe import (DEFAULT_EXPERIMENT, PLANT_INITIAL_UNKNOWNS, UNITS,  # noqa: E402
+                                            model_description)
 from fmu_src.avr_packaging.pythonfmu_fix import (EXIT_BUG_PATCH, EXIT_BUG_SYMBOL,  # noqa: E402,F401 (tests)
                                              _elf_symbol_file_offset, patch_pythonfmu_exit_bug)
 
@@ -169,7 +170,8 @@ def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path
 
     with tempfile.TemporaryDirectory(prefix="cassie_plant_fmu_") as tmp:
         entries = _plant_entries(Path(tmp))
-    tree = model_description(entries.pop("modelDescription.xml"), fmu_core.SPECS, PLANT_UNITS)
+    tree = model_description(entries.pop("modelDescription.xml"), fmu_core.SPECS, PLANT_UNITS,
+                             initial_unknowns=PLANT_INITIAL_UNKNOWNS)
     entries["documentation/index.html"] = pages.plant_page(PLANT_IDENTIFIER, PLANT_LIB, fmu_core.SPECS).encode("utf-8")
     entries["resources/requirements.txt"] = PLANT_REQUIREMENTS.encode("utf-8")
     _move_pythonfmu_library(entries, PLANT_IDENTIFIER)
