@@ -44,9 +44,10 @@ from fmu_src.guard.build_guard import (GUARD_TEXTS, SANITIZE_FLAGS,  # noqa: E40
                                        compile_guard, guard_header)
 from fmu_src.native import build_native  # noqa: E402
 from fmu_src.native.build_native import compile_native  # noqa: E402,F401 (the tests' sanitizer build)
-from fmu_src.avr_packaging import pages, vendor  # noqa: E402
+from fmu_src.avr_packaging import crosscheck, pages, vendor  # noqa: E402
 from fmu_src.avr_packaging.archive import content_guid, read_entries, sha256_of, write_zip  # noqa: E402
-from fmu_src.avr_packaging.describe import DEFAULT_EXPERIMENT, UNITS, model_description  # noqa: E402
+from fmu_src.avr_packaging.describe import (DEFAULT_EXPERIMENT, PLANT_INITIAL_UNKNOWNS, UNITS,  # noqa: E402
+                                            model_description)
 from fmu_src.avr_packaging.pythonfmu_fix import (EXIT_BUG_PATCH, EXIT_BUG_SYMBOL,  # noqa: E402,F401 (tests)
                                              _elf_symbol_file_offset, patch_pythonfmu_exit_bug)
 
@@ -169,7 +170,8 @@ def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path
 
     with tempfile.TemporaryDirectory(prefix="cassie_plant_fmu_") as tmp:
         entries = _plant_entries(Path(tmp))
-    tree = model_description(entries.pop("modelDescription.xml"), fmu_core.SPECS, PLANT_UNITS)
+    tree = model_description(entries.pop("modelDescription.xml"), fmu_core.SPECS, PLANT_UNITS,
+                             initial_unknowns=PLANT_INITIAL_UNKNOWNS)
     entries["documentation/index.html"] = pages.plant_page(PLANT_IDENTIFIER, PLANT_LIB, fmu_core.SPECS).encode("utf-8")
     entries["resources/requirements.txt"] = PLANT_REQUIREMENTS.encode("utf-8")
     _move_pythonfmu_library(entries, PLANT_IDENTIFIER)
@@ -215,11 +217,16 @@ def fmu_entry(path: Path, implementation: str) -> dict:
 
 def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Path]:
     """Build every FMU (the pythonfmu regulator, both native regulators, the CassiePlant
-    FMU), ``<out_dir>/fmus.json`` listing them, and the CassieAVR system (SSP and OSP)."""
+    FMU) with its reference results inside (fmi-ls-ref), the FMI cross-check vendor tree
+    ``<out_dir>/cross-check/`` (``fmu_src/avr_packaging/crosscheck.py``), ``<out_dir>/fmus.json``
+    listing the FMUs, and the CassieAVR system (SSP and OSP)."""
     regulator = build_fmu(out_dir, sanitize=sanitize)
     built = [(regulator, "python")] + [(build_native_fmu(v, out_dir), "native") for v in (2, 3)]
     plant = build_plant_fmu(out_dir)
     built.append((plant, "python"))
+    with tempfile.TemporaryDirectory(prefix="avr_reference_") as tmp:
+        references = crosscheck.add_references([path for path, _ in built], Path(tmp))
+    crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], references, build_native.describe.VERSION)
     listing = {"fmus": [fmu_entry(path, kind) for path, kind in built]}
     tmp = Path(out_dir) / (FMUS_JSON + ".tmp")
     tmp.write_text(json.dumps(listing, indent=2) + "\n")

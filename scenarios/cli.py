@@ -5,7 +5,7 @@
     python -m scenarios run NAME|FILE|all|paper [...] [--model M] [--out DIR]
                             [--regulator fmu|native|native-fmi3|inprocess] [--jobs N] [--fmu PATH]
                             [--duration S] [--no-plots] [--rebuild-fmu] [--overwrite | --resume]
-                            [--plant inprocess|fmu] [--plant-fmu PATH] [--render]
+                            [--plant inprocess|fmu] [--plant-fmu PATH] [--render] [--require-pass]
     python -m scenarios report DIR
 
 ``run`` checks everything before it simulates and names every problem at once: the
@@ -21,9 +21,11 @@ place, and prints one table row per scenario x arm. Ctrl-C stops the run between
 steps: complete scenarios are kept, started ones are marked ``interrupted`` (or, where
 earlier results existed, left as they were), one line is printed.
 
-Exit status: 0 when every arm completed (whatever the verdicts), 1 when an arm failed
-(it is still written and reported), 2 on invalid scenarios, arguments or results
-folder (nothing simulated), 130 after Ctrl-C.
+Exit status: 0 when every arm completed (whatever the verdicts, unless
+``--require-pass``), 1 when an arm failed (it is still written and reported), 2 on
+invalid scenarios, arguments or results folder (nothing simulated), 3 with
+``--require-pass`` when every arm completed but a scenario's verdict is not ``pass``
+(a ``miss``, or ``n/a`` for a scenario without a claim), 130 after Ctrl-C.
 """
 from __future__ import annotations
 
@@ -236,6 +238,9 @@ def build_parser() -> argparse.ArgumentParser:
     sp.add_argument("--render", action="store_true",
                     help="also write each arm's video, <arm>.mp4 and a small <arm>.gif, from a camera following "
                          "the pelvis (MuJoCo offscreen: MUJOCO_GL egl or osmesa; not with --plant fmu)")
+    sp.add_argument("--require-pass", action="store_true",
+                    help="exit 3 unless every scenario's claim verdict is pass (the README's main job: a claim "
+                         "that misses is a failure, not a line in a table)")
     again = sp.add_mutually_exclusive_group()
     again.add_argument("--overwrite", action="store_true",
                        help="replace the results of this run's scenarios already in --out")

@@ -42,7 +42,8 @@ class FmuInstance:
         ``fmi_versions``: the FMI versions accepted (default :data:`FMI_VERSIONS`)."""
         from fmpy import read_model_description
 
-        self.fmu_path = Path(fmu_path)
+        # absolute: fmpy hands the FMU its resources as a file URI, which a relative path has not
+        self.fmu_path = Path(fmu_path).absolute()
         if not self.fmu_path.is_file():
             raise CosimError(f"FMU not found: {self.fmu_path}")
         self._number = next(_INSTANCE_IDS)
@@ -96,7 +97,9 @@ class FmuInstance:
         removes it whatever fails next) and instantiate with the shared logger."""
         from fmpy import extract
 
-        self._unzip = tempfile.mkdtemp(prefix="fmu-", dir=self._unpack_dir)
+        # absolute whatever the caller gave: fmpy passes the folder on as a file URI (fmuResourceLocation)
+        unpack_dir = None if self._unpack_dir is None else os.path.abspath(self._unpack_dir)
+        self._unzip = tempfile.mkdtemp(prefix="fmu-", dir=unpack_dir)
         extract(str(self.fmu_path), self._unzip)
         route_messages(self.instance_name, self._number, self.messages)
         cwd = os.getcwd()

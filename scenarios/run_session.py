@@ -118,7 +118,16 @@ class RunSession:
               f"{self.wall_s:.1f} s wall (--jobs {self.args.jobs}, regulator {self.args.regulator}); results in "
               f"{out_root}/ (python -m scenarios report {out_root})")
         failed = self.write_errors or any(su["status"] != "complete" for su in ordered)
-        return 1 if failed else 0
+        if failed:
+            return 1
+        if self.args.require_pass:
+            short = [f"{su['scenario']}: {output.verdict(su).get('overall', 'n/a')}" for su in ordered
+                     if output.verdict(su).get("overall") != "pass"]
+            if short:
+                print(f"--require-pass: {len(short)} of {len(ordered)} scenario verdict(s) are not pass: "
+                      + "; ".join(short), file=sys.stderr)
+                return 3
+        return 0
 
 
 def _interrupted_line(scenarios: list, summaries: dict, left_as_were: list[str], out_root: Path) -> str:

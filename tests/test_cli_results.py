@@ -431,3 +431,21 @@ def test_no_fmu_copies_left_in_the_system_temp_folder(tmp_path, built_fmu, broke
                               env={**os.environ, "TMPDIR": str(tmpdir)}, timeout=300)
         assert proc.returncode == rc, proc.stderr
         assert list(tmpdir.iterdir()) == [], (fmu, sorted(p.name for p in tmpdir.iterdir()))
+
+
+def test_require_pass_exits_3_on_a_claim_that_misses_and_0_when_every_claim_passes(tmp_path, capsys):
+    """`run --require-pass` (the README's main job): every arm completes in both runs; a claim
+    that misses (a standing robot claimed to fall) gives exit 3 naming the scenario, where
+    plain `run` gives 0; a claim that passes gives 0."""
+    ok = scenario_file(tmp_path, "stands")
+    misses = scenario_file(tmp_path, "claims_a_fall")
+    misses.write_text(misses.read_text().replace("value = false", "value = true"))
+    rc, _, err = cli(capsys, "run", ok, misses, "--regulator", "inprocess", "--out", tmp_path / "plain", "--no-plots")
+    assert rc == 0, err
+    rc, _, err = cli(capsys, "run", ok, misses, "--regulator", "inprocess", "--out", tmp_path / "strict",
+                     "--no-plots", "--require-pass")
+    assert rc == 3, err
+    assert "claims_a_fall: miss" in err and "stands" not in err.split("--require-pass:")[1]
+    rc, _, err = cli(capsys, "run", ok, "--regulator", "inprocess", "--out", tmp_path / "good", "--no-plots",
+                     "--require-pass")
+    assert rc == 0, err

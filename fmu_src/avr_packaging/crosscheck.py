@@ -1,0 +1,280 @@
+"""Reference results: simulated once per build, put inside every FMU (the fmi-ls-ref layered
+standard) and written as an FMI cross-check vendor tree.
+
+Each model has one reference experiment (``EXPERIMENTS``): a few seconds at the FMUs'
+5 ms communication step, with one input row per communication point (``<Model>_in.csv``),
+so an importer never interpolates and every one applies the same doubles; the outputs are
+recorded every ``output_every`` steps (``<Model>_ref.csv``).  The results come from a real
+simulation of the built FMU with FMPy (``simulate``, in a process of its own: a pythonfmu
+FMU loaded into the build process would put its resources first on ``sys.path``).
+
+``add_references`` writes, into each FMU, ``extra/org.fmi-standard.fmi-ls-ref/`` with
+``fmi-ls-manifest.xml`` (one ``<Experiment>`` with its ``<Stimuli>`` and ``<References>``)
+and the two CSV files, as modelica/Reference-FMUs ship their results.  The GUID does not
+change: it identifies the model description, sources and binaries, which the reference
+results are computed from.
+
+``write_vendor_tree`` writes ``cross-check/fmus/2.0/cs/<platform>/cassie-avr/<version>/<Model>/``
+(FMI-CROSS-CHECK-RULES.md v4.1, section 9.1.4-9.1.5) for every FMU that runs without
+additional requirements: the native FMI 2.0 FMU on linux64 and win64.  The pythonfmu FMUs
+need a Python installation with numpy (the plant also MuJoCo) on the importing machine,
+which rule 9.1.3 excludes; FMI 3.0 has no cross-check tree (the rules know 1.0 and 2.0).
+
+    python -m fmu_src.avr_packaging.crosscheck simulate   (reads a JSON request on stdin)
+"""
+from __future__ import annotations
+
+import json
+import logging
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+from .archive import read_entries, write_zip
+
+log = logging.getLogger(__name__)
+
+LS_REF_DIR = "extra/org.fmi-standard.fmi-ls-ref"
+LS_NS = "http://fmi-standard.org/fmi-ls-manifest"
+LS_VERSION = "1.0.0-rc.1"
+#: The fixed description the fmi-ls-ref schema requires.
+LS_DESCRIPTION = "Layered Standard providing reference stimuli and results for an FMU."
+TOOL_NAME = "cassie-avr"
+CROSS_CHECK_DIR = "cross-check"
+#: Platforms of the cross-check tree, by modelIdentifier: the FMUs that need nothing else to run.
+CROSS_CHECK_PLATFORMS = {"AdaptiveVelocityRegulatorNative": ("linux64", "win64")}
+#: The band an importer's result is compared with (``RelTol`` of ``_ref.opt``).  The FMUs are
+#: fixed-step and deterministic and every input value is given at every communication point,
+#: so FMPy on linux64 reproduces the reference bit for bit (tests/test_cross_check.py); the band
+#: leaves room for another platform's libm (exp, log1p) differing in the last bit.
+REL_TOL = 1e-6
+REPO_ROOT = Path(__file__).resolve().parents[2]
+MIT_LICENSE = """MIT License
+
+Copyright (c) cassie-avr project
+
+Permission is hereby granted, free of charge, to any person obtaining a copy of this software and
+associated documentation files (the "Software"), to deal in the Software without restriction,
+including without limitation the rights to use, copy, modify, merge, publish, distribute,
+sublicense, and/or sell copies of the Software, and to permit persons to whom the Software is
+furnished to do so, subject to the following conditions:
+
+The above copyright notice and this permission notice shall be included in all copies or
+substantial portions of the Software.
+
+THE SOFTWARE IS PROVIDED "AS IS", WITHOUT WARRANTY OF ANY KIND, EXPRESS OR IMPLIED, INCLUDING BUT
+NOT LIMITED TO THE WARRANTIES OF MERCHANTABILITY, FITNESS FOR A PARTICULAR PURPOSE AND
+NONINFRINGEMENT. IN NO EVENT SHALL THE AUTHORS OR COPYRIGHT HOLDERS BE LIABLE FOR ANY CLAIM,
+DAMAGES OR OTHER LIABILITY, WHETHER IN AN ACTION OF CONTRACT, TORT OR OTHERWISE, ARISING FROM, OUT
+OF OR IN CONNECTION WITH THE SOFTWARE OR THE USE OR OTHER DEALINGS IN THE SOFTWARE.
+"""
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One reference experiment: ``steps`` communication steps of ``step_size`` s from 0,
+    ``inputs(k)`` the input values at communication point k, the outputs recorded every
+    ``output_every`` steps."""
+
+    description: str
+    steps: int
+    step_size: float
+    output_every: int
+    inputs: Callable[[int], dict]
+
+    @property
+    def stop_time(self) -> float:
+        return self.steps * self.step_size
+
+
+def _regulator_inputs(k: int) -> dict:
+    """Walking-like measurements, constant over 0.25 s segments (50 steps, one walking step
+    each, step_index counting them): speed below the 0.5 m/s command, then above it."""
+    j = k // 50
+    return {"vx": round(0.2 + 0.05 * j, 3), "vy": round(0.04 * (-1) ** j, 3), "vx_des": 0.5, "vy_des": 0.0,
+            "pitch": round(0.02 - 0.005 * j, 3), "roll": round(0.01 * (-1) ** j, 3),
+            "pitch_rate": round(0.1 * ((j % 3) - 1), 3), "roll_rate": round(-0.05 * ((j % 2) * 2 - 1), 3),
+            "step_index": j}
+
+
+def _plant_inputs(k: int) -> dict:
+    """Walk in place for 1 s, then command 0.3 m/s forward (no offsets, no push)."""
+    return {"vx_des": 0.0 if k < 200 else 0.3}
+
+
+_REGULATOR = Experiment("3 s of walking-like measurements, a walking step every 0.25 s", 600, 0.005, 10,
+                        _regulator_inputs)
+EXPERIMENTS = {
+    "AdaptiveVelocityRegulator": _REGULATOR,
+    "AdaptiveVelocityRegulatorNative": _REGULATOR,
+    "CassiePlant": Experiment("2 s from the home pose: stepping in place, then 0.3 m/s forward", 400, 0.005, 10,
+                              _plant_inputs),
+}
+
+
+def _number(value) -> str:
+    """A CSV cell as the cross-check rules want it: C float literals, Booleans as 0/1."""
+    if isinstance(value, (bool,)) or type(value).__name__ == "bool_":
+        return "1" if value else "0"
+    if isinstance(value, float) or type(value).__name__ == "float64":
+        return repr(float(value))
+    return str(int(value))
+
+
+def _csv(names, rows) -> bytes:
+    lines = [",".join(f'"{n}"' for n in ["time", *names])]
+    lines += [",".join(_number(v) for v in row) for row in rows]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def input_csv(experiment: Experiment) -> bytes:
+    """``<Model>_in.csv``: one row per communication point, 0 .. stop time."""
+    names = list(experiment.inputs(0))
+    return _csv(names, [(k * experiment.step_size, *[experiment.inputs(k)[n] for n in names])
+                        for k in range(experiment.steps + 1)])
+
+
+def simulate(fmu: Path, in_csv: Path, experiment: Experiment) -> bytes:
+    """``<Model>_ref.csv`` of ``fmu``: FMPy's co-simulation with the inputs of ``in_csv``,
+    every output, one row every ``output_every`` steps.  Runs in this process."""
+    import numpy as np
+    from fmpy import read_csv, read_model_description, simulate_fmu
+
+    md = read_model_description(str(fmu))
+    outputs = [v.name for v in md.modelVariables if v.causality == "output"]
+    result = simulate_fmu(str(fmu), start_time=0.0, stop_time=experiment.stop_time,
+                          output_interval=experiment.step_size, input=read_csv(str(in_csv)), output=outputs,
+                          fmi_type="CoSimulation", validate=False)
+    if len(result) != experiment.steps + 1:
+        raise RuntimeError(f"{fmu.name}: {len(result)} result rows, expected {experiment.steps + 1}")
+    rows = [(k * experiment.step_size, *[result[n][k] for n in outputs])
+            for k in range(0, experiment.steps + 1, experiment.output_every)]
+    if not all(np.isfinite(float(v)) for row in rows for v in row):
+        raise RuntimeError(f"{fmu.name}: the reference simulation produced a non-finite value")
+    return _csv(outputs, rows)
+
+
+def _model_identifier(fmu: Path) -> str:
+    with zipfile.ZipFile(fmu) as archive:
+        return ET.fromstring(archive.read("modelDescription.xml")).find("CoSimulation").get("modelIdentifier")
+
+
+def reference_results(fmus, work_dir: Path) -> dict[Path, tuple[bytes, bytes]]:
+    """{fmu: (_in.csv, _ref.csv)} for every FMU of ``fmus``, simulated in one child process."""
+    work_dir = Path(work_dir)
+    request = []
+    for i, fmu in enumerate(map(Path, fmus)):
+        model = _model_identifier(fmu)
+        in_path, ref_path = work_dir / f"{i}_in.csv", work_dir / f"{i}_ref.csv"
+        in_path.write_bytes(input_csv(EXPERIMENTS[model]))
+        request.append({"fmu": str(fmu), "model": model, "in": str(in_path), "ref": str(ref_path)})
+    proc = subprocess.run([sys.executable, "-m", "fmu_src.avr_packaging.crosscheck", "simulate"],
+                          input=json.dumps(request), capture_output=True, text=True, cwd=REPO_ROOT)
+    if proc.returncode != 0:
+        raise RuntimeError(f"the reference simulation failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}")
+    return {Path(r["fmu"]): (Path(r["in"]).read_bytes(), Path(r["ref"]).read_bytes()) for r in request}
+
+
+def ls_ref_manifest(model: str, experiment: Experiment) -> bytes:
+    """``fmi-ls-manifest.xml``: the one experiment, its stimuli and its reference results."""
+    ET.register_namespace("fmi-ls", LS_NS)
+    root = ET.Element("fmiReferences", {f"{{{LS_NS}}}fmi-ls-name": "org.fmi-standard.fmi-ls-ref",
+                                        f"{{{LS_NS}}}fmi-ls-version": LS_VERSION,
+                                        f"{{{LS_NS}}}fmi-ls-description": LS_DESCRIPTION})
+    exp = ET.SubElement(root, "Experiment", name="reference", description=experiment.description,
+                        startTime="0.0", stopTime=repr(experiment.stop_time), stepSize=repr(experiment.step_size))
+    ET.SubElement(exp, "Stimuli", type="text/csv", source=f"{model}_in.csv")
+    ET.SubElement(exp, "References", type="text/csv", source=f"{model}_ref.csv")
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def add_references(fmus, work_dir: Path) -> dict[Path, tuple[bytes, bytes]]:
+    """Simulate every FMU of ``fmus`` and rewrite it with ``extra/org.fmi-standard.fmi-ls-ref/``
+    (manifest, ``_in.csv``, ``_ref.csv``); returns {fmu: (_in.csv, _ref.csv)}."""
+    results = reference_results(fmus, work_dir)
+    for fmu, (in_csv, ref_csv) in results.items():
+        model = _model_identifier(fmu)
+        entries = read_entries(fmu)
+        entries[f"{LS_REF_DIR}/fmi-ls-manifest.xml"] = ls_ref_manifest(model, EXPERIMENTS[model])
+        entries[f"{LS_REF_DIR}/{model}_in.csv"] = in_csv
+        entries[f"{LS_REF_DIR}/{model}_ref.csv"] = ref_csv
+        write_zip(entries, fmu)
+        log.info("added reference results to %s", fmu)
+    return results
+
+
+def ref_opt(experiment: Experiment) -> bytes:
+    return (f"StartTime, 0.0\nStopTime, {experiment.stop_time!r}\nStepSize, {experiment.step_size!r}\n"
+            f"RelTol, {REL_TOL!r}\nOutputIntervalLength, {experiment.step_size * experiment.output_every!r}\n").encode()
+
+
+def _readme(model: str, platform: str, version: str, experiment: Experiment) -> str:
+    return f"""# {model} ({TOOL_NAME} {version}, FMI 2.0 co-simulation, {platform})
+
+The adaptive velocity regulator for bipedal walking (Castillo et al., IROS 2020) in C: PD
+foot-placement and torso regulators plus online-learning neural networks that output
+virtual-constraint offsets.  No Python and no other library is needed (linux64: libc and
+libm; win64: kernel32 and msvcrt); the C sources are in the FMU.
+
+Reference experiment: {experiment.description}; {experiment.stop_time!r} s, communication step
+{experiment.step_size!r} s, one input row per communication point in `{model}_in.csv` (apply
+the row of each communication point before its doStep; no interpolation is needed), outputs
+every {experiment.step_size * experiment.output_every!r} s in `{model}_ref.csv`.  The reference
+was computed with FMPy on linux64 by the project's `python build.py`; FMPy reproduces it bit
+for bit.  `RelTol` {REL_TOL!r}
+is the band for other importers and platforms (another libm may differ in the last bit).
+The same files travel inside the FMU in `{LS_REF_DIR}/` (fmi-ls-ref).
+
+Only this FMU is in the tree: the project's pythonfmu FMUs (AdaptiveVelocityRegulator,
+CassiePlant) need a Python 3 installation with numpy (the plant also MuJoCo) on the importing
+machine, which the cross-check rules (9.1.3: "without additional requirements") exclude, and
+the FMI 3.0 FMU has no place in the cross-check tree (FMI 1.0 and 2.0 only).
+
+License: MIT (`LICENSE.txt`); the FMI headers in `sources/` are BSD-2-Clause (Modelica Association).
+"""
+
+
+def write_vendor_tree(out_dir: Path, fmus, results: dict, version: str) -> Path:
+    """``<out_dir>/cross-check/fmus/2.0/cs/<platform>/cassie-avr/<version>/<Model>/`` for every
+    FMI 2.0 FMU of ``fmus`` with platforms in ``CROSS_CHECK_PLATFORMS``; returns the tree's root."""
+    import shutil
+
+    root = Path(out_dir) / CROSS_CHECK_DIR
+    if root.exists():
+        shutil.rmtree(root)
+    for fmu in map(Path, fmus):
+        with zipfile.ZipFile(fmu) as archive:
+            md = ET.fromstring(archive.read("modelDescription.xml"))
+        model = md.find("CoSimulation").get("modelIdentifier") if md.find("CoSimulation") is not None else None
+        if md.get("fmiVersion") != "2.0" or model not in CROSS_CHECK_PLATFORMS:
+            continue
+        in_csv, ref_csv = results[fmu]
+        experiment = EXPERIMENTS[model]
+        for platform in CROSS_CHECK_PLATFORMS[model]:
+            folder = root / "fmus" / "2.0" / "cs" / platform / TOOL_NAME / version / model
+            folder.mkdir(parents=True)
+            shutil.copyfile(fmu, folder / f"{model}.fmu")
+            (folder / f"{model}_in.csv").write_bytes(in_csv)
+            (folder / f"{model}_ref.csv").write_bytes(ref_csv)
+            (folder / f"{model}_ref.opt").write_bytes(ref_opt(experiment))
+            (folder / "ReadMe.md").write_text(_readme(model, platform, version, experiment))
+            (folder / "LICENSE.txt").write_text(MIT_LICENSE)
+    return root
+
+
+def _simulate_request() -> int:
+    """The child process of ``reference_results``: simulate each requested FMU."""
+    for item in json.loads(sys.stdin.read()):
+        Path(item["ref"]).write_bytes(simulate(Path(item["fmu"]), Path(item["in"]), EXPERIMENTS[item["model"]]))
+    return 0
+
+
+if __name__ == "__main__":
+    if sys.argv[1:] != ["simulate"]:
+        sys.exit(f"usage: python -m {__spec__.name} simulate  (a JSON request on stdin)")
+    sys.exit(_simulate_request())

@@ -1,0 +1,90 @@
+"""build.py's reference results: the FMI cross-check vendor tree and the fmi-ls-ref files in each FMU.
+
+Built once (build_all into tmp_path): the tree passes FMPy's own vendor-repository check,
+and every FMU of fmus.json, re-simulated by FMPy with the stimuli inside it, reproduces the
+reference results inside it exactly (deterministic fixed-step FMUs, every input given at
+every communication point: nothing can legitimately differ on the same platform).
+"""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+import zipfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import read_csv, read_model_description, simulate_fmu
+
+LS_REF = "extra/org.fmi-standard.fmi-ls-ref/"
+LS_NS = "{http://fmi-standard.org/fmi-ls-manifest}"
+
+
+@pytest.fixture(scope="module")
+def dist(tmp_path_factory, build_module) -> Path:
+    out = tmp_path_factory.mktemp("dist")
+    build_module.build_all(out)
+    return out
+
+
+def fmus_of(dist):
+    return [dist / e["file"] for e in json.loads((dist / "fmus.json").read_text())["fmus"]]
+
+
+def test_vendor_tree_passes_fmpy_validation(dist):
+    tree = dist / "cross-check"
+    proc = subprocess.run([sys.executable, "-m", "fmpy.cross_check.validate_vendor_repo", str(tree)],
+                          capture_output=True, text=True)
+    assert proc.returncode == 0 and "0 problems found" in proc.stdout, proc.stdout + proc.stderr
+    assert "Validated 2 FMUs" in proc.stdout, proc.stdout
+    folders = sorted(p.parent.relative_to(tree).as_posix() for p in tree.rglob("*.fmu"))
+    assert folders == [f"fmus/2.0/cs/{platform}/cassie-avr/0.1.0/AdaptiveVelocityRegulatorNative"
+                       for platform in ("linux64", "win64")]
+    for folder in folders:
+        model = Path(folder).name
+        files = {p.name for p in (tree / folder).iterdir()}
+        assert files == {f"{model}.fmu", f"{model}_in.csv", f"{model}_ref.csv", f"{model}_ref.opt", "ReadMe.md",
+                         "LICENSE.txt"}
+        assert (tree / folder / f"{model}.fmu").read_bytes() == (dist / f"{model}_fmi2.fmu").read_bytes()
+        with zipfile.ZipFile(tree / folder / f"{model}.fmu") as archive:
+            assert archive.read(f"{LS_REF}{model}_ref.csv") == (tree / folder / f"{model}_ref.csv").read_bytes()
+        assert all((tree / folder / name).stat().st_size < 1e6 for name in files)  # the rules' CSV limit
+
+
+def experiment_of(fmu: Path):
+    """The fmi-ls-ref manifest's one experiment: (attributes, stimuli bytes, references bytes)."""
+    with zipfile.ZipFile(fmu) as archive:
+        root = ET.fromstring(archive.read(LS_REF + "fmi-ls-manifest.xml"))
+        assert root.get(f"{LS_NS}fmi-ls-name") == "org.fmi-standard.fmi-ls-ref"
+        [experiment] = root.findall("Experiment")
+        stimuli = archive.read(LS_REF + experiment.find("Stimuli").get("source"))
+        references = archive.read(LS_REF + experiment.find("References").get("source"))
+    return experiment.attrib, stimuli, references
+
+
+def test_every_fmu_reproduces_its_reference_results_exactly(dist, unzip, tmp_path):
+    for fmu in fmus_of(dist):
+        attrs, stimuli, references = experiment_of(fmu)
+        (tmp_path / "in.csv").write_bytes(stimuli)
+        (tmp_path / "ref.csv").write_bytes(references)
+        ref = read_csv(str(tmp_path / "ref.csv"))
+        step = float(attrs["stepSize"])
+        md = read_model_description(str(fmu))
+        outputs = [v.name for v in md.modelVariables if v.causality == "output"]
+        assert list(ref.dtype.names) == ["time", *outputs]
+        result = simulate_fmu(unzip(fmu, tmp_path / fmu.stem), start_time=float(attrs["startTime"]),
+                              stop_time=float(attrs["stopTime"]), output_interval=step,
+                              input=read_csv(str(tmp_path / "in.csv")), output=outputs, fmi_type="CoSimulation")
+        rows = np.searchsorted(result["time"], ref["time"])
+        assert np.array_equal(result["time"][rows], ref["time"]), fmu.name
+        for name in outputs:  # exact: the same doubles, not merely close ones
+            assert np.array_equal(result[name][rows].astype(float), ref[name].astype(float)), (fmu.name, name)
+        moving = [n for n in outputs if np.ptp(ref[n].astype(float)) > 0]
+        assert len(moving) >= len(outputs) // 2, f"{fmu.name}: a reference where little moves: {moving}"
+
+
+def test_the_three_regulators_share_one_reference(dist):
+    refs = {fmu.name: experiment_of(fmu)[2] for fmu in fmus_of(dist) if "Regulator" in fmu.name}
+    assert len(refs) == 3 and len(set(refs.values())) == 1, sorted(refs)
