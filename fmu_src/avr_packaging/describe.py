@@ -24,7 +24,7 @@ PLANT_INITIAL_UNKNOWNS = {
     # a plane or the height field (terrain_max_height_m > 0) and the field's sample grid (its
     # spacing follows terrain_size_m).  The robot stands on the field's flat start patch
     # (plant/terrain.py), so the terrain's seed and slope never reach it.
-    **{name: ("model", "torso_mass_kg", "torso_com_offset_x_m", "torso_com_offset_y_m", "torso_com_offset_z_m",
+    **{name: ("cassie_model", "torso_mass_kg", "torso_com_offset_x_m", "torso_com_offset_y_m", "torso_com_offset_z_m",
               "terrain_max_height_m", "terrain_size_m") for name in ("left_foot_force", "right_foot_force")},
 }
 
