@@ -5,6 +5,9 @@ The documents are found by walking the build's output folder, into the FMU and S
 archives (and the FMUs inside the SSP): a document of a new kind, or one missing, fails
 ``test_the_build_writes_exactly_these_xml_documents`` until it is listed here with its
 schema.  Each schema is shown to reject a broken copy of the document it checks.
+
+Beyond the schemas (which cannot compare attributes): every FMU's start values lie within
+their variables' ``min``/``max``.  The SSP's own rules are tests/test_ssp_rules.py's.
 """
 from __future__ import annotations
 
@@ -65,6 +68,28 @@ def test_the_build_writes_exactly_these_xml_documents(documents):
 def test_document_is_valid_against_its_official_schema(documents, label):
     assert label in documents, f"the build wrote no {label}"
     assert problems(DOCUMENTS[label], documents[label]) == []
+
+
+def _out_of_range(model_description: bytes) -> list[str]:
+    """Variables whose start value is outside [min, max] (FMI 2.0 section 2.2.7, FMI 3.0 section 2.4.7.5;
+    an FMI 3.0 array's start lists every element)."""
+    root = etree.fromstring(model_description)
+    out = []
+    for variable in root.find("ModelVariables"):
+        typed = variable if root.get("fmiVersion").startswith("3.") else next(iter(variable), None)
+        if typed is None or typed.get("start") is None or not {"min", "max"} & set(typed.attrib):
+            continue
+        low, high = float(typed.get("min", "-inf")), float(typed.get("max", "inf"))
+        if not all(low <= float(x) <= high for x in typed.get("start").split()):
+            out.append(f"{variable.get('name')}: start {typed.get('start')} outside [{low}, {high}]")
+    return out
+
+
+@pytest.mark.parametrize("label", sorted(label for label, kind in DOCUMENTS.items()
+                                         if kind.endswith("-model") and label.count("/") == 1))
+def test_every_start_value_lies_within_min_and_max(documents, label):
+    assert _out_of_range(documents[label]) == []
+    assert _out_of_range(_broken(documents[label], "min", "1e300")), "a start below min goes unnoticed"
 
 
 def _broken(data: bytes, attribute: str, bad: str | None) -> bytes:
