@@ -290,3 +290,39 @@ def test_a_fall_is_reported_the_same_with_the_plant_fmu(built_fmu, plant_fmu):
     assert in_process.fell and with_fmu.fell
     assert (with_fmu.t_fall_s, with_fmu.fall_reason) == (in_process.t_fall_s, in_process.fall_reason)
     assert np.array_equal(with_fmu.rows, in_process.rows)
+
+
+# ---- a scenario as an SSP (export-ssp) -------------------------------------------------------
+@pytest.fixture(scope="module")
+def scripted():
+    """A short time-varying scenario: 0.5 m/s, then 0.3 m/s turning at 0.2 rad/s from 1.5 s; a
+    30 N push along x at 1.0 s for 0.1 s."""
+    base = spec.resolve_targets(["nominal"])[0]
+    return dataclasses.replace(base, duration_s=2.0,
+                               commands=(spec.CommandPoint(0.0, 0.5, 0.0), spec.CommandPoint(1.5, 0.3, 0.0, 0.2)),
+                               pushes=(spec.Push(1.0, (30.0, 0.0, 0.0), 0.1),))
+
+
+def test_exported_ssp_plays_the_scenarios_schedule_at_our_masters_instants(scripted, system_dir, ssp, built_fmu,
+                                                                          plant_fmu, tmp_path):
+    """libcosim and Ecos run the exported SSP with their plain calls; the command source's
+    outputs at every communication point are what our master applies over the next step."""
+    from scenarios.export_ssp import export_ssp
+
+    path = export_ssp(scripted, "adaptive", tmp_path / "scripted.ssp", plant_fmu=plant_fmu, regulator_fmu=built_fmu,
+                      command_fmu=system_dir / "CommandSource_fmi2.fmu")
+    n = scripted.n_comm_steps
+    expected = [[*scripted.command_at_step(k), *scripted.push_force_at_step(k)] for k in range(1, n + 1)]
+    columns = ("command_vx_des", "command_vy_des", "command_yaw_rate_des", "command_push_fx", "command_push_fy",
+               "command_push_fz")
+    for rows in (system_run.run_libcosim(path, scripted.duration_s), system_run.run_ecos(path, scripted.duration_s)):
+        assert [[float(r[c]) for c in columns] for r in rows] == expected[:len(rows)]
+        assert not rows["plant_fell"].any()
+
+
+def test_export_ssp_refuses_the_rl_hzd_arm_naming_why(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "scenarios", "export-ssp", "compare_staircase_rl", "--arm", "rl_hzd",
+                           "--out", str(tmp_path / "x.ssp")], cwd=REPO_ROOT, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 2 and "in-process only" in proc.stderr, proc.stderr
+    assert not (tmp_path / "x.ssp").exists()
