@@ -6,7 +6,7 @@ The SSP holds the plant (``CassiePlant.fmu``), the regulator
 schedule and pushes (:func:`schedule_rows`); the wiring and parameter sets are
 :mod:`scenarios.system`'s.  Parameter sets bind only parameters: the plant's (the
 scenario's model and perturbation, as ``--plant fmu`` sets them) and the regulator's
-(the arm's configuration: ``[regulator]`` and the arm's overrides, e.g.
+(the arm's configuration: ``[regulator]`` and the arm's overrides, its ``seed`` included, e.g.
 ``adaptation_enabled = false`` for ``pd_only``).  One SSP per arm: an SSP has one
 regulator configuration; ``--arm`` picks it (default: the scenario's first arm).
 Its default experiment is the scenario's duration with its 5 ms step.
