@@ -23,9 +23,17 @@ trajectory; its default (Gauss-Seidel) hands the regulator's offsets to the plan
 step they are computed, 5 ms earlier.  :func:`master_rows` turns a run's rows into our
 master's columns, so the suite's metrics and claim checks (:func:`claim_verdict`) apply
 to it.
+
+fmu-manipulation-toolbox's ``fmucontainer`` packs the SSP's three FMUs into one FMU
+(:func:`build_container`, from a JSON description: :func:`container_description`) that
+any FMI 2.0 importer runs (:func:`run_container`: fmpy's ``simulate_fmu``).  Its default
+(parallel) mode is the Jacobi exchange; ``sequential=True`` orders regulator, plant,
+command source, which is our master's default Gauss-Seidel order.
 """
 from __future__ import annotations
 
+import io
+import logging
 import zipfile
 from pathlib import Path
 from typing import Any, Mapping
@@ -33,6 +41,8 @@ from typing import Any, Mapping
 import numpy as np
 
 from scenarios import system
+
+log = logging.getLogger(__name__)
 
 #: What the runners record per communication point: (instance, variable).
 RECORDED = (("command", "vx_des"), ("command", "vy_des"), ("command", "yaw_rate_des"), ("command", "push_fx"),
@@ -270,3 +280,109 @@ def claim_verdict(scenario, arm_rows: Mapping[str, np.ndarray]) -> dict:
 
     arms = {arm: arm_metrics(rows, scenario) for arm, rows in arm_rows.items()}
     return evaluate_claim(scenario_header(scenario, "ssp").get("claim"), arms)
+
+
+# ------------------------------------------------------------------ the FMU container
+#: The container's embedded FMUs in sequential mode: the regulator steps on the plant's outputs
+#: at t_k, the plant on the regulator's new offsets (our master's Gauss-Seidel order), the
+#: command source last (its outputs after the step are the command of t_(k+1)).
+SEQUENTIAL_ORDER = (system.REGULATOR, system.PLANT, system.COMMAND)
+
+
+def container_description(ssp: str | Path, *, sequential: bool = False, name: str = "CassieAVR_container.fmu"
+                          ) -> tuple[dict, dict[str, bytes]]:
+    """fmucontainer's JSON description of the SSP's system, and the FMU files it names.
+
+    From the SSP itself: one embedded FMU per component (named by its file name), the
+    SSP's connections as links, every :data:`RECORDED` variable as a container output
+    named ``instance.variable``, every other output dropped, the parameter sets' values
+    as start values (fmucontainer reads an SSP's routing only, not its parameter sets,
+    hence a JSON description).  Nothing is exposed automatically; the container steps
+    every 5 ms, in parallel (Jacobi) or, ``sequential``, in :data:`SEQUENTIAL_ORDER`.
+    """
+    from fmpy import read_model_description
+    from fmpy.ssp.ssd import read_ssd
+
+    ssd = read_ssd(str(ssp))
+    files: dict[str, str] = {}
+    blobs: dict[str, bytes] = {}
+    start: list[list[str]] = []
+    outputs: dict[str, list[str]] = {}
+    with zipfile.ZipFile(ssp) as archive:
+        for comp in ssd.system.elements:
+            fmu = Path(comp.source).name
+            if fmu in blobs:
+                raise ValueError(f"{ssp}: two components use {fmu}; fmucontainer names an FMU by its file name")
+            files[comp.name], blobs[fmu] = fmu, archive.read(comp.source)
+            md = read_model_description(io.BytesIO(blobs[fmu]))
+            outputs[comp.name] = [v.name for v in md.modelVariables if v.causality == "output"]
+            start += [[fmu, p.name, p.value] for b in comp.parameterBindings for pset in b.parameterValues
+                      for p in pset.parameters]
+    links = [[files[c.startElement], c.startConnector, files[c.endElement], c.endConnector]
+             for c in ssd.system.connections]
+    used = {(c.startElement, c.startConnector) for c in ssd.system.connections} | set(RECORDED)
+    order = SEQUENTIAL_ORDER if sequential else tuple(files)
+    description = {
+        "name": name, "step_size": system.STEP_S, "sequential": sequential, "mt": False,
+        "auto_link": False, "auto_input": False, "auto_output": False, "auto_parameter": False, "auto_local": False,
+        "fmu": [files[inst] for inst in order],
+        "link": links,
+        "output": [[files[inst], var, f"{inst}.{var}"] for inst, var in RECORDED],
+        "drop": [[files[inst], var] for inst, names in outputs.items() for var in names if (inst, var) not in used],
+        "start": start,
+    }
+    return description, blobs
+
+
+def fmucontainer_command() -> Path:
+    """fmu-manipulation-toolbox's ``fmucontainer`` beside the running interpreter."""
+    import sys
+
+    exe = Path(sys.executable).parent / ("fmucontainer.exe" if sys.platform == "win32" else "fmucontainer")
+    if not exe.is_file():
+        raise RuntimeError(f"{exe}: no fmucontainer beside the interpreter (pip install 'fmu-manipulation-toolbox>=2.0')")
+    return exe
+
+
+def build_container(ssp: str | Path, out: str | Path, *, sequential: bool = False) -> Path:
+    """Pack the SSP's FMUs into the container FMU ``out`` with ``fmucontainer -container
+    <description>.json -fmu-directory <folder>`` (the tool's documented command), built in a
+    temporary folder beside ``out`` that is removed afterwards."""
+    import json
+    import shutil
+    import subprocess
+    import tempfile
+
+    out = Path(out)
+    description, blobs = container_description(ssp, sequential=sequential, name=out.name)
+    with tempfile.TemporaryDirectory(prefix="container_", dir=out.parent) as tmp:
+        folder = Path(tmp)
+        for name, data in blobs.items():
+            (folder / name).write_bytes(data)
+        (folder / "container.json").write_text(json.dumps(description, indent=1))
+        proc = subprocess.run([str(fmucontainer_command()), "-container", "container.json", "-fmu-directory",
+                               str(folder)], cwd=folder, capture_output=True, text=True, timeout=600)
+        built = folder / out.name
+        if proc.returncode != 0 or not built.is_file():
+            raise RuntimeError(f"fmucontainer failed (exit {proc.returncode}):\n{proc.stdout[-3000:]}{proc.stderr[-3000:]}")
+        log.debug("fmucontainer: %s", proc.stdout)
+        shutil.move(str(built), out)
+    return out
+
+
+def run_container(fmu: str | Path, duration_s: float) -> np.ndarray:
+    """Run a container FMU (:func:`build_container`) with fmpy's ``simulate_fmu`` for
+    ``duration_s``, a communication point every 5 ms; rows of :data:`RECORDED` after every
+    step (the row fmpy records at t = 0, after initialization, left out)."""
+    from fmpy import simulate_fmu
+
+    n = int(round(duration_s / system.STEP_S))
+    result = simulate_fmu(str(fmu), start_time=0.0, stop_time=n * system.STEP_S, step_size=system.STEP_S,
+                          output_interval=system.STEP_S, output=[f"{i}.{v}" for i, v in RECORDED])
+    if len(result) != n + 1:
+        raise RuntimeError(f"{fmu}: fmpy recorded {len(result)} rows, not {n + 1}")
+    rows = np.zeros(n, dtype=_dtype())
+    rows["t"] = (np.arange(n) + 1) * system.STEP_S
+    for inst, var in RECORDED:
+        rows[f"{inst}_{var}"] = result[f"{inst}.{var}"][1:]
+    return rows

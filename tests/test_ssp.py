@@ -446,3 +446,37 @@ def test_exported_time_varying_scenario_is_our_masters_run_and_verdict(time_vary
         for order, verdict in ours.items():
             assert _same_verdict(theirs, verdict), (name, order, theirs, verdict)
 
+
+# ---- the system as one FMU: fmu-manipulation-toolbox's fmucontainer --------------------------
+@pytest.mark.parametrize("sequential, order", [(False, "jacobi"), (True, "gauss-seidel")])
+def test_fmucontainer_packs_the_exported_ssp_into_one_fmu_that_runs_our_masters_loop(time_varying, tmp_path,
+                                                                                      sequential, order):
+    """fmucontainer (found beside the interpreter) packs push_fwd_30n's exported SSP (plant,
+    regulator, command source, parameter values as start values) into one FMI 2.0 FMU; fmpy's
+    simulate_fmu runs it for 30 s and gives our master's run, bit for bit, in the matching
+    order: the container's parallel mode is our Jacobi order, its sequential mode (regulator,
+    plant, command source) our default Gauss-Seidel order."""
+    from fmpy import read_model_description
+
+    scenario, runs = time_varying
+    fmu = system_run.build_container(runs["ssp"], tmp_path / "CassieAVR_container.fmu", sequential=sequential)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["CassieAVR_container.fmu"]
+    md = read_model_description(str(fmu), validate=True)
+    assert md.fmiVersion == "2.0" and md.coSimulation is not None
+    assert {v.name for v in md.modelVariables if v.causality == "output"} == {f"{i}.{v}" for i, v in
+                                                                              system_run.RECORDED}
+    rows = _in_fresh_temp(tmp_path / "tmp", system_run.run_container, fmu, scenario.duration_s)
+    ours = runs[order].rows
+    table, _, _ = system_run.master_rows(rows, stop_at_fall=False)
+    if order == "jacobi":
+        assert _jacobi_gap(ours, rows) == 0.0
+    else:
+        # our master's row k holds the plant at t_k and the offsets it applies over
+        # [t_k, t_k+1), computed in step k; the container's row after step k holds the plant
+        # at t_k+1 and those same offsets
+        assert len(table) == len(ours)
+        for column in table.dtype.names:
+            if column.startswith("out_"):
+                assert np.array_equal(ours[column], table[column]), column
+            else:
+                assert np.array_equal(ours[column][1:], table[column][:-1]), column
