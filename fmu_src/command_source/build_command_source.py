@@ -43,6 +43,8 @@ NAMES = tuple(name for name, _, _ in OUTPUTS)
 HEADER = "time," + ",".join(NAMES)
 SCHEDULE = "resources/schedule.csv"
 UNITS = {"m/s": {"m": "1", "s": "-1"}, "rad/s": {"rad": "1", "s": "-1"}, "N": {"kg": "1", "m": "1", "s": "-2"}}
+#: FMI 3.0's independent variable ``time`` has a unit, which the model description must define.
+TIME_UNIT = {"s": {"s": "1"}}
 CORE = ("cmdsrc.c",)
 API = {2: ("cmdsrc_fmi2.c",), 3: ("cmdsrc_fmi3.c",)}
 HEADERS = ("cmdsrc.h",)
@@ -103,7 +105,7 @@ def _md(fmi_version: int, guid: str) -> bytes:
         ET.SubElement(root, "CoSimulation", common, canGetAndSetFMUState="false", canSerializeFMUState="false",
                       hasEventMode="false", providesIntermediateUpdate="false")
     units = ET.SubElement(root, "UnitDefinitions")
-    for name, exps in UNITS.items():
+    for name, exps in {**UNITS, **(TIME_UNIT if fmi_version == 3 else {})}.items():
         ET.SubElement(ET.SubElement(units, "Unit", name=name), "BaseUnit", exps)
     cats = ET.SubElement(root, "LogCategories")
     ET.SubElement(cats, "Category", name="logStatusError", description="Refused calls and errors (always logged)")

@@ -87,6 +87,26 @@ char *cs_path_from_uri(const char *uri) {
     return out;
 }
 
+/* `text` for a log message, which FMI requires to be UTF-8: printable ASCII as is, any other
+ * byte as \xHH, at most `size` - 1 characters ("..." at the end when cut). */
+static const char *quoted(char *out, size_t size, const char *text) {
+    static const char hex[] = "0123456789abcdef";
+    size_t n = 0;
+    for (const unsigned char *c = (const unsigned char *)text; *c; ++c) {
+        if (n + 8 >= size) {
+            memcpy(out + n, "...", 4);
+            return out;
+        }
+        if (*c >= 0x20 && *c < 0x7f && *c != '\\') {
+            out[n++] = (char)*c;
+        } else {
+            out[n++] = '\\', out[n++] = 'x', out[n++] = hex[*c >> 4], out[n++] = hex[*c & 15];
+        }
+    }
+    out[n] = '\0';
+    return out;
+}
+
 /* A decimal number in C's notation ('.' as the decimal point, whatever the host's locale). */
 static int parse_number(const char *field, double *out) {
     char buf[128];
@@ -136,9 +156,10 @@ static CsStatus read_schedule(CsInstance *inst, const char *resources) {
         while (n > 0 && (line[n - 1] == '\n' || line[n - 1] == '\r')) line[--n] = '\0';
         if (n == 0 || line[0] == '#') continue;
         if (!header_seen) {
+            char shown[160];
             if (strcmp(line, HEADER) != 0)
                 status = cs_refuse(inst, call, "%s line %d: the header must be \"%s\", not \"%s\"", path, lineno,
-                                   HEADER, line);
+                                   HEADER, quoted(shown, sizeof shown, line));
             header_seen = 1;
             continue;
         }
@@ -171,9 +192,10 @@ static CsStatus read_schedule(CsInstance *inst, const char *resources) {
                 break;
             }
             if (comma != NULL) *comma = '\0';
+            char shown[160];
             if (!parse_number(cursor, &row[col]))
                 status = cs_refuse(inst, call, "%s line %d: %s = \"%s\" is not a finite number", path, lineno,
-                                   col == 0 ? "time" : CS_OUTPUT_NAMES[col - 1], cursor);
+                                   col == 0 ? "time" : CS_OUTPUT_NAMES[col - 1], quoted(shown, sizeof shown, cursor));
             cursor = comma + 1;
         }
         if (status != CS_OK) break;
