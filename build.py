@@ -225,8 +225,8 @@ def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Pa
     plant = build_plant_fmu(out_dir)
     built.append((plant, "python"))
     with tempfile.TemporaryDirectory(prefix="avr_reference_") as tmp:
-        references = crosscheck.add_references([path for path, _ in built], Path(tmp))
-    crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], references, build_native.describe.VERSION)
+        crosscheck.add_references([path for path, _ in built], Path(tmp))
+    crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], build_native.describe.VERSION)
     listing = {"fmus": [fmu_entry(path, kind) for path, kind in built]}
     tmp = Path(out_dir) / (FMUS_JSON + ".tmp")
     tmp.write_text(json.dumps(listing, indent=2) + "\n")
