@@ -14,7 +14,10 @@ GUID, no generation time), a documentation page and a ``requirements.txt`` are a
 the FMI guard (``fmu_src/guard/*.c``) is compiled as the linux64 library the host loads
 (pythonfmu's own library moves beside it as ``<id>_pythonfmu.so``), and the archive is
 written with sorted entries and fixed timestamps, so two builds of the same sources give
-the same sha256.  Prints each FMU's path and sha256.  ``--sanitize`` compiles the guard
+the same sha256.  Every FMU build function then simulates the FMU it wrote once with FMPy
+and puts the results inside (``extra/org.fmi-standard.fmi-ls-ref/``, the fmi-ls-ref layered
+standard; ``fmu_src/avr_packaging/crosscheck.py``), so an FMU is the same file whoever builds
+it.  Prints each FMU's path and sha256.  ``--sanitize`` compiles the guard
 with AddressSanitizer + UndefinedBehaviorSanitizer instead (for the ``sanitize`` tests).
 Temporary folders are removed when the build ends, also when it fails.
 
@@ -133,8 +136,9 @@ def build_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path:
     entries["resources/requirements.txt"] = REQUIREMENTS.encode("utf-8")
     _move_pythonfmu_library(entries, MODEL_IDENTIFIER)
     slave_module = entries["resources/slavemodule.txt"].decode("utf-8").strip()
-    return _guarded_fmu(entries, tree, MODEL_IDENTIFIER, out_dir, header_options={"slave_module": slave_module},
-                        sanitize=sanitize)
+    fmu_path = _guarded_fmu(entries, tree, MODEL_IDENTIFIER, out_dir, header_options={"slave_module": slave_module},
+                            sanitize=sanitize)
+    return crosscheck.add_reference(fmu_path, sanitize=sanitize)
 
 
 def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
@@ -142,7 +146,7 @@ def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
     fmu_path = Path(out_dir) / build_native.fmu_name(fmi_version)
     write_zip(build_native.fmu_entries(fmi_version, UNITS, DEFAULT_EXPERIMENT), fmu_path)
     log.info("built %s", fmu_path)
-    return fmu_path
+    return crosscheck.add_reference(fmu_path)
 
 
 def _plant_entries(tmp: Path) -> dict[str, bytes]:
@@ -176,8 +180,9 @@ def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path
     entries["resources/requirements.txt"] = PLANT_REQUIREMENTS.encode("utf-8")
     _move_pythonfmu_library(entries, PLANT_IDENTIFIER)
     options = {"slave_module": PLANT_SLAVE_SCRIPT.stem, "step_quantum_s": fmu_core.PLANT_STEP_S}
-    return _guarded_fmu(entries, tree, PLANT_IDENTIFIER, out_dir, guid_prefix=f"{PLANT_IDENTIFIER}:",
-                        header_options=options, sanitize=sanitize)
+    fmu_path = _guarded_fmu(entries, tree, PLANT_IDENTIFIER, out_dir, guid_prefix=f"{PLANT_IDENTIFIER}:",
+                            header_options=options, sanitize=sanitize)
+    return crosscheck.add_reference(fmu_path, sanitize=sanitize)
 
 
 def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path) -> Path:
@@ -217,15 +222,13 @@ def fmu_entry(path: Path, implementation: str) -> dict:
 
 def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Path]:
     """Build every FMU (the pythonfmu regulator, both native regulators, the CassiePlant
-    FMU) with its reference results inside (fmi-ls-ref), the FMI cross-check vendor tree
+    FMU), each with its reference results inside, the FMI cross-check vendor tree
     ``<out_dir>/cross-check/`` (``fmu_src/avr_packaging/crosscheck.py``), ``<out_dir>/fmus.json``
     listing the FMUs, and the CassieAVR system (SSP and OSP)."""
     regulator = build_fmu(out_dir, sanitize=sanitize)
     built = [(regulator, "python")] + [(build_native_fmu(v, out_dir), "native") for v in (2, 3)]
     plant = build_plant_fmu(out_dir)
     built.append((plant, "python"))
-    with tempfile.TemporaryDirectory(prefix="avr_reference_") as tmp:
-        crosscheck.add_references([path for path, _ in built], Path(tmp))
     crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], build_native.describe.VERSION)
     listing = {"fmus": [fmu_entry(path, kind) for path, kind in built]}
     tmp = Path(out_dir) / (FMUS_JSON + ".tmp")

@@ -4,11 +4,13 @@ Built once (build_all into tmp_path): the tree passes FMPy's own vendor-reposito
 and every FMU of fmus.json, re-simulated by FMPy with the experiment, stimuli and results its
 fmi-ls-ref manifest lists, reproduces those results exactly (deterministic fixed-step FMUs,
 every input given at every communication point: nothing can legitimately differ on the same
-platform).
+platform).  Each FMU build function adds the reference itself, so an FMU built alone (as a
+run builds ``dist/`` on demand) is the same file as build_all's.
 """
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 import xml.etree.ElementTree as ET
@@ -18,6 +20,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy import read_csv, read_model_description, simulate_fmu
+
+from plant_fmu_support import built_plant_fmu
 
 LS_REF = "extra/org.fmi-standard.fmi-ls-ref/"
 LS_NS = "{http://fmi-standard.org/fmi-ls-manifest}"
@@ -102,3 +106,16 @@ def test_the_three_regulators_share_one_reference(dist):
     refs = {fmu.name: experiment_of(fmu)[2] for fmu in fmus_of(dist) if "Regulator" in fmu.name}
     assert len(refs) == 3 and len(set(refs.values())) == 1, sorted(refs)
 
+
+def test_an_fmu_built_alone_is_build_alls(dist, built_fmu, native_fmus, tmp_path_factory, build_module):
+    """The FMUs each build function writes (the session's, as a run builds ``dist/`` on demand)
+    carry the same reference and are the same files as build_all's."""
+    if os.environ.get("AVR_TEST_FMU"):
+        pytest.skip("AVR_TEST_FMU: the session's regulator FMU is a given file, not one built here")
+    alone = {"AdaptiveVelocityRegulator.fmu": built_fmu, "AdaptiveVelocityRegulatorNative_fmi2.fmu": native_fmus[2],
+             "AdaptiveVelocityRegulatorNative_fmi3.fmu": native_fmus[3],
+             "CassiePlant.fmu": built_plant_fmu(tmp_path_factory, build_module)}
+    assert sorted(alone) == sorted(fmu.name for fmu in fmus_of(dist))
+    for name, fmu in alone.items():
+        assert experiment_of(Path(fmu))[2] == experiment_of(dist / name)[2], name
+        assert Path(fmu).read_bytes() == (dist / name).read_bytes(), name

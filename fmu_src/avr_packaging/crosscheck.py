@@ -27,6 +27,9 @@ of the default experiment, no inputs).  The GUID does not change: it
 identifies the model description, sources and binaries, which the reference results are
 computed from.
 
+Every FMU build function of build.py calls ``add_reference`` on the FMU it wrote, so an FMU
+has its reference whoever builds it (``build_all`` or a run building ``dist/`` on demand).
+
 ``write_vendor_tree`` writes ``cross-check/fmus/2.0/cs/<platform>/cassie-avr/<version>/<Model>/``
 (FMI-CROSS-CHECK-RULES.md v4.1, section 9.1.4-9.1.5) for every FMU that runs without
 additional requirements: the native FMI 2.0 FMU on linux64 and win64.  The pythonfmu FMUs
@@ -41,6 +44,7 @@ import json
 import logging
 import subprocess
 import sys
+import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import dataclass
@@ -265,6 +269,17 @@ def add_references(fmus, work_dir: Path) -> None:
         entries[LS_DOC] = _ls_ref_doc(model, experiment).encode()
         write_zip(entries, fmu)
         log.info("added reference results to %s", fmu)
+
+
+def add_reference(fmu: Path, *, sanitize: bool = False) -> Path:
+    """``fmu`` with its reference results inside (``add_references``); returns ``fmu``.  A
+    ``sanitize`` build (tests only) gets none: its guard runs only with libasan preloaded."""
+    if sanitize:
+        log.info("%s: a sanitize build, no reference results", fmu)
+        return Path(fmu)
+    with tempfile.TemporaryDirectory(prefix="avr_reference_") as tmp:
+        add_references([fmu], Path(tmp))
+    return Path(fmu)
 
 
 def reference_files(fmu: Path) -> dict[str, bytes]:
