@@ -3,8 +3,10 @@
 ``AdaptiveVelocityRegulator.fmu`` (FMI 2.0 co-simulation, pythonfmu, the reference) and
 ``AdaptiveVelocityRegulatorNative_fmi2.fmu`` / ``_fmi3.fmu`` (the same regulator in C,
 FMI 2.0 and FMI 3.0 from one source, linux and windows x86-64 binaries plus sources;
-the win64 binaries need the MinGW-w64 cross compiler), the ``CassiePlant.fmu`` and the
-CassieAVR system wiring both (SSP archive and OSP folder).
+the win64 binaries need the MinGW-w64 cross compiler), the ``CassiePlant.fmu``, the
+``CommandSource_fmi2.fmu`` (native C: the command and pushes over time, from its
+``resources/schedule.csv``) and the CassieAVR system wiring the three (SSP archive and OSP
+folder).
 
     python build.py [--out DIR] [--sanitize]
 
@@ -46,6 +48,7 @@ if str(REPO_ROOT) not in sys.path:  # build.py also runs without the package ins
 from fmu_src.guard.build_guard import (GUARD_TEXTS, SANITIZE_FLAGS,  # noqa: E402,F401 (SANITIZE_FLAGS: documented)
                                        compile_guard, guard_header)
 from fmu_src.native import build_native  # noqa: E402
+from fmu_src.command_source import build_command_source as command_source  # noqa: E402
 from fmu_src.native.build_native import compile_native  # noqa: E402,F401 (the tests' sanitizer build)
 from fmu_src.avr_packaging import crosscheck, pages, vendor  # noqa: E402
 from fmu_src.avr_packaging.archive import content_guid, read_entries, sha256_of, write_zip  # noqa: E402
@@ -185,27 +188,40 @@ def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path
     return crosscheck.add_reference(fmu_path, sanitize=sanitize)
 
 
-def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path) -> Path:
-    """Write ``<out_dir>/CassieAVR.ssp``: both FMUs wired name to name, the nominal parameter sets and a
-    30 s, 5 ms default experiment (the structure is ``scenarios/system.py``'s); reproducible zip."""
-    from scenarios import system
-
-    path = Path(out_dir) / f"{system.SYSTEM_NAME}.ssp"
-    write_zip(system.ssp_entries(Path(plant_fmu), Path(regulator_fmu)), path)
+def build_command_source(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
+    """Build ``<out_dir>/CommandSource_fmi<2|3>.fmu`` (linux and windows x86-64, the nominal
+    schedule: 0.5 m/s, no turn, no push) reproducibly."""
+    path = command_source.build(fmi_version, Path(out_dir))
+    log.info("built %s", path)
     return path
 
 
-def build_osp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path) -> Path:
-    """Write the folder ``<out_dir>/CassieAVR_osp/``: OspSystemStructure.xml beside copies of both FMUs."""
+def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: Path | None = None) -> Path:
+    """Write ``<out_dir>/CassieAVR.ssp``: the plant, the regulator and the command source (its
+    nominal schedule, built into ``out_dir`` if not given) wired name to name, every
+    parameter at its start value in the parameter sets, a 30 s, 5 ms default experiment
+    (the structure is ``scenarios/system.py``'s); reproducible zip."""
+    from scenarios import system
+
+    command_fmu = command_fmu or build_command_source(2, out_dir)
+    path = Path(out_dir) / f"{system.SYSTEM_NAME}.ssp"
+    write_zip(system.ssp_entries(Path(plant_fmu), Path(regulator_fmu), Path(command_fmu)), path)
+    return path
+
+
+def build_osp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: Path | None = None) -> Path:
+    """Write the folder ``<out_dir>/CassieAVR_osp/``: OspSystemStructure.xml beside copies of the three FMUs."""
     import shutil
 
     from scenarios import system
 
+    command_fmu = command_fmu or build_command_source(2, out_dir)
     folder = Path(out_dir) / f"{system.SYSTEM_NAME}_osp"
     folder.mkdir(parents=True, exist_ok=True)
-    for fmu in (plant_fmu, regulator_fmu):
+    for fmu in (plant_fmu, regulator_fmu, command_fmu):
         shutil.copyfile(fmu, folder / Path(fmu).name)
-    (folder / "OspSystemStructure.xml").write_bytes(system.osp_system_structure(Path(plant_fmu), Path(regulator_fmu)))
+    (folder / "OspSystemStructure.xml").write_bytes(
+        system.osp_system_structure(Path(plant_fmu), Path(regulator_fmu), Path(command_fmu)))
     return folder
 
 
@@ -234,7 +250,9 @@ def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Pa
     tmp = Path(out_dir) / (FMUS_JSON + ".tmp")
     tmp.write_text(json.dumps(listing, indent=2) + "\n")
     tmp.replace(Path(out_dir) / FMUS_JSON)
-    return [path for path, _ in built] + [build_ssp(out_dir, plant, regulator), build_osp(out_dir, plant, regulator)]
+    command = build_command_source(2, out_dir)
+    return [path for path, _ in built] + [command, build_ssp(out_dir, plant, regulator, command),
+                                          build_osp(out_dir, plant, regulator, command)]
 
 
 def main(argv=None) -> int:

@@ -7,6 +7,7 @@
                             [--duration S] [--no-plots] [--rebuild-fmu] [--overwrite | --resume]
                             [--plant inprocess|fmu] [--plant-fmu PATH] [--render] [--require-pass]
     python -m scenarios report DIR
+    python -m scenarios export-ssp SCENARIO [--arm ARM] [--out FILE]   (scenarios.export_ssp)
 
 ``run`` checks everything before it simulates and names every problem at once: the
 scenarios (each model compiled and checked to be a Cassie), the arguments, and the
@@ -251,6 +252,10 @@ def build_parser() -> argparse.ArgumentParser:
     from scenarios.campaign.cli import add_parser as add_campaign_parser
 
     add_campaign_parser(sub)
+
+    from scenarios.export_ssp import add_parser as add_export_ssp_parser
+
+    add_export_ssp_parser(sub)
 
     sp = sub.add_parser("report", help="write DIR/report.md over the results in DIR")
     sp.add_argument("dir")

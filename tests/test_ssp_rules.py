@@ -51,22 +51,9 @@ def entries(ssp) -> dict[str, str]:
             "plant_ssv": comps["plant"].find("ssd:ParameterBindings/ssd:ParameterBinding", NS).get("source")}
 
 
-@pytest.mark.parametrize("rule", [
-    "schema", "connector", "range", "connection", "unsupported",
-    pytest.param("binding", marks=pytest.mark.xfail(strict=True, reason=(
-        "CassieAVR.ssp's parameter sets bind the FMU inputs vx_des, vy_des, yaw_rate_des (SSP 1.0 5.3.4 allows "
-        "bindings only on variables with initial exact/approx; FMI 2.0 inputs have none): fixed when the "
-        "command is fed through a connection"))),
-])
+@pytest.mark.parametrize("rule", ["schema", "connector", "range", "connection", "unsupported", "binding"])
 def test_the_built_ssp_keeps_the_rule(baseline, rule):
     assert [str(p) for p in baseline if p.rule == rule] == []
-
-
-def test_the_built_ssps_binding_problems_are_the_input_bindings(baseline):
-    """What the expected failure above is about, and nothing else (an empty list once fixed)."""
-    bindings = [p for p in baseline if p.rule == "binding"]
-    assert {p.where.split("'")[1] for p in bindings} <= set(INPUT_BINDINGS)
-    assert all("an FMI 2.0 input (no initial)" in p.message for p in bindings)
 
 
 # ---- broken copies ---------------------------------------------------------------------------
