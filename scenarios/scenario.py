@@ -166,6 +166,11 @@ class Scenario:
             sums[i] = (fx, fy, fz)
         return sums[i]
 
+    @property
+    def push_switch_steps(self) -> list[int]:
+        """The steps at which the pushes in force change (their sum is constant in between)."""
+        return self._push_index[0]
+
     @functools.cached_property
     def _command_index(self) -> tuple[list[int], tuple[CommandPoint, ...]]:
         """(running maximum of the points' start steps, the points): the first point
