@@ -36,7 +36,7 @@ def read_toml(path: str | Path, what: str = "scenario file") -> dict[str, Any]:
     messages); ScenarioError with one problem naming the file otherwise."""
     path = Path(path)
     try:
-        data = _read_regular(path, what)
+        data = read_regular_file(path, what)
     except FileNotFoundError:
         raise ScenarioError([f"file not found: {path}"], source=str(path)) from None
     except OSError as exc:
@@ -61,9 +61,10 @@ def read_toml(path: str | Path, what: str = "scenario file") -> dict[str, Any]:
     return doc
 
 
-def _read_regular(path: Path, what: str) -> bytes:
-    """The bytes of ``path`` if it is a regular file of at most MAX_FILE_BYTES; opened
-    without blocking (a named pipe opens at once and is then refused by its kind)."""
+def read_regular_file(path: Path, what: str) -> bytes:
+    """The bytes of ``path`` if it is a regular file of at most MAX_FILE_BYTES (else
+    ScenarioError naming what it is); opened without blocking (a named pipe opens at
+    once and is then refused by its kind). OSError when it cannot be opened or read."""
     fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0))
     try:
         mode = os.fstat(fd).st_mode
@@ -89,7 +90,7 @@ def _read_regular(path: Path, what: str) -> bytes:
 
 
 def depth_problem(doc: Any) -> str | None:
-    """Why ``doc`` nests too deeply (tables and arrays below the top level), or None.
+    """Why ``doc`` (a TOML or JSON document) nests too deeply, or None.
     Walks the document with its own stack: any depth is measured without recursion."""
     stack = [(doc, 0)]
     while stack:
