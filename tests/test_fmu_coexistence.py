@@ -9,6 +9,8 @@ that must stay empty.
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -34,7 +36,8 @@ for call in json.load(sys.stdin):
                           output=call["output"])
     results.append({name: r[name].tolist() for name in r.dtype.names})
 extracted = [p for p in sys.path if p.startswith(tempfile.gettempdir())]  # fmpy's (deleted) folders
-print(json.dumps({"results": results, "extracted_on_sys_path": extracted}))
+public = sorted(n for n in sys.modules if n.split(".")[0] in ("plant", "fmu_src") or n.startswith(("avr", "cassie")))
+print(json.dumps({"results": results, "extracted_on_sys_path": extracted, "public_modules": public}))
 """
 
 
@@ -78,6 +81,9 @@ def test_simulate_fmu_five_times_alternating_plant_and_regulator(builds, tmp_pat
     assert first["regulator"]["Kp_x"][-1] == KP_X
     assert "gait library" not in stderr, stderr  # the plant never lost its data folder
     assert host["extracted_on_sys_path"] == []
+    # under public names only the entry modules, one per build: the code is under private names
+    assert len(host["public_modules"]) == 3, host["public_modules"]
+    assert all(re.fullmatch(r"(avr_slave|cassie_plant_slave)_[0-9a-f]{16}", n) for n in host["public_modules"])
 
 
 @pytest.mark.parametrize("order", [("regulator", "regulator_b"), ("regulator_b", "regulator")])
