@@ -25,10 +25,7 @@ import struct
 import zlib
 from dataclasses import dataclass
 
-try:
-    from .avr_errors import StateError
-except ImportError:  # pragma: no cover - inside the FMU the modules are top-level
-    from avr_errors import StateError
+from .avr_errors import StateError
 
 MAGIC = b"AVRS"
 VERSION = 2

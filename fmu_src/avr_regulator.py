@@ -18,20 +18,12 @@ from numbers import Real
 
 import numpy as np
 
-try:
-    from .avr_errors import InputError, ParameterError, StateError
-    from .avr_network import (INV_TAU_RC, NETWORK_NAMES, input_currents, lif_rates_times_tau_rc,
-                               readonly, scaled_inputs)
-    from .avr_params import network_key, validate_inputs
-    from .avr_specs import (ANGLE_LIMIT_RAD, DELTA_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
-                            VELOCITY_LIMIT_MPS)
-except ImportError:  # inside the FMU the modules are top-level
-    from avr_errors import InputError, ParameterError, StateError
-    from avr_network import (INV_TAU_RC, NETWORK_NAMES, input_currents, lif_rates_times_tau_rc,
-                             readonly, scaled_inputs)
-    from avr_params import network_key, validate_inputs
-    from avr_specs import (ANGLE_LIMIT_RAD, DELTA_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
-                           VELOCITY_LIMIT_MPS)
+from .avr_errors import InputError, ParameterError, StateError
+from .avr_network import (INV_TAU_RC, NETWORK_NAMES, input_currents, lif_rates_times_tau_rc,
+                           readonly, scaled_inputs)
+from .avr_params import network_key, validate_inputs
+from .avr_specs import (ANGLE_LIMIT_RAD, DELTA_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
+                        VELOCITY_LIMIT_MPS)
 
 __all__ = ["WEIGHT_ROWS", "N_WEIGHT_ROWS", "STRIDE_READY", "RegulatorState",
            "initial_state", "step"]

@@ -18,14 +18,9 @@ import zlib
 
 import numpy as np
 
-try:
-    from .avr_errors import StateError
-    from .avr_params import network_key
-    from .avr_regulator import N_WEIGHT_ROWS, STRIDE_READY, RegulatorState
-except ImportError:  # inside the FMU the modules are top-level
-    from avr_errors import StateError
-    from avr_params import network_key
-    from avr_regulator import N_WEIGHT_ROWS, STRIDE_READY, RegulatorState
+from .avr_errors import StateError
+from .avr_params import network_key
+from .avr_regulator import N_WEIGHT_ROWS, STRIDE_READY, RegulatorState
 
 __all__ = ["state_to_bytes", "state_from_bytes"]
 
