@@ -37,6 +37,14 @@ MINGW_CC = Path("/usr/bin/x86_64-w64-mingw32-gcc")
 WINE = Path("/usr/lib/wine/wine64")
 READELF = Path("/usr/bin/readelf")
 MINGW_OBJDUMP = Path("/usr/bin/x86_64-w64-mingw32-objdump")
+#: Linux aarch64: the cross compiler (Debian gcc-aarch64-linux-gnu, with its C library in
+#: AARCH64_SYSROOT) and the user-mode emulator that runs its programs here (Debian qemu-user).
+AARCH64_CC = Path("/usr/bin/aarch64-linux-gnu-gcc")
+AARCH64_SYSROOT = Path("/usr/aarch64-linux-gnu")
+QEMU_AARCH64 = Path("/usr/bin/qemu-aarch64")
+#: The plain C FMI 3.0 host (tests/native/fmi3_host.c, the same scripts as fmi2_host.c) and its headers.
+C_HOST3 = NATIVE_DIR / "fmi3_host.c"
+FMI3_INCLUDE = FMI2_INCLUDE.parent / "fmi3"
 
 
 def require(tool: Path) -> Path:
