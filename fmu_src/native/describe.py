@@ -127,9 +127,14 @@ def build_description(model_identifier: str, source_files) -> bytes:
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def documentation(fmi_version: int, model_identifier: str) -> str:
-    """``documentation/index.html``: the FMI behaviour, the method (``docs/method.md``) and the variables."""
+def documentation(fmi_version: int, model_identifier: str, platforms) -> str:
+    """``documentation/index.html``: the platforms with binaries (``platforms``: (folder, what it
+    runs on) pairs), the FMI behaviour, the method (``docs/method.md``) and the variables."""
     specs = all_specs()
+    binaries = "".join(f"<li><code>binaries/{html.escape(folder)}/</code>: {html.escape(name)}</li>"
+                       for folder, name in platforms)
+    aarch64_note = (" FMI 2.0 names no platform folder for Linux aarch64: there, use the FMI 3.0 FMU (which "
+                    "carries that binary) or build this one from its sources." if fmi_version == 2 else "")
     rows = "\n".join(
         "<tr>" + "".join(f"<td>{html.escape(str(cell))}</td>" for cell in (
             vr, s.name, s.causality, s.type, s.variability, s.unit, xml_value(s.default),
@@ -138,9 +143,16 @@ def documentation(fmi_version: int, model_identifier: str) -> str:
     return f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>{model_identifier} (FMI {fmi_version}.0)</title></head><body>
 <h1>{model_identifier} (FMI {fmi_version}.0 co-simulation, native C)</h1>
-<p>{html.escape(DESCRIPTION)}. Binaries for Linux and Windows x86-64; the C sources in <code>sources/</code>
-compile with any C99 compiler for other platforms, in any mode, and give the same bits (the sources forbid
-FMA contraction themselves; shipped binaries: {COMPILER_OPTIONS}; never fast-math). No Python is needed.</p>
+<p>{html.escape(DESCRIPTION)}. No Python is needed.</p>
+<h2>Platforms</h2>
+<p>This FMU carries binaries for:</p>
+<ul>{binaries}</ul>
+<p>For any other platform, the C sources in <code>sources/</code> build the library with any C99 compiler
+(shipped binaries: <code>{COMPILER_OPTIONS}</code>; no option is needed, only never fast-math). The sources
+forbid FMA contraction themselves (<code>#pragma STDC FP_CONTRACT OFF</code> and the GCC and MSVC
+equivalents), so a library built from them, in any C mode and at any optimization level, computes the same
+bits as the shipped binaries on any CPU whose C compiler evaluates doubles in double precision
+(FLT_EVAL_METHOD 0: x86-64, aarch64 and the other 64-bit CPUs; not 32-bit x87 code).{aarch64_note}</p>
 <h2>FMI behaviour</h2>
 <p>Any communication step &gt; 0. Calls the FMI {fmi_version}.0 state machine forbids, sets of outputs or of
 fixed parameters after initialization, NaN/inf values and values outside [min, max] are refused with Error and
