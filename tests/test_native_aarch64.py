@@ -13,9 +13,8 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 
-from native_support import (AARCH64_CC, CC, READELF, c_host_outputs, c_host_script, core_outputs, input_sequence,
-                            require)
-from test_native_same_bits import compile_host, run_host
+from native_support import (AARCH64_CC, CC, READELF, c_host_outputs, c_host_script, compile_host, core_outputs,
+                            input_sequence, require, run_host)
 
 PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_knee": 0.0}
 N_STEPS = 400

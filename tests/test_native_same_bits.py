@@ -11,7 +11,6 @@ the plain C host (aarch64 under qemu-aarch64), and its printed outputs must be t
 x86-64 binary's, byte for byte (``%.17g`` reads back as the same double).
 """
 import os
-import subprocess
 import sys
 import zipfile
 from pathlib import Path
@@ -20,8 +19,7 @@ import pytest
 from fmpy import read_model_description
 from fmpy.build import build_platform_binary
 
-from native_support import (AARCH64_CC, AARCH64_SYSROOT, C_HOST, C_HOST3, CC, FMI2_INCLUDE, FMI3_INCLUDE,
-                            QEMU_AARCH64, c_host_script, compile_c, input_sequence, require)
+from native_support import AARCH64_CC, CC, c_host_script, compile_host, input_sequence, require, run_host
 
 PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_knee": 0.0}
 N_STEPS = 400
@@ -34,29 +32,6 @@ BUILDS = {
     "clang-gnu11-O3-march=native": ("x86_64", CLANG, "-std=gnu11 -O3 -march=native"),
     "aarch64-gcc-gnu11-O3": ("aarch64", AARCH64_CC, "-std=gnu11 -O3"),
 }
-HOST_SOURCES = {2: (C_HOST, FMI2_INCLUDE), 3: (C_HOST3, FMI3_INCLUDE)}
-
-
-def compile_host(compiler: Path, fmi: int, out: Path) -> Path:
-    """The plain C host for FMI ``fmi``, compiled with ``compiler`` (host or cross).  libm is linked
-    in (not only as needed): a library CMake builds from the sources leaves ``sqrt`` to the
-    process, as every Python host provides it (fmpy's CMake build does not link the buildDescription's
-    libm)."""
-    source, include = HOST_SOURCES[fmi]
-    return compile_c(require(compiler), [source], out, "-std=c99", "-O1", f"-I{include}", "-ldl",
-                     "-Wl,--no-as-needed", "-lm")
-
-
-def run_host(host: Path, cpu: str, library: Path, token: str, script: Path) -> str:
-    """The host's stdout (one line of outputs per step); aarch64 programs run under qemu-aarch64."""
-    cmd = [str(host), str(library), token, str(script)]
-    if cpu == "aarch64":
-        cmd = [str(require(QEMU_AARCH64)), "-L", str(AARCH64_SYSROOT)] + cmd
-    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env={"PATH": "/usr/bin:/bin"})
-    assert proc.returncode == 0, f"{' '.join(cmd)} exited {proc.returncode}:\n{proc.stderr[-3000:]}"
-    return proc.stdout
-
-
 def build_with_fmpy(fmu: Path, compiler: Path, cpu: str, flags: str, folder: Path, monkeypatch) -> Path:
     """The FMU's ``sources/`` built by fmpy's ``build_platform_binary`` (CMake; ``cmake`` comes
     with fmpy, beside the interpreter) with ``compiler`` and ``flags``; the library's path."""
