@@ -3,10 +3,11 @@
 ``AdaptiveVelocityRegulator.fmu`` (FMI 2.0 co-simulation, pythonfmu, the reference) and
 ``AdaptiveVelocityRegulatorNative_fmi2.fmu`` / ``_fmi3.fmu`` (the same regulator in C,
 FMI 2.0 and FMI 3.0 from one source, Linux and Windows x86-64 binaries, FMI 3.0 also Linux
-aarch64, plus sources), the ``CassiePlant.fmu`` and the CassieAVR system wiring both (SSP
-archive and OSP folder).  The Windows and aarch64 binaries need cross compilers (Debian
-``gcc-mingw-w64-x86-64``, ``gcc-aarch64-linux-gnu``); without one, its platform is
-skipped with a warning naming the package, and the build goes on.
+aarch64, plus sources), the ``CassiePlant.fmu``, the ``CommandSource_fmi2.fmu`` (native C:
+the command and pushes over time, from its ``resources/schedule.csv``) and the CassieAVR
+system wiring the three (SSP archive and OSP folder).  The native FMUs' Windows and aarch64
+binaries need cross compilers (Debian ``gcc-mingw-w64-x86-64``, ``gcc-aarch64-linux-gnu``);
+without one, its platform is skipped with a warning naming the package, and the build goes on.
 
     python build.py [--out DIR] [--sanitize]
 
@@ -16,7 +17,10 @@ GUID, no generation time), a documentation page and a ``requirements.txt`` are a
 the FMI guard (``fmu_src/guard/*.c``) is compiled as the linux64 library the host loads
 (pythonfmu's own library moves beside it as ``<id>_pythonfmu.so``), and the archive is
 written with sorted entries and fixed timestamps, so two builds of the same sources give
-the same sha256.  Prints each FMU's path and sha256.  ``--sanitize`` compiles the guard
+the same sha256.  Every FMU build function then simulates the FMU it wrote once with FMPy
+and puts the results inside (``extra/org.fmi-standard.fmi-ls-ref/``, the fmi-ls-ref layered
+standard; ``fmu_src/avr_packaging/crosscheck.py``), so an FMU is the same file whoever builds
+it.  Prints each FMU's path and sha256.  ``--sanitize`` compiles the guard
 with AddressSanitizer + UndefinedBehaviorSanitizer instead (for the ``sanitize`` tests).
 Temporary folders are removed when the build ends, also when it fails.
 
@@ -45,10 +49,12 @@ if str(REPO_ROOT) not in sys.path:  # build.py also runs without the package ins
 from fmu_src.guard.build_guard import (GUARD_TEXTS, SANITIZE_FLAGS,  # noqa: E402,F401 (SANITIZE_FLAGS: documented)
                                        compile_guard, guard_header)
 from fmu_src.native import build_native  # noqa: E402
+from fmu_src.command_source import build_command_source as command_source  # noqa: E402
 from fmu_src.native.build_native import compile_native  # noqa: E402,F401 (the tests' sanitizer build)
-from fmu_src.avr_packaging import pages, vendor  # noqa: E402
+from fmu_src.avr_packaging import crosscheck, pages, vendor  # noqa: E402
 from fmu_src.avr_packaging.archive import content_guid, read_entries, sha256_of, write_zip  # noqa: E402
-from fmu_src.avr_packaging.describe import DEFAULT_EXPERIMENT, UNITS, model_description  # noqa: E402
+from fmu_src.avr_packaging.describe import (DEFAULT_EXPERIMENT, PLANT_INITIAL_UNKNOWNS, UNITS,  # noqa: E402
+                                            model_description)
 from fmu_src.avr_packaging.pythonfmu_fix import (EXIT_BUG_PATCH, EXIT_BUG_SYMBOL,  # noqa: E402,F401 (tests)
                                              _elf_symbol_file_offset, patch_pythonfmu_exit_bug)
 
@@ -134,8 +140,9 @@ def build_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path:
     entries["resources/requirements.txt"] = REQUIREMENTS.encode("utf-8")
     _move_pythonfmu_library(entries, MODEL_IDENTIFIER)
     slave_module = entries["resources/slavemodule.txt"].decode("utf-8").strip()
-    return _guarded_fmu(entries, tree, MODEL_IDENTIFIER, out_dir, header_options={"slave_module": slave_module},
-                        sanitize=sanitize)
+    fmu_path = _guarded_fmu(entries, tree, MODEL_IDENTIFIER, out_dir, header_options={"slave_module": slave_module},
+                            sanitize=sanitize)
+    return crosscheck.add_reference(fmu_path, sanitize=sanitize)
 
 
 def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
@@ -144,7 +151,7 @@ def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
     fmu_path = Path(out_dir) / build_native.fmu_name(fmi_version)
     write_zip(build_native.fmu_entries(fmi_version, UNITS, DEFAULT_EXPERIMENT), fmu_path)
     log.info("built %s", fmu_path)
-    return fmu_path
+    return crosscheck.add_reference(fmu_path)
 
 
 def _plant_entries(tmp: Path) -> dict[str, bytes]:
@@ -172,36 +179,51 @@ def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path
 
     with tempfile.TemporaryDirectory(prefix="cassie_plant_fmu_") as tmp:
         entries = _plant_entries(Path(tmp))
-    tree = model_description(entries.pop("modelDescription.xml"), fmu_core.SPECS, PLANT_UNITS)
+    tree = model_description(entries.pop("modelDescription.xml"), fmu_core.SPECS, PLANT_UNITS,
+                             initial_unknowns=PLANT_INITIAL_UNKNOWNS)
     entries["documentation/index.html"] = pages.plant_page(PLANT_IDENTIFIER, PLANT_LIB, fmu_core.SPECS).encode("utf-8")
     entries["resources/requirements.txt"] = PLANT_REQUIREMENTS.encode("utf-8")
     _move_pythonfmu_library(entries, PLANT_IDENTIFIER)
     options = {"slave_module": PLANT_SLAVE_SCRIPT.stem, "step_quantum_s": fmu_core.PLANT_STEP_S}
-    return _guarded_fmu(entries, tree, PLANT_IDENTIFIER, out_dir, guid_prefix=f"{PLANT_IDENTIFIER}:",
-                        header_options=options, sanitize=sanitize)
+    fmu_path = _guarded_fmu(entries, tree, PLANT_IDENTIFIER, out_dir, guid_prefix=f"{PLANT_IDENTIFIER}:",
+                            header_options=options, sanitize=sanitize)
+    return crosscheck.add_reference(fmu_path, sanitize=sanitize)
 
 
-def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path) -> Path:
-    """Write ``<out_dir>/CassieAVR.ssp``: both FMUs wired name to name, the nominal parameter sets and a
-    30 s, 5 ms default experiment (the structure is ``scenarios/system.py``'s); reproducible zip."""
-    from scenarios import system
-
-    path = Path(out_dir) / f"{system.SYSTEM_NAME}.ssp"
-    write_zip(system.ssp_entries(Path(plant_fmu), Path(regulator_fmu)), path)
+def build_command_source(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
+    """Build ``<out_dir>/CommandSource_fmi<2|3>.fmu`` (the native regulator's platforms, the nominal
+    schedule: 0.5 m/s, no turn, no push) reproducibly."""
+    path = command_source.build(fmi_version, Path(out_dir))
+    log.info("built %s", path)
     return path
 
 
-def build_osp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path) -> Path:
-    """Write the folder ``<out_dir>/CassieAVR_osp/``: OspSystemStructure.xml beside copies of both FMUs."""
+def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: Path | None = None) -> Path:
+    """Write ``<out_dir>/CassieAVR.ssp``: the plant, the regulator and the command source (its
+    nominal schedule, built into ``out_dir`` if not given) wired name to name, every
+    parameter at its start value in the parameter sets, a 30 s, 5 ms default experiment
+    (the structure is ``scenarios/system.py``'s); reproducible zip."""
+    from scenarios import system
+
+    command_fmu = command_fmu or build_command_source(2, out_dir)
+    path = Path(out_dir) / f"{system.SYSTEM_NAME}.ssp"
+    write_zip(system.ssp_entries(Path(plant_fmu), Path(regulator_fmu), Path(command_fmu)), path)
+    return path
+
+
+def build_osp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: Path | None = None) -> Path:
+    """Write the folder ``<out_dir>/CassieAVR_osp/``: OspSystemStructure.xml beside copies of the three FMUs."""
     import shutil
 
     from scenarios import system
 
+    command_fmu = command_fmu or build_command_source(2, out_dir)
     folder = Path(out_dir) / f"{system.SYSTEM_NAME}_osp"
     folder.mkdir(parents=True, exist_ok=True)
-    for fmu in (plant_fmu, regulator_fmu):
+    for fmu in (plant_fmu, regulator_fmu, command_fmu):
         shutil.copyfile(fmu, folder / Path(fmu).name)
-    (folder / "OspSystemStructure.xml").write_bytes(system.osp_system_structure(Path(plant_fmu), Path(regulator_fmu)))
+    (folder / "OspSystemStructure.xml").write_bytes(
+        system.osp_system_structure(Path(plant_fmu), Path(regulator_fmu), Path(command_fmu)))
     return folder
 
 
@@ -218,16 +240,21 @@ def fmu_entry(path: Path, implementation: str) -> dict:
 
 def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Path]:
     """Build every FMU (the pythonfmu regulator, both native regulators, the CassiePlant
-    FMU), ``<out_dir>/fmus.json`` listing them, and the CassieAVR system (SSP and OSP)."""
+    FMU), each with its reference results inside, the FMI cross-check vendor tree
+    ``<out_dir>/cross-check/`` (``fmu_src/avr_packaging/crosscheck.py``), ``<out_dir>/fmus.json``
+    listing the FMUs, and the CassieAVR system (SSP and OSP)."""
     regulator = build_fmu(out_dir, sanitize=sanitize)
     built = [(regulator, "python")] + [(build_native_fmu(v, out_dir), "native") for v in (2, 3)]
     plant = build_plant_fmu(out_dir)
     built.append((plant, "python"))
+    crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], build_native.describe.VERSION)
     listing = {"fmus": [fmu_entry(path, kind) for path, kind in built]}
     tmp = Path(out_dir) / (FMUS_JSON + ".tmp")
     tmp.write_text(json.dumps(listing, indent=2) + "\n")
     tmp.replace(Path(out_dir) / FMUS_JSON)
-    return [path for path, _ in built] + [build_ssp(out_dir, plant, regulator), build_osp(out_dir, plant, regulator)]
+    command = build_command_source(2, out_dir)
+    return [path for path, _ in built] + [command, build_ssp(out_dir, plant, regulator, command),
+                                          build_osp(out_dir, plant, regulator, command)]
 
 
 def main(argv=None) -> int:

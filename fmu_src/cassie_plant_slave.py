@@ -15,7 +15,7 @@ foreign serialized states are ``fmi2Error`` without reaching Python.  pythonfmu 
 Python exception as ``fmi2Fatal`` only, so this slave never raises on bad input: it logs
 the problem with status Error and changes nothing, and the guard answers ``fmi2Error``
 for any call that logged an error.  That covers what only Python can check: the
-``model`` name, the plant's own parameter validation (``Perturbation.problems()``: every
+``cassie_model`` name, the plant's own parameter validation (``Perturbation.problems()``: every
 problem at once, each naming its field and range) in ``fmi2ExitInitializationMode``,
 which then stays in initialization mode, and the contents of an FMU state.
 
@@ -100,7 +100,7 @@ class CassiePlant(_base.SpecSlave):
         self._init_variables(self._core.SPECS)
 
     def _value_problem(self, spec, value) -> str | None:
-        if spec.name == "model":
+        if spec.name == "cassie_model":
             return self._core.model_problem(value)
         return super()._value_problem(spec, value)
 

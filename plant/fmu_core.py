@@ -4,7 +4,7 @@ The FMU (``fmu_src/cassie_plant_slave.py``) is a thin translator over this modul
 module knows nothing of FMI.  It wraps :class:`plant.sim.CassieWalker` (MuJoCo at its
 0.5 ms step with the nominal controller, starting from rest in the ``home`` pose):
 
-* :data:`PARAM_SPECS` are fixed parameters: the model (``menagerie`` or ``osu``) and the
+* :data:`PARAM_SPECS` are fixed parameters: ``cassie_model`` (``menagerie`` or ``osu``) and the
   perturbation, mapped onto :class:`plant.perturbation.Perturbation` by
   :func:`perturbation_from_values`, whose ``problems()`` are the one validation (the
   scenario files run the same one): every message names the field and its range.
@@ -40,7 +40,7 @@ from plant.terrain import MAX_HEIGHT_M, MAX_SLOPE_DEG, SIZE_RANGE_M, TerrainSpec
 MODEL_IDENTIFIER = "CassiePlant"
 #: The plant step (s) of both models; communication steps must be whole multiples of it.
 PLANT_STEP_S = 0.0005
-#: The ``model`` parameter's values and the MJCF file of each, relative to the models folder.
+#: The ``cassie_model`` parameter's values and the MJCF file of each, relative to the models folder.
 MODEL_FILES = {"menagerie": "menagerie/agility_cassie/scene.xml", "osu": "osu/cassie.xml"}
 #: A relative tolerance on "a whole number of plant steps" (the master's own rule is 1e-6
 #: of a plant step; any float h = k * 0.5 ms computed by a master is within 1e-12 of it).
@@ -62,7 +62,7 @@ def _o(name, unit, description, type="Real"):
 
 
 PARAM_SPECS: tuple[VarSpec, ...] = (
-    _p("model", "menagerie", None, None, "",
+    _p("cassie_model", "menagerie", None, None, "",
        "Cassie model: 'menagerie' (MuJoCo Menagerie's agility_cassie) or 'osu' (Oregon State's "
        "cassie-mujoco-sim model); both travel in the FMU's resources", type="String"),
     _p("torso_mass_kg", NOMINAL_PELVIS_MASS_KG, 0.0, MAX_TORSO_MASS_KG, "kg",
@@ -143,7 +143,7 @@ def values_from_perturbation(model: str, perturbation: Perturbation | None) -> d
     """The parameter values of ``model`` with ``perturbation`` (the inverse of
     :func:`perturbation_from_values`); the scenarios' --plant fmu path uses it."""
     p = perturbation or Perturbation()
-    values = dict(PARAM_DEFAULTS, model=model, joint_damping_scale=float(p.joint_damping_scale))
+    values = dict(PARAM_DEFAULTS, cassie_model=model, joint_damping_scale=float(p.joint_damping_scale))
     if p.torso_mass_kg is not None:
         values["torso_mass_kg"] = float(p.torso_mass_kg)
     for axis, c in zip("xyz", p.torso_com_offset_m):
@@ -158,12 +158,12 @@ def values_from_perturbation(model: str, perturbation: Perturbation | None) -> d
 def model_problem(model) -> str | None:
     if model in MODEL_FILES:
         return None
-    return f"model = {model!r}: must be one of {', '.join(repr(m) for m in MODEL_FILES)}"
+    return f"cassie_model = {model!r}: must be one of {', '.join(repr(m) for m in MODEL_FILES)}"
 
 
 def problems(values: Mapping) -> list[str]:
     """Every problem of the parameter values (the model's and the Perturbation's own)."""
-    found = [p for p in [model_problem(values["model"])] if p]
+    found = [p for p in [model_problem(values["cassie_model"])] if p]
     return found + perturbation_from_values(values).problems()
 
 
@@ -180,7 +180,7 @@ def start(values: Mapping, models_dir: str | Path | None = None) -> CassieWalker
         err = PerturbationError(f"invalid CassiePlant parameters, {len(found)} problem(s): " + "; ".join(found))
         err.problems = found
         raise err
-    model = values["model"]
+    model = values["cassie_model"]
     source = model if models_dir is None else str(Path(models_dir) / MODEL_FILES[model])
     walker = CassieWalker(load_model(source, perturbation_from_values(values)))
     if walker.SIM_DT_S != PLANT_STEP_S:

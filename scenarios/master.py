@@ -42,6 +42,11 @@ log = logging.getLogger(__name__)
 SENSED_INPUTS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
 #: Progress is reported every this many communication steps.
 PROGRESS_EVERY = 200
+#: The data flow within a communication step: ``gauss-seidel`` (the default: sense the plant,
+#: step the regulator, apply its offsets over the same step) or ``jacobi`` (as the SSP masters
+#: libcosim, fmpy and Ecos: the offsets applied over step k are the regulator's outputs at
+#: t_k, computed from the plant's outputs at t_(k-1); the offsets act one step later).
+EXCHANGES = ("gauss-seidel", "jacobi")
 #: How close ``h / sim_dt`` must be to a whole number (in plant steps).
 WHOLE_STEPS_TOL = 1e-6
 
@@ -142,7 +147,8 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
             progress: Callable[[int], None] | None = None, model=None, model_summary: dict | None = None,
             stop: Callable[[], bool] | None = None,
             plant: Callable[[Scenario, Any], Any] | None = None,
-            recorder: Callable[[int, float, Any], None] | None = None) -> ArmResult:
+            recorder: Callable[[int, float, Any], None] | None = None,
+            exchange: str = "gauss-seidel") -> ArmResult:
     """Run one arm of ``scenario`` closed-loop; return its trajectory (nothing printed).
 
     ``progress(n)`` is called with the number of communication steps done since the
@@ -156,11 +162,14 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     communication step before the plant advances (``run --render``:
     :class:`scenarios.render.StateRecorder`; its ``track()`` goes into the result).
     The result's ``timings`` say where the time went (:data:`TIMINGS`).
+    ``exchange``: :data:`EXCHANGES` (``"jacobi"``: the SSP masters' order).
     """
     from plant.sim import CassieWalker
 
     from scenarios.plantio import load_plant_model
 
+    if exchange not in EXCHANGES:
+        raise ValueError(f"exchange = {exchange!r}: must be one of {', '.join(EXCHANGES)}")
     if isinstance(arm, str):
         arm = scenario.arm(arm)
     cpu0, lap = time.process_time(), time.perf_counter()
@@ -179,7 +188,7 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     try:
         regulator.start(arm.overrides_dict(), 0.0, scenario.n_comm_steps * scenario.comm_step_s)
         lap = _lap(timings, "regulator_start_s", lap)
-        _run_steps(scenario, arm, walker, regulator, n_plant, steps, progress, stop, recorder)
+        _run_steps(scenario, arm, walker, regulator, n_plant, steps, progress, stop, recorder, exchange)
         lap = _lap(timings, "loop_s", lap)
     finally:
         regulator.close()
@@ -206,7 +215,7 @@ def _lap(timings: dict[str, float], key: str, since: float) -> float:
 
 def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n_plant: int, steps: _Steps,
                progress: Callable[[int], None] | None, stop: Callable[[], bool] | None,
-               recorder: Callable[[int, float, Any], None] | None = None) -> None:
+               recorder: Callable[[int, float, Any], None] | None = None, exchange: str = "gauss-seidel") -> None:
     """The communication steps of :func:`run_arm` (see the module docstring), into ``steps``."""
     h, t0, n_steps = scenario.comm_step_s, 0.0, scenario.n_comm_steps
     outputs = regulator.output_names()
@@ -215,6 +224,9 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
     force = (0.0, 0.0, 0.0)
     table = None
     reg_s = plant_s = record_s = 0.0
+    # Jacobi: the offsets in force over step k are the regulator's outputs at t_k, computed
+    # in step k-1; at t0 its outputs' start values, 0 for every regulator output.
+    held = {n: 0.0 for n in outputs} if exchange == "jacobi" else None
     try:
         for k in range(n_steps):
             if stop is not None and stop():
@@ -234,6 +246,8 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
             inputs["vx_des"], inputs["vy_des"], _ = cmd
             c0 = clock()
             out = regulator.step(t, h, inputs)
+            if held is not None:
+                out, held = held, out
             c1 = clock()
             walker.set_offsets({n: out[n] for n in OFFSET_NAMES})
             if table is None:
@@ -264,7 +278,8 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
 
 def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | Path | None = None,
                  arms: tuple[str, ...] | None = None, progress: Callable[[int], None] | None = None,
-                 plant: Callable[[Scenario, Any], Any] | None = None) -> list[ArmResult]:
+                 plant: Callable[[Scenario, Any], Any] | None = None,
+                 exchange: str = "gauss-seidel") -> list[ArmResult]:
     """Every arm of ``scenario`` (or those named in ``arms``), each on a fresh plant and regulator."""
     from scenarios.plantio import load_plant_model
 
@@ -274,5 +289,5 @@ def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | 
         if arms is not None and arm.name not in arms:
             continue
         results.append(run_arm(scenario, arm, arm_regulator(arm, regulator, fmu_path), progress=progress,
-                               model=model, model_summary=summary, plant=plant))
+                               model=model, model_summary=summary, plant=plant, exchange=exchange))
     return results

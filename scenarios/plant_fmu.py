@@ -10,9 +10,10 @@ after it.  The same scenario gives the same rows bit for bit with either plant: 
 FMU runs the same code at the same plant step, and the master's data flow (sense,
 regulate, apply, advance: Gauss-Seidel) does not change.
 
-The scenario's plant (model and perturbation) becomes the FMU's parameters through
-:func:`plant.fmu_core.values_from_perturbation`; a model given as an MJCF path cannot
-go into the FMU (its models travel inside it) and is refused.
+The scenario's plant (its ``model`` key and perturbation) becomes the FMU's parameters
+(``cassie_model``, ``torso_mass_kg``, ...) through
+:func:`plant.fmu_core.values_from_perturbation`; a model given as an MJCF path cannot go
+into the FMU (its models travel inside it) and is refused.
 """
 from __future__ import annotations
 

@@ -1,139 +1,70 @@
-"""Run the CassieAVR system (``dist/CassieAVR.ssp``) in libcosim and in fmpy, and script it.
+"""Run a CassieAVR system (``dist/CassieAVR.ssp``, or a scenario's SSP from
+``python -m scenarios export-ssp``) in libcosim, fmpy and Ecos, each with its own plain call.
 
-Both FMUs take the command's speeds (``vx_des``, ``vy_des``); the plant alone takes its
-yaw rate (``yaw_rate_des``: the regulator has no such input) and the push
-(``push_fx/fy/fz``); nothing in the system drives them (:data:`SCRIPTED`).  The SSP's
-parameter sets give the nominal start values (0.5 m/s, no turn, no push).  Over time:
+The command and the pushes come from the system's ``command`` component (the
+CommandSource FMU, its ``resources/schedule.csv``) through connections, so no master
+needs anything but the SSP file; the parameter sets bind only parameters.
 
-* **libcosim**: an OSP scenario file (JSON: override events per variable and time),
-  :func:`osp_scenario` writes one from a scenario TOML; ``execution.load_scenario``.
-* **fmpy**: ``fmpy.ssp.simulation.simulate_ssp`` feeds ``input`` functions to the
-  *system's* input connectors only, and libcosim's SSP reader refuses connections from
-  system connectors, so the SSP file has none; :func:`with_system_inputs` writes a copy
-  of it whose system has the :data:`SCRIPTED` inputs fanned out to both FMUs, and
-  :func:`read_input_csv` turns an input CSV (``time`` + those columns; zero-order hold)
-  into the ``input`` functions.  fmpy applies system inputs one step late (it copies
-  connections after each step).
+* libcosim: ``CosimExecution.from_ssp_file(ssp)`` applies every component's first
+  parameter binding;
+* Ecos: ``EcosSimulation(ssp_path=ssp, step_size=...).init(parameter_set="nominal")``
+  applies every component's set of that name (hence one name for all,
+  :data:`scenarios.system.PARAMETER_SET`); :func:`run_ecos` hands it the SSP unpacked
+  (Ecos leaves its own unpacked copy of a ``.ssp`` behind);
+* fmpy 0.3: ``simulate_ssp(ssp, ..., parameter_set=...)`` reads no parameter binding
+  itself, so :func:`ssp_parameter_set` hands it the SSP's own bindings under their
+  hierarchical names (``plant.torso_mass_kg``), String values left out (fmpy cannot
+  set them).
 
-Exchange: both masters step the two FMUs with the inputs of the previous communication
-point (Jacobi); our own master (``python -m scenarios run NAME --plant fmu``) senses the
-plant, steps the regulator and hands its outputs to the plant in the same step
-(Gauss-Seidel), so the regulator's offsets reach the plant 5 ms earlier there.
+Exchange: all three step every FMU with the inputs of the previous communication point
+(Jacobi) and read the outputs after the step.  Our own master does the same with
+``exchange="jacobi"`` (:func:`scenarios.master.run_arm`), which gives the SSP masters'
+trajectory; its default (Gauss-Seidel) hands the regulator's offsets to the plant in the
+step they are computed, 5 ms earlier.  :func:`master_rows` turns a run's rows into our
+master's columns, so the suite's metrics and claim checks (:func:`claim_verdict`) apply
+to it.
 """
 from __future__ import annotations
 
-import json
 import zipfile
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Mapping
 
 import numpy as np
 
 from scenarios import system
 
-SCRIPTED = ("vx_des", "vy_des", "yaw_rate_des", "push_fx", "push_fy", "push_fz")
-#: The scripted inputs of both FMUs (the others are the plant's only).
-COMMAND = ("vx_des", "vy_des")
 #: What the runners record per communication point: (instance, variable).
-RECORDED = (("plant", "vx"), ("plant", "vy"), ("plant", "step_index"), ("plant", "pelvis_x"),
-            ("plant", "pelvis_y"), ("plant", "pitch"), ("plant", "fell"), ("avr", "delta_swing_hip_pitch"),
-            ("avr", "psi_x"))
-
-
-# ------------------------------------------------------------------------------ scripts
-def schedule(scenario) -> list[tuple[float, dict[str, float]]]:
-    """(time, values of :data:`SCRIPTED`) at t = 0 and wherever the scenario's command or push changes."""
-    out, last = [], None
-    for k in range(scenario.n_comm_steps):
-        now = dict(zip(SCRIPTED, (*scenario.command_at_step(k), *scenario.push_force_at_step(k))))
-        if now != last:
-            out.append((k * scenario.comm_step_s, now))
-            last = now
-    return out
-
-
-def osp_scenario(scenario) -> dict:
-    """libcosim's scenario (override events) for the scenario's commands and pushes."""
-    events, last = [], {}
-    for t, values in schedule(scenario):
-        for name, value in values.items():
-            if last.get(name) != value:
-                for model in ("plant", "avr") if name in COMMAND else ("plant",):
-                    events.append({"time": t, "model": model, "variable": name, "action": "override",
-                                   "value": value})
-        last = values
-    return {"description": f"{scenario.name}: commands and pushes", "events": events, "end": scenario.duration_s}
-
-
-def input_csv(scenario) -> str:
-    """fmpy's input CSV for the scenario's commands and pushes (zero-order hold between rows)."""
-    rows = ["time," + ",".join(SCRIPTED)]
-    rows += [f"{t!r}," + ",".join(repr(float(v[n])) for n in SCRIPTED) for t, v in schedule(scenario)]
-    return "\n".join(rows) + "\n"
-
-
-def read_input_csv(path: str | Path) -> dict[str, Callable[[float], float]]:
-    """``simulate_ssp``'s ``input``: per column, the value of the last row at or before t."""
-    from fmpy.util import read_csv
-
-    signals = read_csv(str(path))
-    times = np.asarray(signals["time"], dtype=float)
-
-    def hold(values):
-        return lambda t: float(values[max(int(np.searchsorted(times, t + 1e-12, side="right")) - 1, 0)])
-    return {n: hold(np.asarray(signals[n], dtype=float)) for n in signals.dtype.names if n != "time"}
-
-
-def with_system_inputs(ssp: str | Path, out: str | Path, names=SCRIPTED) -> Path:
-    """A copy of the SSP whose system has input connectors ``names`` wired to every FMU input
-    of that name (for fmpy's ``simulate_ssp(..., input=...)``; libcosim cannot read it)."""
-    import xml.etree.ElementTree as ET
-
-    q = system._q
-    with zipfile.ZipFile(ssp) as archive:
-        entries = {n: archive.read(n) for n in archive.namelist()}
-    for prefix, uri in system.NS.items():
-        ET.register_namespace(prefix, uri)
-    root = ET.fromstring(entries["SystemStructure.ssd"])
-    sysel = root.find(q("ssd:System"))
-    connectors = ET.Element(q("ssd:Connectors"))
-    sysel.insert(0, connectors)
-    conns = sysel.find(q("ssd:Connections"))
-    comps = [(c, _inputs_of(entries[c.get("source")])) for c in sysel.find(q("ssd:Elements"))]
-    for name in names:
-        ET.SubElement(ET.SubElement(connectors, q("ssd:Connector"), name=name, kind="input"), q("ssc:Real"))
-        for comp, inputs in comps:
-            if name in inputs:
-                connector = ET.SubElement(comp.find(q("ssd:Connectors")), q("ssd:Connector"), name=name, kind="input")
-                ET.SubElement(connector, q("ssc:Real"))
-                ET.SubElement(conns, q("ssd:Connection"), startConnector=name, endElement=comp.get("name"),
-                              endConnector=name)
-    ET.indent(root)
-    entries["SystemStructure.ssd"] = ET.tostring(root, encoding="UTF-8", xml_declaration=True)
-    with zipfile.ZipFile(out, "w", zipfile.ZIP_DEFLATED) as archive:
-        for name in sorted(entries):
-            archive.writestr(name, entries[name])
-    return Path(out)
-
-
-def _inputs_of(fmu_bytes: bytes) -> set[str]:
-    import io
-
-    from fmpy import read_model_description
-
-    md = read_model_description(io.BytesIO(fmu_bytes))
-    return {v.name for v in md.modelVariables if v.causality == "input"}
+RECORDED = (("command", "vx_des"), ("command", "vy_des"), ("command", "yaw_rate_des"), ("command", "push_fx"),
+            ("command", "push_fy"), ("command", "push_fz"),
+            ("plant", "vx"), ("plant", "vy"), ("plant", "pitch"), ("plant", "roll"), ("plant", "pitch_rate"),
+            ("plant", "roll_rate"), ("plant", "step_index"), ("plant", "pelvis_x"), ("plant", "pelvis_y"),
+            ("plant", "pelvis_vx"), ("plant", "pelvis_vy"), ("plant", "yaw"), ("plant", "yaw_rate"),
+            ("plant", "fell"),
+            ("avr", "delta_swing_hip_pitch"), ("avr", "delta_swing_knee"), ("avr", "delta_swing_hip_roll"),
+            ("avr", "delta_stance_hip_roll"), ("avr", "delta_stance_hip_pitch"), ("avr", "delta_stance_knee"),
+            ("avr", "psi_x"), ("avr", "psi_y"), ("avr", "psi_pitch"), ("avr", "psi_roll"))
+#: Our master's columns from the recorded ones (scenarios.master's row layout; telemetry as
+#: scenarios.plant_fmu.FmuPlant names the plant FMU's outputs).
+MASTER_COLUMNS = {
+    "cmd_vx_des": "command_vx_des", "cmd_vy_des": "command_vy_des", "cmd_yaw_rate_des": "command_yaw_rate_des",
+    "push_fx": "command_push_fx", "push_fy": "command_push_fy", "push_fz": "command_push_fz",
+    **{f"in_{n}": f"plant_{n}" for n in ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")},
+    **{f"out_{n}": f"avr_{n}" for i, n in RECORDED if i == "avr"},
+    "tel_pelvis_x": "plant_pelvis_x", "tel_pelvis_y": "plant_pelvis_y", "tel_vx": "plant_pelvis_vx",
+    "tel_vy": "plant_pelvis_vy", "tel_vx_step_avg": "plant_vx", "tel_vy_signal": "plant_vy",
+    "tel_yaw": "plant_yaw", "tel_yaw_rate": "plant_yaw_rate",
+}
 
 
 # ------------------------------------------------------------------------------ masters
-def run_libcosim(ssp: str | Path, duration_s: float, start_values: Mapping[str, Mapping[str, Any]] | None = None,
-                 scenario_file: str | Path | None = None) -> np.ndarray:
+def run_libcosim(ssp: str | Path, duration_s: float, start_values: Mapping[str, Mapping[str, Any]] | None = None
+                 ) -> np.ndarray:
     """Run the SSP in libcosim for ``duration_s``; rows of :data:`RECORDED` after every step.
 
     ``start_values``: {instance: {variable: value}} on top of the SSP's parameter sets.
     """
     from libcosimpy.CosimExecution import CosimExecution
-    from libcosimpy.CosimManipulator import CosimManipulator
     from libcosimpy.CosimObserver import CosimObserver
 
     execution = CosimExecution.from_ssp_file(str(ssp))
@@ -141,19 +72,31 @@ def run_libcosim(ssp: str | Path, duration_s: float, start_values: Mapping[str, 
     for inst, values in (start_values or {}).items():
         for name, value in values.items():
             _libcosim_initial(execution, index[inst], refs[inst][name], value)
-    if scenario_file is not None:
-        manager = CosimManipulator.create_scenario_manager()
-        execution.add_manipulator(manager)
-        execution.load_scenario(manager, str(scenario_file))
     observer = CosimObserver.create_last_value()
     execution.add_observer(observer)
     n = int(round(duration_s / system.STEP_S))
     rows = np.zeros(n, dtype=_dtype())
+    reads = _libcosim_reads(observer, index, refs)
     for k in range(n):
         if not execution.step():
             raise RuntimeError(f"libcosim step {k} failed")
-        rows[k] = ((k + 1) * system.STEP_S, *(_libcosim_value(observer, index[i], refs[i][v]) for i, v in RECORDED))
+        rows["t"][k] = (k + 1) * system.STEP_S
+        for getter, slave, vrs, columns in reads:
+            for column, value in zip(columns, getter(slave, vrs)):
+                rows[column][k] = value
     return rows
+
+
+def _libcosim_reads(observer, index, refs):
+    """(getter, slave, value references, columns) per slave and type of :data:`RECORDED`."""
+    getters = {0: observer.last_real_values, 1: observer.last_integer_values, 3: observer.last_boolean_values}
+    groups: dict[tuple[str, int], tuple[list, list]] = {}
+    for inst, var in RECORDED:
+        ref = refs[inst][var]
+        vrs, columns = groups.setdefault((inst, ref.type), ([], []))
+        vrs.append(ref.reference)
+        columns.append(f"{inst}_{var}")
+    return [(getters[kind], index[inst], vrs, columns) for (inst, kind), (vrs, columns) in groups.items()]
 
 
 def _libcosim_variables(execution):
@@ -175,19 +118,19 @@ def _libcosim_value(observer, slave: int, var):
     return getter[var.type](slave, [var.reference])[0]
 
 
-def run_fmpy(ssp: str | Path, duration_s: float, start_values: Mapping[str, Mapping[str, Any]] | None = None,
-             inputs: Mapping[str, Callable[[float], float]] | None = None) -> np.ndarray:
+def run_fmpy(ssp: str | Path, duration_s: float, start_values: Mapping[str, Mapping[str, Any]] | None = None
+             ) -> np.ndarray:
     """Run the SSP with fmpy's ``simulate_ssp``; rows of :data:`RECORDED` after every step.
 
-    The SSP's parameter sets are passed as ``parameter_set`` (simulate_ssp does not read
-    them itself) with ``start_values`` on top; fmpy 0.3 cannot set String variables, so
-    String parameters must stay at their defaults.
+    The SSP's parameter bindings are passed as ``parameter_set`` (fmpy 0.3's simulate_ssp
+    reads none itself; it applies this set to each FMU before its initialization mode)
+    with ``start_values`` on top; fmpy 0.3 cannot set String variables, so String
+    parameters must stay at their defaults.
     """
     from fmpy.ssp.simulation import simulate_ssp
 
     result = simulate_ssp(str(ssp), start_time=0.0, stop_time=duration_s - 0.5 * system.STEP_S,
-                          step_size=system.STEP_S, parameter_set=ssp_parameter_set(ssp, start_values),
-                          input=dict(inputs or {}))
+                          step_size=system.STEP_S, parameter_set=ssp_parameter_set(ssp, start_values))
     rows = np.zeros(len(result), dtype=_dtype())
     rows["t"] = result["time"] + system.STEP_S  # fmpy labels a row with the step's start
     for inst, var in RECORDED:
@@ -195,9 +138,64 @@ def run_fmpy(ssp: str | Path, duration_s: float, start_values: Mapping[str, Mapp
     return rows
 
 
+def run_ecos(ssp: str | Path, duration_s: float, parameter_set: str = system.PARAMETER_SET) -> np.ndarray:
+    """Run the SSP in Ecos (``ecospy``) for ``duration_s``; rows of :data:`RECORDED` after every step.
+
+    ``EcosSimulation(ssp_path=..., step_size=0.005).init(parameter_set=...)``: Ecos applies
+    each component's binding named ``parameter_set`` in initialization mode.  Ecos takes
+    the SSP file or its unpacked folder; it is given the folder, unpacked here into a
+    temporary folder that is removed afterwards, because Ecos 0.7.2 leaves its own
+    unpacked copy of a ``.ssp`` (``ecos_ssp_<uuid>``, 2 MB) in the system temp folder.
+    Ecos has no start values on top of a parameter set (values set before ``init`` are
+    not applied; a fixed parameter cannot change after it): other values need their
+    own parameter set.
+    """
+    import tempfile
+
+    ecos_simulation, ecos_lib = _ecospy()
+    n = int(round(duration_s / system.STEP_S))
+    rows = np.zeros(n, dtype=_dtype())
+    kinds = _dtype()
+    with tempfile.TemporaryDirectory(prefix="cassie_avr_ecos_") as unpacked:
+        with zipfile.ZipFile(ssp) as archive:
+            archive.extractall(unpacked)
+        with ecos_simulation(ssp_path=unpacked, step_size=system.STEP_S) as sim:
+            if not sim.init(parameter_set=parameter_set):
+                raise RuntimeError(f"Ecos could not initialise {ssp} with parameter set {parameter_set!r}: "
+                                   f"{ecos_lib.get_last_error()}")
+            getters = [({"i": sim.get_integer, "b": sim.get_bool}.get(kinds[f"{i}_{v}"].kind, sim.get_real),
+                        f"{i}::{v}") for i, v in RECORDED]
+            for k in range(n):
+                sim.step()
+                t = sim.get_time()
+                if abs(t - (k + 1) * system.STEP_S) > 0.5 * system.STEP_S:
+                    raise RuntimeError(f"Ecos step {k} reached t = {t!r} s: {ecos_lib.get_last_error()}")
+                rows[k] = ((k + 1) * system.STEP_S, *(get(name) for get, name in getters))
+            sim.terminate()
+    return rows
+
+
+def _ecospy():
+    """ecospy's EcosSimulation and EcosLib; its library needs TBB (Debian: libtbb12)."""
+    import os
+
+    path = os.environ.get("PATH")
+    try:
+        from ecospy import EcosLib, EcosSimulation
+    except OSError as exc:
+        raise RuntimeError(f"ecospy's library did not load ({exc}); on Debian it needs the package libtbb12") from exc
+    finally:  # importing ecospy puts its binaries/ first on PATH (for its proxyfmu, unused here)
+        if path is None:
+            os.environ.pop("PATH", None)
+        else:
+            os.environ["PATH"] = path
+    return EcosSimulation, EcosLib
+
+
 def ssp_parameter_set(ssp: str | Path, start_values=None):
-    """The SSP's parameter bindings (and ``start_values``) as one fmpy ParameterSet, names
-    prefixed with the instance, String parameters at their FMU default left out."""
+    """The SSP's parameter bindings (and ``start_values``) as one fmpy ParameterSet, each
+    name prefixed with its instance (SSP's hierarchical names, what fmpy matches),
+    String parameters at their FMU default left out."""
     from fmpy.ssp.ssd import Parameter, ParameterSet, read_ssd
 
     values: dict[str, tuple[str, str]] = {}
@@ -241,6 +239,34 @@ def step_averaged_speed_error(rows: np.ndarray, vx_des: float, window_s: float =
     return steady_state_error(table, "vx", window_s=window_s)
 
 
-def write_osp_scenario(scenario, path: str | Path) -> Path:
-    Path(path).write_text(json.dumps(osp_scenario(scenario), indent=1) + "\n")
-    return Path(path)
+def master_rows(rows: np.ndarray, *, stop_at_fall: bool = True) -> tuple[np.ndarray, bool, float | None]:
+    """``rows`` of a runner in our master's columns (:data:`MASTER_COLUMNS`) for the suite's
+    metrics, and (fell, t_fall_s) as our master reports them: the rows end with the first
+    communication point at which the plant's ``fell`` is set (our master stops there)."""
+    fell_at = np.flatnonzero(rows["plant_fell"])
+    fell = bool(len(fell_at))
+    t_fall = float(rows["t"][fell_at[0]]) if fell else None
+    if fell and stop_at_fall:
+        rows = rows[:fell_at[0] + 1]
+    kinds = {"in_step_index": "i8"}
+    out = np.zeros(len(rows), dtype=[("t", "f8")] + [(c, kinds.get(c, "f8")) for c in MASTER_COLUMNS])
+    out["t"] = rows["t"]
+    for column, recorded in MASTER_COLUMNS.items():
+        out[column] = rows[recorded]
+    return out, fell, t_fall
+
+
+def arm_metrics(rows: np.ndarray, scenario) -> dict:
+    """The per-arm metrics of ``summary.json`` for a runner's ``rows`` of ``scenario``'s arm."""
+    from scenarios.metrics import summarize_arm
+
+    table, fell, t_fall = master_rows(rows)
+    return summarize_arm(table, fell=fell, t_fall_s=t_fall, perturbation_t_s=scenario.perturbation_t_s)
+
+
+def claim_verdict(scenario, arm_rows: Mapping[str, np.ndarray]) -> dict:
+    """The scenario's claim verdict (``scenarios.output.verdict``) from each arm's runner rows."""
+    from scenarios.output import evaluate_claim, scenario_header
+
+    arms = {arm: arm_metrics(rows, scenario) for arm, rows in arm_rows.items()}
+    return evaluate_claim(scenario_header(scenario, "ssp").get("claim"), arms)

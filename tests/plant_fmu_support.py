@@ -19,12 +19,13 @@ def built_plant_fmu(tmp_path_factory, build_module) -> Path:
 
 
 def built_system(tmp_path_factory, build_module, regulator_fmu) -> Path:
-    """A folder holding both FMUs, CassieAVR.ssp and CassieAVR_osp/ (build.py's own functions)."""
+    """A folder holding the command source FMU, CassieAVR.ssp and CassieAVR_osp/ (build.py's own functions)."""
     if "system" not in _BUILT:
         out = tmp_path_factory.mktemp("system")
         plant = built_plant_fmu(tmp_path_factory, build_module)
-        build_module.build_ssp(out, plant, regulator_fmu)
-        build_module.build_osp(out, plant, regulator_fmu)
+        command = build_module.build_command_source(2, out)
+        build_module.build_ssp(out, plant, regulator_fmu, command)
+        build_module.build_osp(out, plant, regulator_fmu, command)
         _BUILT["system"] = out
     return _BUILT["system"]
 

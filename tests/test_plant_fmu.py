@@ -76,6 +76,10 @@ def test_variables_have_units_and_the_regulators_names(plant_fmu, built_fmu):
     assert plant["fell"] == ("output", "Boolean")
     assert {"pelvis_x", "pelvis_y", "pelvis_z", "pelvis_vx", "pelvis_vy", "yaw", "yaw_rate", "stance",
             "left_foot_force", "right_foot_force"} <= set(plant)
+    # The model choice is `cassie_model`: a bare `model` collides with masters' own vocabulary
+    # (OMSimulator resolves it as its root model and fails); no generic names in either FMU.
+    assert plant["cassie_model"] == ("parameter", "String")
+    assert not {"model", "system", "root", "time"} & (set(plant) | set(regulator))
 
 
 def test_model_files_and_licenses_travel_inside_not_in_the_repository(plant_fmu):
@@ -161,13 +165,13 @@ def test_bad_parameters_are_refused_naming_field_and_range_all_at_once(plant_dir
 
 def test_model_name_is_checked(plant_dir):
     p = Plant(plant_dir)
-    assert status_of(p.set, "model", "cassie3") == ERROR
+    assert status_of(p.set, "cassie_model", "cassie3") == ERROR
     p.fmu.setupExperiment(startTime=0.0)
     p.fmu.enterInitializationMode()
-    assert p.get("model") == b"menagerie"  # refused: unchanged
-    assert status_of(p.set, "model", "osu") == OK
+    assert p.get("cassie_model") == b"menagerie"  # refused: unchanged
+    assert status_of(p.set, "cassie_model", "osu") == OK
     p.fmu.exitInitializationMode()
-    assert p.get("model") == b"osu" and not p.step()[-1]  # the OSU model stands and steps
+    assert p.get("cassie_model") == b"osu" and not p.step()[-1]  # the OSU model stands and steps
     p.free()
 
 
@@ -252,15 +256,15 @@ def test_state_round_trip_is_bit_exact(plant_dir):
 
 
 def test_a_state_of_the_other_model_is_refused_and_changes_nothing(plant_dir):
-    """The guard compares numeric fixed parameters; the String ``model`` is the slave's to check."""
-    osu = Plant(plant_dir, name="osu").init(model="osu")
+    """The guard compares numeric fixed parameters; the String ``cassie_model`` is the slave's to check."""
+    osu = Plant(plant_dir, name="osu").init(cassie_model="osu")
     osu.step(vx_des=0.5)
     blob = bytes(osu.fmu.serializeFMUstate(osu.fmu.getFMUstate()))
     menagerie = Plant(plant_dir, name="menagerie").init()
     before = menagerie.step()
     state = menagerie.fmu.deSerializeFMUstate(blob)  # the numeric fixed parameters match: accepted so far
     assert status_of(menagerie.fmu.setFMUstate, state) == ERROR
-    assert menagerie.get("model") == b"menagerie" and menagerie.outputs() == before
+    assert menagerie.get("cassie_model") == b"menagerie" and menagerie.outputs() == before
     for p in (osu, menagerie):
         p.free()
 
@@ -308,7 +312,7 @@ reg = FMU2Slave(guid=md.guid, unzipDirectory=regulator_dir, modelIdentifier=md.c
                 instanceName="avr")
 reg.instantiate(); reg.setupExperiment(startTime=0.0); reg.enterInitializationMode(); reg.exitInitializationMode()
 fmu = Plant(plant_dir).init(vx_des=0.5, yaw_rate_des=0.3)
-walker = start(dict(model="menagerie", torso_mass_kg=10.33, torso_com_offset_x_m=0.0, torso_com_offset_y_m=0.0,
+walker = start(dict(cassie_model="menagerie", torso_mass_kg=10.33, torso_com_offset_x_m=0.0, torso_com_offset_y_m=0.0,
                     torso_com_offset_z_m=0.0, joint_damping_scale=1.0, terrain_max_height_m=0.0,
                     terrain_max_slope_deg=10.0, terrain_seed=0, terrain_size_m=20.0))
 core = Regulator(RegulatorParams())

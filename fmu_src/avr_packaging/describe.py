@@ -15,6 +15,18 @@ UNITS = {  # name -> SI base-unit exponents
     "s": {"s": "1"},
 }
 DEFAULT_EXPERIMENT = {"startTime": "0", "stopTime": "10", "stepSize": "0.005"}
+#: The CassiePlant outputs its initialization computes (the robot placed on the terrain in the
+#: home pose), with the knowns each depends on; every other plant output keeps its start value
+#: until the first doStep.  tests/test_fmu_model_structure.py measures both on the built FMU.
+PLANT_INITIAL_UNKNOWNS = {
+    "pelvis_z": (),  # the home pose's height, whichever model and terrain
+    # The contact forces carrying the robot: its model and mass distribution, whether the floor is
+    # a plane or the height field (terrain_max_height_m > 0) and the field's sample grid (its
+    # spacing follows terrain_size_m).  The robot stands on the field's flat start patch
+    # (plant/terrain.py), so the terrain's seed and slope never reach it.
+    **{name: ("cassie_model", "torso_mass_kg", "torso_com_offset_x_m", "torso_com_offset_y_m", "torso_com_offset_z_m",
+              "terrain_max_height_m", "terrain_size_m") for name in ("left_foot_force", "right_foot_force")},
+}
 
 
 def xml_value(value) -> str:
@@ -67,10 +79,43 @@ def _annotate_variables(root: ET.Element, specs, units: dict, ranges: bool = Tru
                 typed.set("max", xml_value(spec.max))
 
 
-def model_description(xml_bytes: bytes, specs, extra_units: dict | None = None) -> ET.ElementTree:
+def _model_structure(root: ET.Element, initial_unknowns: dict) -> None:
+    """The exact ``ModelStructure`` (FMI 2.0 section 2.2.8): every output declares
+    ``dependencies=""`` (the slaves compute outputs only in doStep: setting an input changes no
+    output before the next step); an output named in ``initial_unknowns`` (name -> the knowns
+    it is computed from during initialization) becomes ``initial="calculated"`` without a start
+    value and is listed in ``InitialUnknowns`` with those dependencies, in index order."""
+    variables = list(root.find("ModelVariables"))
+    index = {var.get("name"): str(i) for i, var in enumerate(variables, start=1)}
+    unknown = set(initial_unknowns) - {v.get("name") for v in variables if v.get("causality") == "output"}
+    if unknown:
+        raise ValueError(f"initial_unknowns names no output: {sorted(unknown)}")
+    for name in initial_unknowns:
+        var = variables[int(index[name]) - 1]
+        var.set("initial", "calculated")
+        var[0].attrib.pop("start", None)
+    old = root.find("ModelStructure")
+    if old is not None:
+        root.remove(old)
+    structure = ET.SubElement(root, "ModelStructure")
+    outputs = ET.SubElement(structure, "Outputs")
+    for var in variables:
+        if var.get("causality") == "output":
+            ET.SubElement(outputs, "Unknown", index=index[var.get("name")], dependencies="")
+    if initial_unknowns:
+        initial = ET.SubElement(structure, "InitialUnknowns")
+        for name in sorted(initial_unknowns, key=lambda n: int(index[n])):
+            deps = sorted(int(index[known]) for known in initial_unknowns[name])
+            ET.SubElement(initial, "Unknown", index=index[name], dependencies=" ".join(map(str, deps)))
+
+
+def model_description(xml_bytes: bytes, specs, extra_units: dict | None = None,
+                      initial_unknowns: dict | None = None) -> ET.ElementTree:
     """pythonfmu's ``modelDescription.xml`` made complete and reproducible: ``UNITS`` (plus
-    ``extra_units``), units and ranges from ``specs``, ``DEFAULT_EXPERIMENT``, no generation
-    time and a placeholder GUID (the content GUID is set once everything else is known)."""
+    ``extra_units``), units and ranges from ``specs``, ``DEFAULT_EXPERIMENT``, the exact model
+    structure (``_model_structure``; ``initial_unknowns``: the outputs computed during
+    initialization, name -> the knowns they depend on), no generation time and a placeholder
+    GUID (the content GUID is set once everything else is known)."""
     root = ET.fromstring(xml_bytes)
     root.attrib.pop("generationDateAndTime", None)
     root.set("guid", PLACEHOLDER_GUID)
@@ -80,6 +125,7 @@ def model_description(xml_bytes: bytes, specs, extra_units: dict | None = None) 
     if extra_units:
         add_units(units, extra_units)
         _annotate_variables(root, specs, extra_units, ranges=False)
+    _model_structure(root, initial_unknowns or {})
     ET.indent(root)
     return ET.ElementTree(root)
 

@@ -81,7 +81,7 @@ def copy_models(models: Path) -> None:
     shutil.copyfile(MODEL_LICENSES / "menagerie.txt", models / "menagerie" / "LICENSE")
     osu = model.osu_model_path()
     if not osu.is_file():
-        log.warning("OSU model not found at %s (set CASSIE_OSU_XML): the FMU's model='osu' will be refused", osu)
+        log.warning("OSU model not found at %s (set CASSIE_OSU_XML): the FMU's cassie_model='osu' will be refused", osu)
         return
     (models / "osu").mkdir(parents=True)
     shutil.copyfile(osu, models / "osu" / "cassie.xml")

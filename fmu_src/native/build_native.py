@@ -92,13 +92,14 @@ def source_entries(fmi_version: int, guid: str) -> dict[str, bytes]:
     return {f"sources/{name}": data for name, data in files.items()}
 
 
-def buildable_platforms(fmi_version: int) -> dict[str, str]:
+def buildable_platforms(fmi_version: int, what: str | None = None) -> dict[str, str]:
     """The platforms of ``PLATFORMS[fmi_version]`` (folder -> target) whose compiler is installed;
-    a warning names each one skipped and the Debian package that adds its cross compiler."""
+    a warning names each one skipped, ``what`` (the FMU's file name; default: this regulator
+    FMU's) and the Debian package that adds its cross compiler."""
     platforms = {}
     for platform, target in PLATFORMS[fmi_version].items():
         if target != "linux" and compiler.cross_compiler(target) is None:
-            log.warning(compiler.skip_message(target, fmu_name(fmi_version)))
+            log.warning(compiler.skip_message(target, what or fmu_name(fmi_version)))
         else:
             platforms[platform] = target
     return platforms
