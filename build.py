@@ -2,11 +2,12 @@
 
 ``AdaptiveVelocityRegulator.fmu`` (FMI 2.0 co-simulation, pythonfmu, the reference) and
 ``AdaptiveVelocityRegulatorNative_fmi2.fmu`` / ``_fmi3.fmu`` (the same regulator in C,
-FMI 2.0 and FMI 3.0 from one source, linux and windows x86-64 binaries plus sources;
-the win64 binaries need the MinGW-w64 cross compiler), the ``CassiePlant.fmu``, the
-``CommandSource_fmi2.fmu`` (native C: the command and pushes over time, from its
-``resources/schedule.csv``) and the CassieAVR system wiring the three (SSP archive and OSP
-folder).
+FMI 2.0 and FMI 3.0 from one source, Linux and Windows x86-64 binaries, FMI 3.0 also Linux
+aarch64, plus sources), the ``CassiePlant.fmu``, the ``CommandSource_fmi2.fmu`` (native C:
+the command and pushes over time, from its ``resources/schedule.csv``) and the CassieAVR
+system wiring the three (SSP archive and OSP folder).  The native FMUs' Windows and aarch64
+binaries need cross compilers (Debian ``gcc-mingw-w64-x86-64``, ``gcc-aarch64-linux-gnu``);
+without one, its platform is skipped with a warning naming the package, and the build goes on.
 
     python build.py [--out DIR] [--sanitize]
 
@@ -156,7 +157,8 @@ def build_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path:
 
 
 def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
-    """Build ``<out_dir>/AdaptiveVelocityRegulatorNative_fmi<2|3>.fmu`` (linux and windows x86-64) reproducibly."""
+    """Build ``<out_dir>/AdaptiveVelocityRegulatorNative_fmi<2|3>.fmu`` reproducibly, with the binaries of
+    every platform whose compiler is installed (``build_native.PLATFORMS``)."""
     fmu_path = Path(out_dir) / build_native.fmu_name(fmi_version)
     write_zip(build_native.fmu_entries(fmi_version, UNITS, DEFAULT_EXPERIMENT), fmu_path)
     log.info("built %s", fmu_path)
@@ -202,7 +204,7 @@ def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path
 
 
 def build_command_source(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
-    """Build ``<out_dir>/CommandSource_fmi<2|3>.fmu`` (linux and windows x86-64, the nominal
+    """Build ``<out_dir>/CommandSource_fmi<2|3>.fmu`` (the native regulator's platforms, the nominal
     schedule: 0.5 m/s, no turn, no push) reproducibly."""
     path = command_source.build(fmi_version, Path(out_dir))
     log.info("built %s", path)

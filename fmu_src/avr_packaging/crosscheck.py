@@ -316,8 +316,8 @@ License: MIT (`LICENSE.txt`); the FMI headers in `sources/` are BSD-2-Clause (Mo
 
 def write_vendor_tree(out_dir: Path, fmus, version: str) -> Path:
     """``<out_dir>/cross-check/fmus/2.0/cs/<platform>/cassie-avr/<version>/<Model>/`` for every
-    FMI 2.0 FMU of ``fmus`` with platforms in ``CROSS_CHECK_PLATFORMS``, with the reference files
-    inside the FMU; returns the tree's root."""
+    FMI 2.0 FMU of ``fmus`` with platforms in ``CROSS_CHECK_PLATFORMS`` (those it carries binaries
+    for), with the reference files inside the FMU; returns the tree's root."""
     import shutil
 
     root = Path(out_dir) / CROSS_CHECK_DIR
@@ -326,11 +326,12 @@ def write_vendor_tree(out_dir: Path, fmus, version: str) -> Path:
     for fmu in map(Path, fmus):
         with zipfile.ZipFile(fmu) as archive:
             md = ET.fromstring(archive.read("modelDescription.xml"))
+            carried = {name.split("/")[1] for name in archive.namelist() if name.startswith("binaries/")}
         model = md.find("CoSimulation").get("modelIdentifier") if md.find("CoSimulation") is not None else None
         if md.get("fmiVersion") != "2.0" or model not in CROSS_CHECK_PLATFORMS:
             continue
         files = reference_files(fmu)
-        for platform in CROSS_CHECK_PLATFORMS[model]:
+        for platform in [p for p in CROSS_CHECK_PLATFORMS[model] if p in carried]:  # without a cross compiler: not all
             folder = root / "fmus" / "2.0" / "cs" / platform / TOOL_NAME / version / model
             folder.mkdir(parents=True)
             shutil.copyfile(fmu, folder / f"{model}.fmu")
