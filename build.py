@@ -208,7 +208,7 @@ def build_command_source(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
     schedule: 0.5 m/s, no turn, no push) reproducibly."""
     path = command_source.build(fmi_version, Path(out_dir))
     log.info("built %s", path)
-    return path
+    return crosscheck.add_reference(path)
 
 
 def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: Path | None = None) -> Path:
@@ -253,20 +253,21 @@ def fmu_entry(path: Path, implementation: str) -> dict:
 
 def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Path]:
     """Build every FMU (the pythonfmu regulator, both native regulators, the CassiePlant
-    FMU), each with its reference results inside, the FMI cross-check vendor tree
+    FMU, the CommandSource FMU), each with its reference results inside, the FMI cross-check vendor tree
     ``<out_dir>/cross-check/`` (``fmu_src/avr_packaging/crosscheck.py``), ``<out_dir>/fmus.json``
     listing the FMUs, and the CassieAVR system (SSP and OSP)."""
     regulator = build_fmu(out_dir, sanitize=sanitize)
     built = [(regulator, "python")] + [(build_native_fmu(v, out_dir), "native") for v in (2, 3)]
     plant = build_plant_fmu(out_dir)
     built.append((plant, "python"))
+    command = build_command_source(2, out_dir)
+    built.append((command, "native"))
     crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], build_native.describe.VERSION)
     listing = {"fmus": [fmu_entry(path, kind) for path, kind in built]}
     tmp = Path(out_dir) / (FMUS_JSON + ".tmp")
     tmp.write_text(json.dumps(listing, indent=2) + "\n")
     tmp.replace(Path(out_dir) / FMUS_JSON)
-    command = build_command_source(2, out_dir)
-    return [path for path, _ in built] + [command, build_ssp(out_dir, plant, regulator, command),
+    return [path for path, _ in built] + [build_ssp(out_dir, plant, regulator, command),
                                           build_osp(out_dir, plant, regulator, command)]
 
 

@@ -21,6 +21,8 @@ import numpy as np
 import pytest
 from fmpy import read_csv, read_model_description, simulate_fmu
 
+from fmu_src.command_source import build_command_source as command_source
+
 from plant_fmu_support import built_plant_fmu
 
 LS_REF = "extra/org.fmi-standard.fmi-ls-ref/"
@@ -98,6 +100,11 @@ def test_every_fmu_reproduces_its_reference_results_exactly(dist, unzip, tmp_pat
         assert np.array_equal(result["time"][rows], ref["time"]), fmu.name
         for name in outputs:  # exact: the same doubles, not merely close ones
             assert np.array_equal(result[name][rows].astype(float), ref[name].astype(float)), (fmu.name, name)
+        if not any(v.causality == "input" for v in md.modelVariables):
+            # the CommandSource plays its packed schedule; the nominal one holds a single row
+            (_, nominal), = command_source.NOMINAL_ROWS
+            assert {n: set(ref[n].astype(float)) for n in outputs} == {n: {nominal[n]} for n in outputs}
+            continue
         moving = [n for n in outputs if np.ptp(ref[n].astype(float)) > 0]
         assert len(moving) >= len(outputs) // 2, f"{fmu.name}: a reference where little moves: {moving}"
 
@@ -114,7 +121,8 @@ def test_an_fmu_built_alone_is_build_alls(dist, built_fmu, native_fmus, tmp_path
         pytest.skip("AVR_TEST_FMU: the session's regulator FMU is a given file, not one built here")
     alone = {"AdaptiveVelocityRegulator.fmu": built_fmu, "AdaptiveVelocityRegulatorNative_fmi2.fmu": native_fmus[2],
              "AdaptiveVelocityRegulatorNative_fmi3.fmu": native_fmus[3],
-             "CassiePlant.fmu": built_plant_fmu(tmp_path_factory, build_module)}
+             "CassiePlant.fmu": built_plant_fmu(tmp_path_factory, build_module),
+             "CommandSource_fmi2.fmu": build_module.build_command_source(2, tmp_path_factory.mktemp("command"))}
     assert sorted(alone) == sorted(fmu.name for fmu in fmus_of(dist))
     for name, fmu in alone.items():
         assert experiment_of(Path(fmu))[2] == experiment_of(dist / name)[2], name

@@ -25,11 +25,12 @@ LS_REF_MANIFEST = "extra/org.fmi-standard.fmi-ls-ref/fmi-ls-manifest.xml"
 CROSS_CHECK_FMUS = tuple(f"cross-check/fmus/2.0/cs/{platform}/cassie-avr/0.1.0/AdaptiveVelocityRegulatorNative/"
                          "AdaptiveVelocityRegulatorNative.fmu" for platform in ("linux64", "win64"))
 #: Every FMU with a reference experiment (crosscheck.EXPERIMENTS), wherever the build puts it: each carries its
-#: reference results (fmi-ls-ref).  CommandSource_fmi2.fmu has no reference experiment.
+#: reference results (fmi-ls-ref).
 EVERY_FMU = ("AdaptiveVelocityRegulator.fmu", "AdaptiveVelocityRegulatorNative_fmi2.fmu",
-             "AdaptiveVelocityRegulatorNative_fmi3.fmu", "CassiePlant.fmu",
-             "CassieAVR.ssp/resources/AdaptiveVelocityRegulator.fmu", "CassieAVR.ssp/resources/CassiePlant.fmu",
-             "CassieAVR_osp/AdaptiveVelocityRegulator.fmu", "CassieAVR_osp/CassiePlant.fmu", *CROSS_CHECK_FMUS)
+             "AdaptiveVelocityRegulatorNative_fmi3.fmu", "CassiePlant.fmu", "CommandSource_fmi2.fmu",
+             *(f"{system}/{fmu}" for system in ("CassieAVR.ssp/resources", "CassieAVR_osp")
+               for fmu in ("AdaptiveVelocityRegulator.fmu", "CassiePlant.fmu", "CommandSource_fmi2.fmu")),
+             *CROSS_CHECK_FMUS)
 #: Every XML document build.py writes that an official schema describes, with its schema kind.
 DOCUMENTS = {
     "AdaptiveVelocityRegulator.fmu/modelDescription.xml": "fmi2-model",

@@ -133,6 +133,8 @@ _REGULATOR = Experiment("3 s of walking-like measurements, a walking step every 
 EXPERIMENTS = {
     "AdaptiveVelocityRegulator": _REGULATOR,
     "AdaptiveVelocityRegulatorNative": _REGULATOR,
+    "CommandSource": Experiment("2 s of the nominal schedule (0.5 m/s, no turn, no push); no inputs", 400, 0.005,
+                                10, lambda k: {}),
     "CassiePlant": Experiment("2 s from the home pose: stepping in place, then 0.3 m/s forward", 400, 0.005, 10,
                               _plant_inputs),
 }

@@ -30,6 +30,8 @@ from ..native import build_native
 
 SRC = Path(__file__).resolve().parent
 MODEL_IDENTIFIER = "CommandSource"
+#: where the nominal build's reference results live in the FMU (fmi-ls-ref; added by build.py)
+REFERENCE_PREFIX = "extra/org.fmi-standard.fmi-ls-ref/"
 INSTANCE_NAME = "command"
 #: (name, unit, description) in value-reference order: the columns after ``time``.
 OUTPUTS = (
@@ -234,5 +236,7 @@ def with_schedule(fmu: str | Path, schedule: str, out: str | Path) -> Path:
     if root.get("modelName") != MODEL_IDENTIFIER:
         raise ValueError(f"{fmu} is {root.get('modelName')!r}, not a {MODEL_IDENTIFIER} FMU")
     entries[SCHEDULE] = schedule.encode()
+    # the nominal build's reference results (fmi-ls-ref) describe the nominal schedule, not this one
+    entries = {name: data for name, data in entries.items() if not name.startswith(REFERENCE_PREFIX)}
     write_zip(entries, Path(out))
     return Path(out)
