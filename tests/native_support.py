@@ -63,10 +63,40 @@ def unzipped(fmu_path) -> str:
     return extract(str(fmu_path), unzipdir=tempfile.mkdtemp(prefix="unzip_", dir=Path(fmu_path).parent))
 
 
+def logged_slave(fmu_path, messages: list, name="avr") -> "AnySlave":
+    """An AnySlave whose log messages (text) are appended to ``messages`` (FMI 2.0 or 3.0)."""
+    return AnySlave(fmu_path, name=name, messages=messages)
+
+
+def _instantiate_logging(fmu, fmi3: bool, messages: list):
+    """Instantiate ``fmu`` with a logger appending each message's text to ``messages``; returns what
+    must be kept alive as long as the instance."""
+    if fmi3:
+        fmu.instantiate(loggingOn=False,
+                        logMessage=lambda env, status, category, message: messages.append(message.decode()))
+        return None
+    from ctypes import byref
+
+    from fmpy import calloc, free
+    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
+                           fmi2CallbackLoggerTYPE)
+    from fmpy.logging import addLoggerProxy
+
+    callbacks = fmi2CallbackFunctions()
+    callbacks.logger = fmi2CallbackLoggerTYPE(lambda env, inst, status, category, message: messages.append(
+        message.decode("utf-8", "replace")))
+    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+    addLoggerProxy(byref(callbacks))  # formats the variadic arguments before Python sees them
+    fmu.instantiate(loggingOn=False, callbacks=callbacks)
+    return callbacks
+
+
 class AnySlave:
     """fmpy's FMU2Slave or FMU3Slave (by the FMU's fmiVersion) addressed by variable name."""
 
-    def __init__(self, fmu_path, name="avr", unzip=None):
+    def __init__(self, fmu_path, name="avr", unzip=None, messages=None):
+        """``messages``: a list that gets every log message's text (fmpy prints them otherwise)."""
         self.md = read_model_description(str(fmu_path))
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.unzip = unzip or unzipped(fmu_path)
@@ -74,7 +104,10 @@ class AnySlave:
         cls = FMU3Slave if self.fmi3 else FMU2Slave
         self.fmu = cls(guid=self.md.guid, unzipDirectory=self.unzip,
                        modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
-        self.fmu.instantiate(loggingOn=False)
+        if messages is None:
+            self.fmu.instantiate(loggingOn=False)
+        else:
+            self._keep = _instantiate_logging(self.fmu, self.fmi3, messages)
         self.out_vrs = [self.vars[n].valueReference for n in OUTPUT_NAMES]
 
     def init(self, **params):
