@@ -46,10 +46,12 @@ MODEL_FILES = {"menagerie": "menagerie/agility_cassie/scene.xml", "osu": "osu/ca
 #: of a plant step; any float h = k * 0.5 ms computed by a master is within 1e-12 of it).
 STEPS_TOL = 1e-6
 #: The longest communication step (s): 20,000 plant steps, 1.3 to 2 s of wall time on this
-#: project's 2-core machine (0.13 to 0.2 s per simulated second, shared or not).  One doStep runs to its end and FMI 2.0 gives
-#: no way to interrupt it (calls on one instance are never concurrent; canRunAsynchronuously is
-#: false), so a longer step is refused (fmi2Error naming this maximum) rather than left to run for
-#: hours; a master takes several steps instead.
+#: project's 2-core machine (0.13 to 0.2 s per simulated second, alone or shared).  Nothing can
+#: stop a doStep once it runs: fmi2CancelStep is for asynchronous steps (canRunAsynchronuously is
+#: false), and neither the guard nor pythonfmu makes two threads' calls on one instance safe
+#: (fmi2Terminate or fmi2FreeInstance during a doStep would race on the instance).  So a longer
+#: step, which could run for hours, is refused (fmi2Error naming this maximum); a master takes
+#: several steps instead.
 MAX_STEP_S = 10.0
 
 

@@ -17,8 +17,8 @@
  *        f64 weights (4 rows of n_neurons)
  *   end-4: u32 CRC-32 (zlib's) of every byte before it
  * A blob is refused unless its size, checksum, GUID and variable count match and every
- * value is finite, of its type and within its range, and the networks it names are the
- * ones its variables define.  In memory an FMUstate is this same blob, so get/set and
+ * value is finite, of its type and within its range, the networks it names are the
+ * ones its variables define, and its counters are ones a run can reach (check_counters).  In memory an FMUstate is this same blob, so get/set and
  * serialize/deserialize round trips are bit-exact by construction.
  */
 #include "avr_instance.h" /* first: see avr_types.h */
