@@ -5,6 +5,7 @@ from conftest.py (``built_fmu``, ``native_fmus``, ``regulator_fmu``).
 """
 from __future__ import annotations
 
+import itertools
 import subprocess
 import sys
 import tempfile
@@ -68,28 +69,19 @@ def logged_slave(fmu_path, messages: list, name="avr") -> "AnySlave":
     return AnySlave(fmu_path, name=name, messages=messages)
 
 
-def _instantiate_logging(fmu, fmi3: bool, messages: list):
-    """Instantiate ``fmu`` with a logger appending each message's text to ``messages``; returns what
-    must be kept alive as long as the instance."""
-    if fmi3:
-        fmu.instantiate(loggingOn=False,
-                        logMessage=lambda env, status, category, message: messages.append(message.decode()))
-        return None
-    from ctypes import byref
+#: Instance numbers of the logged slaves (their FMI 3.0 instanceEnvironment; above the scenarios' own).
+_LOGGED_NUMBERS = itertools.count(1_000_000)
 
-    from fmpy import calloc, free
-    from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                           fmi2CallbackLoggerTYPE)
-    from fmpy.logging import addLoggerProxy
 
-    callbacks = fmi2CallbackFunctions()
-    callbacks.logger = fmi2CallbackLoggerTYPE(lambda env, inst, status, category, message: messages.append(
-        message.decode("utf-8", "replace")))
-    callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
-    callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-    addLoggerProxy(byref(callbacks))  # formats the variadic arguments before Python sees them
-    fmu.instantiate(loggingOn=False, callbacks=callbacks)
-    return callbacks
+def _instantiate_logging(fmu, fmi3: bool, messages: list, number: int) -> None:
+    """Instantiate ``fmu`` with the scenarios' process-wide logger routing its messages to
+    ``messages``.  Never a logger of its own: fmpy's FMI 2.0 message formatter keeps one global
+    pointer to the last logger registered, which would dangle once that logger is collected
+    (scenarios/fmi_api.py explains)."""
+    from scenarios import fmi_api
+
+    fmi_api.route_messages(fmu.instanceName, number, messages)
+    fmi_api.FMI_APIS["3.0" if fmi3 else "2.0"].instantiate(fmu, number)
 
 
 class AnySlave:
@@ -97,6 +89,9 @@ class AnySlave:
 
     def __init__(self, fmu_path, name="avr", unzip=None, messages=None):
         """``messages``: a list that gets every log message's text (fmpy prints them otherwise)."""
+        number = None if messages is None else next(_LOGGED_NUMBERS)
+        if number is not None:
+            name = f"{name}-{number}"  # the logger routes by instance name
         self.md = read_model_description(str(fmu_path))
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.unzip = unzip or unzipped(fmu_path)
@@ -107,7 +102,7 @@ class AnySlave:
         if messages is None:
             self.fmu.instantiate(loggingOn=False)
         else:
-            self._keep = _instantiate_logging(self.fmu, self.fmi3, messages)
+            _instantiate_logging(self.fmu, self.fmi3, messages, number)
         self.out_vrs = [self.vars[n].valueReference for n in OUTPUT_NAMES]
 
     def init(self, **params):
