@@ -197,7 +197,8 @@ def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path
     entries["documentation/index.html"] = pages.plant_page(PLANT_IDENTIFIER, PLANT_LIB, fmu_core.SPECS).encode("utf-8")
     entries["resources/requirements.txt"] = PLANT_REQUIREMENTS.encode("utf-8")
     _move_pythonfmu_library(entries, PLANT_IDENTIFIER)
-    options = {"slave_module": packed.module, "step_quantum_s": fmu_core.PLANT_STEP_S}
+    options = {"slave_module": packed.module, "step_quantum_s": fmu_core.PLANT_STEP_S,
+               "max_step_s": fmu_core.MAX_STEP_S}
     fmu_path = _guarded_fmu(entries, tree, PLANT_IDENTIFIER, out_dir, guid_prefix=f"{PLANT_IDENTIFIER}:",
                             header_options=options, sanitize=sanitize)
     return crosscheck.add_reference(fmu_path, sanitize=sanitize)

@@ -34,7 +34,7 @@ from .avr_network import (INTERCEPT_RANGE, MAX_RATE_RANGE_HZ, NETWORK_NAMES, TAU
                           expm1_fixed)
 from .avr_params import (RegulatorInputs, RegulatorParams, network_key, params_from_overrides,
                          validate_inputs, validate_params)
-from .avr_regulator import WEIGHT_ROWS, RegulatorState, initial_state, step
+from .avr_regulator import MAX_CALLS, WEIGHT_ROWS, RegulatorState, initial_state, step
 from .avr_specs import (ANGLE_LIMIT_RAD, FIXED_PARAMS, INPUT_SPECS, OUTPUT_JOINTS, OUTPUT_SPECS,
                         PARAM_SPECS, PYTHON_TYPES, RATE_LIMIT_RADPS, VELOCITY_LIMIT_MPS, VarSpec,
                         check_param, format_range)
@@ -49,7 +49,7 @@ __all__ = [
     "RegulatorInputs", "validate_inputs",
     "NetworkSpec", "Networks", "SplitMix64", "sphere_encoders", "build_networks",
     "lif_gain_bias", "scaled_inputs", "LN2", "SQRT2", "log1p_fixed", "expm1_fixed",
-    "WEIGHT_ROWS", "RegulatorState", "initial_state", "step",
+    "WEIGHT_ROWS", "MAX_CALLS", "RegulatorState", "initial_state", "step",
     "state_to_bytes", "state_from_bytes", "Regulator",
 ]
 

@@ -10,8 +10,10 @@ them (pythonfmu issue #228).  The models are read from each instance's own resou
 Statuses: the FMU's linux64 library is the FMI guard (``fmu_src/guard/``, built with this
 FMU's variable table and ``AVR_STEP_QUANTUM`` = 0.5 ms): calls the state machine forbids,
 sets of outputs or of fixed parameters after initialization, NaN/inf or out-of-range
-values, communication steps that are not whole multiples of 0.5 ms and corrupt or
-foreign serialized states are ``fmi2Error`` without reaching Python.  pythonfmu reports a
+values, communication steps that are not whole multiples of 0.5 ms or longer than the
+maximum step (``AVR_MAX_STEP`` = ``plant.fmu_core.MAX_STEP_S``), corrupt or foreign
+serialized states and ones whose header and blob disagree on the phase or time are
+``fmi2Error`` without reaching Python.  pythonfmu reports a
 Python exception as ``fmi2Fatal`` only, so this slave never raises on bad input: it logs
 the problem with status Error and changes nothing, and the guard answers ``fmi2Error``
 for any call that logged an error.  That covers what only Python can check: the
@@ -105,6 +107,8 @@ class CassiePlant(SpecSlave):
 
     def _set_fmu_state(self, state):
         try:
+            if bytes(state[:len(self._core.avr_fmustate.REFUSED_STATE)]) == self._core.avr_fmustate.REFUSED_STATE:
+                raise self._core.StateError(bytes(state).decode("utf-8", "replace"))  # only without the guard
             parts, walker = self._restore(bytes(state))
         except Exception as exc:  # noqa: BLE001 - a bad state is refused (fmi2Error), the instance unchanged
             self._refuse(f"fmi2SetFMUstate refused: {exc}")
@@ -124,6 +128,16 @@ class CassiePlant(SpecSlave):
 
     @staticmethod
     def _fmu_state_from_bytes(state: bytes):
-        # The guard has checked the serialized state's CRC-64, GUID, fixed parameters and this blob's
-        # header; the contents are checked by _set_fmu_state, which refuses a bad one with fmi2Error.
-        return bytes(state)
+        """The blob itself if its variable table is valid, else ``REFUSED_STATE`` + the reason (which
+        the guard reads back and answers with fmi2Error; pythonfmu would turn an exception into
+        fmi2Fatal).  pythonfmu calls this on the class, without an instance: the walker state, which
+        needs the instance's model, is checked when the state is set (:meth:`_set_fmu_state`, fmi2Error
+        too).  The guard has checked the serialized state's CRC-64, GUID, fixed parameters, this blob's
+        header and that both say the same phase and time."""
+        try:
+            blob = bytes(state)
+            fmu_core.decode_fmu_state(blob)
+        except Exception as exc:  # noqa: BLE001 - nothing may escape to pythonfmu (it would mean fmi2Fatal)
+            return fmu_core.avr_fmustate.REFUSED_STATE + f"{type(exc).__name__}: {exc}".encode("utf-8", "replace")
+        return blob
+

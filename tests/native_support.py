@@ -5,6 +5,7 @@ from conftest.py (``built_fmu``, ``native_fmus``, ``regulator_fmu``).
 """
 from __future__ import annotations
 
+import itertools
 import subprocess
 import sys
 import tempfile
@@ -71,10 +72,34 @@ def unzipped(fmu_path) -> str:
     return extract(str(fmu_path), unzipdir=tempfile.mkdtemp(prefix="unzip_", dir=Path(fmu_path).parent))
 
 
+def logged_slave(fmu_path, messages: list, name="avr") -> "AnySlave":
+    """An AnySlave whose log messages (text) are appended to ``messages`` (FMI 2.0 or 3.0)."""
+    return AnySlave(fmu_path, name=name, messages=messages)
+
+
+#: Instance numbers of the logged slaves (their FMI 3.0 instanceEnvironment; above the scenarios' own).
+_LOGGED_NUMBERS = itertools.count(1_000_000)
+
+
+def _instantiate_logging(fmu, fmi3: bool, messages: list, number: int) -> None:
+    """Instantiate ``fmu`` with the scenarios' process-wide logger routing its messages to
+    ``messages``.  Never a logger of its own: fmpy's FMI 2.0 message formatter keeps one global
+    pointer to the last logger registered, which would dangle once that logger is collected
+    (scenarios/fmi_api.py explains)."""
+    from scenarios import fmi_api
+
+    fmi_api.route_messages(fmu.instanceName, number, messages)
+    fmi_api.FMI_APIS["3.0" if fmi3 else "2.0"].instantiate(fmu, number)
+
+
 class AnySlave:
     """fmpy's FMU2Slave or FMU3Slave (by the FMU's fmiVersion) addressed by variable name."""
 
-    def __init__(self, fmu_path, name="avr", unzip=None):
+    def __init__(self, fmu_path, name="avr", unzip=None, messages=None):
+        """``messages``: a list that gets every log message's text (fmpy prints them otherwise)."""
+        number = None if messages is None else next(_LOGGED_NUMBERS)
+        if number is not None:
+            name = f"{name}-{number}"  # the logger routes by instance name
         self.md = read_model_description(str(fmu_path))
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.unzip = unzip or unzipped(fmu_path)
@@ -82,7 +107,10 @@ class AnySlave:
         cls = FMU3Slave if self.fmi3 else FMU2Slave
         self.fmu = cls(guid=self.md.guid, unzipDirectory=self.unzip,
                        modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
-        self.fmu.instantiate(loggingOn=False)
+        if messages is None:
+            self.fmu.instantiate(loggingOn=False)
+        else:
+            _instantiate_logging(self.fmu, self.fmi3, messages, number)
         self.out_vrs = [self.vars[n].valueReference for n in OUTPUT_NAMES]
 
     def init(self, **params):

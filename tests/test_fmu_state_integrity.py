@@ -57,11 +57,11 @@ REASONS = {  # case -> what the fmi2Error message must say
     "forged: Kp_x = NaN": "Kp_x = nan: must be a finite number",
     "forged: vx is text": "vx = 'fast': must be a finite number",
     "forged: no vx": "lacks vx",
-    "forged: unknown phase": "unknown FMI phase 'running'",
-    "forged: JSON time inf": "time_s = inf: must be a finite number",
+    "forged: unknown phase": "header says phase stepComplete, its slave part does not",  # the guard sees it first
+    "forged: JSON time inf": "its slave part inf s (header and contents must agree)",  # the guard sees it first
     "forged: JSON n_neurons 10, core 20": "state has n_neurons = 20, regulator has 10",
     "forged: core truncated": "state blob has",
-    "forged: JSON a list": "does not have this FMU's layout",
+    "forged: JSON a list": "header says phase stepComplete, its slave part does not",  # the guard sees it first
 }
 
 

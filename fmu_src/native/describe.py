@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 
 from ..avr_packaging.describe import xml_value
 from ..avr_packaging.method_page import method_html
-from .header import all_specs
+from .header import LOG_CATEGORIES, all_specs
 
 AUTHOR = "cassie-avr project"
 VERSION = "0.1.0"
@@ -29,8 +29,6 @@ DESCRIPTION = ("Adaptive velocity regulator for bipedal walking (native C implem
 #: reassociation, which no pragma in the sources can undo).
 COMPILER_OPTIONS = "-std=c99 -O3 -fno-trapping-math"
 _FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
-_LOG_CATEGORIES = (("logStatusError", "Refused calls and errors (always logged)"),
-                   ("logAll", "Debug messages (with logging on)"))
 
 
 def _units(root: ET.Element, units: dict) -> None:
@@ -85,7 +83,7 @@ def model_description(fmi_version: int, model_identifier: str, guid: str, source
     _interface(root, fmi_version, model_identifier, source_files)
     _units(root, units)
     categories = ET.SubElement(root, "LogCategories")
-    for name, text in _LOG_CATEGORIES:
+    for name, text in LOG_CATEGORIES:
         ET.SubElement(categories, "Category", name=name, description=text)
     ET.SubElement(root, "DefaultExperiment", default_experiment)
     variables = ET.SubElement(root, "ModelVariables")
@@ -154,11 +152,14 @@ equivalents), so a library built from them, in any C mode and at any optimizatio
 bits as the shipped binaries on any CPU whose C compiler evaluates doubles in double precision
 (FLT_EVAL_METHOD 0: x86-64, aarch64 and the other 64-bit CPUs; not 32-bit x87 code).{aarch64_note}</p>
 <h2>FMI behaviour</h2>
-<p>Any communication step &gt; 0. Calls the FMI {fmi_version}.0 state machine forbids, sets of outputs or of
-fixed parameters after initialization, NaN/inf values and values outside [min, max] are refused with Error and
-a log message naming the variable and its range; a refused call changes nothing and the instance stays usable.
+<p>Any communication step &gt; 0 (one regulator call per step whatever its length: no maximum; a step whose
+end time overflows is refused). Calls the FMI {fmi_version}.0 state machine forbids, sets of outputs or of
+fixed parameters after initialization, NaN/inf values and values outside [min, max], and log categories the
+model description does not declare are refused with Error and a log message naming the variable and its range
+(or the category); a refused call changes nothing and the instance stays usable.
 FMU state can be saved, restored and serialized (all variables, weights and memories; the serialized form carries
-the GUID and a CRC-32 and is refused if corrupt or from another FMU). Outputs change only in doStep (no direct
+the GUID and a CRC-32 and is refused if corrupt or from another FMU, and so is one whose contents no run can
+reach: a value out of range, counters beyond what a run counts). Outputs change only in doStep (no direct
 feedthrough). Same value references, variables and numerics as the pythonfmu FMU AdaptiveVelocityRegulator.</p>
 {method_html()}<h2>Variables</h2>
 <table border="1"><tr><th>valueReference</th><th>name</th><th>causality</th><th>type</th><th>variability</th>
