@@ -2,21 +2,26 @@
 
 ``AdaptiveVelocityRegulator.fmu`` (FMI 2.0 co-simulation, pythonfmu, the reference) and
 ``AdaptiveVelocityRegulatorNative_fmi2.fmu`` / ``_fmi3.fmu`` (the same regulator in C,
-FMI 2.0 and FMI 3.0 from one source, linux and windows x86-64 binaries plus sources;
-the win64 binaries need the MinGW-w64 cross compiler), the ``CassiePlant.fmu``, the
-``CommandSource_fmi2.fmu`` (native C: the command and pushes over time, from its
-``resources/schedule.csv``) and the CassieAVR system wiring the three (SSP archive and OSP
-folder).
+FMI 2.0 and FMI 3.0 from one source, Linux and Windows x86-64 binaries, FMI 3.0 also Linux
+aarch64, plus sources), the ``CassiePlant.fmu``, the ``CommandSource_fmi2.fmu`` (native C:
+the command and pushes over time, from its ``resources/schedule.csv``) and the CassieAVR
+system wiring the three (SSP archive and OSP folder).  The native FMUs' Windows and aarch64
+binaries need cross compilers (Debian ``gcc-mingw-w64-x86-64``, ``gcc-aarch64-linux-gnu``);
+without one, its platform is skipped with a warning naming the package, and the build goes on.
 
     python build.py [--out DIR] [--sanitize]
 
-Steps for a pythonfmu FMU: pythonfmu packs the slave with its modules; the model
+Steps for a pythonfmu FMU: the slave and its modules become one package imported under a name
+private to the build (``fmu_src/avr_packaging/pack.py``), which pythonfmu packs; the model
 description is post-processed (units, ranges, default experiment, a content-derived
 GUID, no generation time), a documentation page and a ``requirements.txt`` are added,
 the FMI guard (``fmu_src/guard/*.c``) is compiled as the linux64 library the host loads
 (pythonfmu's own library moves beside it as ``<id>_pythonfmu.so``), and the archive is
 written with sorted entries and fixed timestamps, so two builds of the same sources give
-the same sha256.  Prints each FMU's path and sha256.  ``--sanitize`` compiles the guard
+the same sha256.  Every FMU build function then simulates the FMU it wrote once with FMPy
+and puts the results inside (``extra/org.fmi-standard.fmi-ls-ref/``, the fmi-ls-ref layered
+standard; ``fmu_src/avr_packaging/crosscheck.py``), so an FMU is the same file whoever builds
+it.  Prints each FMU's path and sha256.  ``--sanitize`` compiles the guard
 with AddressSanitizer + UndefinedBehaviorSanitizer instead (for the ``sanitize`` tests).
 Temporary folders are removed when the build ends, also when it fails.
 
@@ -47,7 +52,7 @@ from fmu_src.guard.build_guard import (GUARD_TEXTS, SANITIZE_FLAGS,  # noqa: E40
 from fmu_src.native import build_native  # noqa: E402
 from fmu_src.command_source import build_command_source as command_source  # noqa: E402
 from fmu_src.native.build_native import compile_native  # noqa: E402,F401 (the tests' sanitizer build)
-from fmu_src.avr_packaging import crosscheck, pages, vendor  # noqa: E402
+from fmu_src.avr_packaging import crosscheck, pack, pages, vendor  # noqa: E402
 from fmu_src.avr_packaging.archive import content_guid, read_entries, sha256_of, write_zip  # noqa: E402
 from fmu_src.avr_packaging.describe import (DEFAULT_EXPERIMENT, PLANT_INITIAL_UNKNOWNS, UNITS,  # noqa: E402
                                             model_description)
@@ -56,17 +61,20 @@ from fmu_src.avr_packaging.pythonfmu_fix import (EXIT_BUG_PATCH, EXIT_BUG_SYMBOL
 
 FMU_SRC = REPO_ROOT / "fmu_src"
 SLAVE_SCRIPT = FMU_SRC / "avr_slave.py"
-#: The regulator FMU's modules besides the slave script (flat in resources/); the plant FMU
-#: vendors them too: its slave uses avr_slavebase, its core avr_specs.
+#: The regulator FMU's modules besides the slave script; the plant FMU carries them too: its
+#: slave uses avr_slavebase, its core avr_specs.  Each pythonfmu FMU's code is one package in
+#: resources/<lib>/, imported under a name private to the build (fmu_src/avr_packaging/pack.py).
 PROJECT_FILES = tuple(FMU_SRC / f"avr_{name}.py" for name in (
     "core", "errors", "fmustate", "network", "params", "regulator", "slavebase", "specs", "statebytes"))
 MODEL_IDENTIFIER = "AdaptiveVelocityRegulator"
+#: The regulator's package folder in resources/.
+REGULATOR_LIB = "avr_regulator_lib"
 DEFAULT_OUT = REPO_ROOT / "dist"
 REQUIREMENTS = "numpy>=1.24\n"
 FMUS_JSON = "fmus.json"
 PLANT_SLAVE_SCRIPT = FMU_SRC / "cassie_plant_slave.py"
 PLANT_IDENTIFIER = "CassiePlant"
-#: The plant package and its project imports travel in resources/<PLANT_LIB>/ (see the slave).
+#: The plant's package folder in resources/ (with the models and their licenses, see the slave).
 PLANT_LIB = "cassie_plant_lib"
 DEG_TO_RAD = 3.141592653589793 / 180
 PLANT_UNITS = {"1": {}, "m": {"m": "1"}, "N": {"kg": "1", "m": "1", "s": "-2"}, "kg": {"kg": "1"},
@@ -83,12 +91,19 @@ def _specs():
     return (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)
 
 
-def _pythonfmu_entries(slave_script: Path, project_files, dest: Path) -> dict[str, bytes]:
-    """Every file of the FMU pythonfmu builds for ``slave_script`` (with FMU state support)."""
+def _pythonfmu_entries(packed: pack.Packed, dest: Path) -> dict[str, bytes]:
+    """Every file of the FMU pythonfmu builds for the staged code ``packed`` (with FMU state support)."""
     from pythonfmu.builder import FmuBuilder
 
-    raw = FmuBuilder.build_FMU(slave_script, dest=dest, project_files=list(project_files),
-                               canGetAndSetFMUstate=True, canSerializeFMUstate=True)
+    path_before = list(sys.path)
+    try:
+        raw = FmuBuilder.build_FMU(packed.entry, dest=dest, project_files=[packed.lib],
+                                   canGetAndSetFMUstate=True, canSerializeFMUstate=True)
+    finally:  # the builder imports the entry from the staging folder, which is about to be deleted
+        sys.path[:] = [p for p in sys.path if p in path_before]
+        for name in [n for n in sys.modules if n == packed.module or n == packed.package
+                     or n.startswith(packed.package + ".")]:
+            del sys.modules[name]
     return read_entries(raw)
 
 
@@ -130,30 +145,34 @@ def build_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path:
     """
     specs = _specs()
     with tempfile.TemporaryDirectory(prefix="avr_fmu_") as tmp:
-        entries = _pythonfmu_entries(SLAVE_SCRIPT, PROJECT_FILES, Path(tmp))
+        packed = pack.pack(Path(tmp) / "stage", SLAVE_SCRIPT, MODEL_IDENTIFIER, REGULATOR_LIB, PROJECT_FILES)
+        entries = _pythonfmu_entries(packed, Path(tmp) / "raw")
     tree = model_description(entries.pop("modelDescription.xml"), specs)
     entries["documentation/index.html"] = pages.regulator_page(MODEL_IDENTIFIER, specs).encode("utf-8")
     entries["resources/requirements.txt"] = REQUIREMENTS.encode("utf-8")
     _move_pythonfmu_library(entries, MODEL_IDENTIFIER)
-    slave_module = entries["resources/slavemodule.txt"].decode("utf-8").strip()
-    return _guarded_fmu(entries, tree, MODEL_IDENTIFIER, out_dir, header_options={"slave_module": slave_module},
-                        sanitize=sanitize)
+    fmu_path = _guarded_fmu(entries, tree, MODEL_IDENTIFIER, out_dir, header_options={"slave_module": packed.module},
+                            sanitize=sanitize)
+    return crosscheck.add_reference(fmu_path, sanitize=sanitize)
 
 
 def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
-    """Build ``<out_dir>/AdaptiveVelocityRegulatorNative_fmi<2|3>.fmu`` (linux and windows x86-64) reproducibly."""
+    """Build ``<out_dir>/AdaptiveVelocityRegulatorNative_fmi<2|3>.fmu`` reproducibly, with the binaries of
+    every platform whose compiler is installed (``build_native.PLATFORMS``)."""
     fmu_path = Path(out_dir) / build_native.fmu_name(fmi_version)
     write_zip(build_native.fmu_entries(fmi_version, UNITS, DEFAULT_EXPERIMENT), fmu_path)
     log.info("built %s", fmu_path)
-    return fmu_path
+    return crosscheck.add_reference(fmu_path)
 
 
-def _plant_entries(tmp: Path) -> dict[str, bytes]:
-    """pythonfmu's CassiePlant FMU with the plant modules and models in resources/, linux64 only."""
-    lib = tmp / "stage" / PLANT_LIB
-    vendor.vendor_plant(lib, PROJECT_FILES)
-    vendor.copy_models(lib / "models")
-    entries = _pythonfmu_entries(PLANT_SLAVE_SCRIPT, [lib], tmp / "raw")
+def _plant_entries(tmp: Path) -> tuple[pack.Packed, dict[str, bytes]]:
+    """pythonfmu's CassiePlant FMU with the plant's package, data and models in resources/, linux64 only."""
+    def data(lib: Path) -> None:
+        vendor.copy_plant_data(lib)
+        vendor.copy_models(lib / "models")
+
+    packed = pack.pack(tmp / "stage", PLANT_SLAVE_SCRIPT, PLANT_IDENTIFIER, PLANT_LIB, PROJECT_FILES, fill=data)
+    entries = _pythonfmu_entries(packed, tmp / "raw")
     if PYTHONFMU_LINUX.format(PLANT_IDENTIFIER) not in entries:
         import pythonfmu
 
@@ -161,7 +180,7 @@ def _plant_entries(tmp: Path) -> dict[str, bytes]:
                            "resources copy, imported after a pythonfmu FMU was loaded): build in a fresh process")
     for name in [n for n in entries if n.startswith("binaries/") and not n.startswith("binaries/linux64/")]:
         del entries[name]  # the guard is built for linux64 only: without it a refusal could only be fmi2Fatal
-    return entries
+    return packed, entries
 
 
 def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path:
@@ -172,23 +191,25 @@ def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path
     from plant import fmu_core
 
     with tempfile.TemporaryDirectory(prefix="cassie_plant_fmu_") as tmp:
-        entries = _plant_entries(Path(tmp))
+        packed, entries = _plant_entries(Path(tmp))
     tree = model_description(entries.pop("modelDescription.xml"), fmu_core.SPECS, PLANT_UNITS,
                              initial_unknowns=PLANT_INITIAL_UNKNOWNS)
     entries["documentation/index.html"] = pages.plant_page(PLANT_IDENTIFIER, PLANT_LIB, fmu_core.SPECS).encode("utf-8")
     entries["resources/requirements.txt"] = PLANT_REQUIREMENTS.encode("utf-8")
     _move_pythonfmu_library(entries, PLANT_IDENTIFIER)
-    options = {"slave_module": PLANT_SLAVE_SCRIPT.stem, "step_quantum_s": fmu_core.PLANT_STEP_S}
-    return _guarded_fmu(entries, tree, PLANT_IDENTIFIER, out_dir, guid_prefix=f"{PLANT_IDENTIFIER}:",
-                        header_options=options, sanitize=sanitize)
+    options = {"slave_module": packed.module, "step_quantum_s": fmu_core.PLANT_STEP_S,
+               "max_step_s": fmu_core.MAX_STEP_S}
+    fmu_path = _guarded_fmu(entries, tree, PLANT_IDENTIFIER, out_dir, guid_prefix=f"{PLANT_IDENTIFIER}:",
+                            header_options=options, sanitize=sanitize)
+    return crosscheck.add_reference(fmu_path, sanitize=sanitize)
 
 
 def build_command_source(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
-    """Build ``<out_dir>/CommandSource_fmi<2|3>.fmu`` (linux and windows x86-64, the nominal
+    """Build ``<out_dir>/CommandSource_fmi<2|3>.fmu`` (the native regulator's platforms, the nominal
     schedule: 0.5 m/s, no turn, no push) reproducibly."""
     path = command_source.build(fmi_version, Path(out_dir))
     log.info("built %s", path)
-    return path
+    return crosscheck.add_reference(path)
 
 
 def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: Path | None = None) -> Path:
@@ -233,22 +254,21 @@ def fmu_entry(path: Path, implementation: str) -> dict:
 
 def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Path]:
     """Build every FMU (the pythonfmu regulator, both native regulators, the CassiePlant
-    FMU) with its reference results inside (fmi-ls-ref), the FMI cross-check vendor tree
+    FMU, the CommandSource FMU), each with its reference results inside, the FMI cross-check vendor tree
     ``<out_dir>/cross-check/`` (``fmu_src/avr_packaging/crosscheck.py``), ``<out_dir>/fmus.json``
     listing the FMUs, and the CassieAVR system (SSP and OSP)."""
     regulator = build_fmu(out_dir, sanitize=sanitize)
     built = [(regulator, "python")] + [(build_native_fmu(v, out_dir), "native") for v in (2, 3)]
     plant = build_plant_fmu(out_dir)
     built.append((plant, "python"))
-    with tempfile.TemporaryDirectory(prefix="avr_reference_") as tmp:
-        references = crosscheck.add_references([path for path, _ in built], Path(tmp))
-    crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], references, build_native.describe.VERSION)
+    command = build_command_source(2, out_dir)
+    built.append((command, "native"))
+    crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], build_native.describe.VERSION)
     listing = {"fmus": [fmu_entry(path, kind) for path, kind in built]}
     tmp = Path(out_dir) / (FMUS_JSON + ".tmp")
     tmp.write_text(json.dumps(listing, indent=2) + "\n")
     tmp.replace(Path(out_dir) / FMUS_JSON)
-    command = build_command_source(2, out_dir)
-    return [path for path, _ in built] + [command, build_ssp(out_dir, plant, regulator, command),
+    return [path for path, _ in built] + [build_ssp(out_dir, plant, regulator, command),
                                           build_osp(out_dir, plant, regulator, command)]
 
 

@@ -22,37 +22,23 @@ modules that do the work, so ``from fmu_src.avr_core import X`` keeps working:
 * ``avr_statebytes``: ``state_to_bytes`` / ``state_from_bytes`` (format version 2).
 
 Everything is float64, seeded and imports nothing besides numpy and the standard
-library, because these modules are copied flat into the FMU's ``resources/`` folder
-(so each imports the others package-relative, else top-level).
+library (and each other, package-relative), because these modules travel inside the FMU
+(``resources/avr_regulator_lib/``, see ``avr_packaging/pack.py``).
 """
 from __future__ import annotations
 
-try:
-    from .avr_errors import ParameterError
-    from .avr_network import (INTERCEPT_RANGE, MAX_RATE_RANGE_HZ, NETWORK_NAMES, TAU_RC, TAU_REF,
-                              Networks, NetworkSpec, SplitMix64, build_networks, lif_gain_bias,
-                              scaled_inputs, sphere_encoders, LN2, SQRT2, log1p_fixed,
-                              expm1_fixed)
-    from .avr_params import (RegulatorInputs, RegulatorParams, network_key, params_from_overrides,
-                             validate_inputs, validate_params)
-    from .avr_regulator import WEIGHT_ROWS, RegulatorState, initial_state, step
-    from .avr_specs import (ANGLE_LIMIT_RAD, FIXED_PARAMS, INPUT_SPECS, OUTPUT_JOINTS, OUTPUT_SPECS,
-                            PARAM_SPECS, PYTHON_TYPES, RATE_LIMIT_RADPS, VELOCITY_LIMIT_MPS, VarSpec,
-                            check_param, format_range)
-    from .avr_statebytes import state_from_bytes, state_to_bytes
-except ImportError:  # inside the FMU the modules are top-level
-    from avr_errors import ParameterError
-    from avr_network import (INTERCEPT_RANGE, MAX_RATE_RANGE_HZ, NETWORK_NAMES, TAU_RC, TAU_REF,
-                             Networks, NetworkSpec, SplitMix64, build_networks, lif_gain_bias,
-                             scaled_inputs, sphere_encoders, LN2, SQRT2, log1p_fixed,
-                             expm1_fixed)
-    from avr_params import (RegulatorInputs, RegulatorParams, network_key, params_from_overrides,
-                            validate_inputs, validate_params)
-    from avr_regulator import WEIGHT_ROWS, RegulatorState, initial_state, step
-    from avr_specs import (ANGLE_LIMIT_RAD, FIXED_PARAMS, INPUT_SPECS, OUTPUT_JOINTS, OUTPUT_SPECS,
-                           PARAM_SPECS, PYTHON_TYPES, RATE_LIMIT_RADPS, VELOCITY_LIMIT_MPS, VarSpec,
-                           check_param, format_range)
-    from avr_statebytes import state_from_bytes, state_to_bytes
+from .avr_errors import ParameterError
+from .avr_network import (INTERCEPT_RANGE, MAX_RATE_RANGE_HZ, NETWORK_NAMES, TAU_RC, TAU_REF,
+                          Networks, NetworkSpec, SplitMix64, build_networks, lif_gain_bias,
+                          scaled_inputs, sphere_encoders, LN2, SQRT2, log1p_fixed,
+                          expm1_fixed)
+from .avr_params import (RegulatorInputs, RegulatorParams, network_key, params_from_overrides,
+                         validate_inputs, validate_params)
+from .avr_regulator import MAX_CALLS, WEIGHT_ROWS, RegulatorState, initial_state, step
+from .avr_specs import (ANGLE_LIMIT_RAD, FIXED_PARAMS, INPUT_SPECS, OUTPUT_JOINTS, OUTPUT_SPECS,
+                        PARAM_SPECS, PYTHON_TYPES, RATE_LIMIT_RADPS, VELOCITY_LIMIT_MPS, VarSpec,
+                        check_param, format_range)
+from .avr_statebytes import state_from_bytes, state_to_bytes
 
 __all__ = [
     "OUTPUT_JOINTS", "VarSpec", "PARAM_SPECS", "INPUT_SPECS", "OUTPUT_SPECS", "PYTHON_TYPES",
@@ -63,7 +49,7 @@ __all__ = [
     "RegulatorInputs", "validate_inputs",
     "NetworkSpec", "Networks", "SplitMix64", "sphere_encoders", "build_networks",
     "lif_gain_bias", "scaled_inputs", "LN2", "SQRT2", "log1p_fixed", "expm1_fixed",
-    "WEIGHT_ROWS", "RegulatorState", "initial_state", "step",
+    "WEIGHT_ROWS", "MAX_CALLS", "RegulatorState", "initial_state", "step",
     "state_to_bytes", "state_from_bytes", "Regulator",
 ]
 

@@ -25,10 +25,7 @@ import struct
 import zlib
 from dataclasses import dataclass
 
-try:
-    from .avr_errors import StateError
-except ImportError:  # pragma: no cover - inside the FMU the modules are top-level
-    from avr_errors import StateError
+from .avr_errors import StateError
 
 MAGIC = b"AVRS"
 VERSION = 2
@@ -39,6 +36,12 @@ PHASES = ("instantiated", "initializationMode", "stepComplete", "terminated")
 #: What the regulator slave's deserialization yields for a refused blob (then the reason,
 #: UTF-8); the guard reads it back and answers fmi2Error with the reason.
 REFUSED_STATE = b"\0AVR-REFUSED\0"
+#: How the JSON of every blob :func:`encode` writes begins (``json.dumps`` with sorted keys):
+#: ``JSON_PREFIX`` phase ``JSON_TIME`` time ``JSON_VALUES`` {values}``}``.  The guard reads the
+#: phase and the time there and refuses a blob whose header says otherwise.
+JSON_PREFIX = '{"phase": "'
+JSON_TIME = '", "time_s": '
+JSON_VALUES = ', "values": '
 
 
 @dataclass(frozen=True)
@@ -51,10 +54,13 @@ class FmuStateParts:
     core: bytes
 
 
+def _json_text(values: dict, phase: str, time_s, allow_nan: bool = False) -> str:
+    return json.dumps({"values": values, "phase": phase, "time_s": time_s}, sort_keys=True, allow_nan=allow_nan)
+
+
 def encode(values: dict, phase: str, time_s: float, core: bytes) -> bytes:
     """The blob for these parts (deterministic: identical parts give identical bytes)."""
-    text = json.dumps({"values": values, "phase": phase, "time_s": time_s}, sort_keys=True,
-                      allow_nan=False).encode("utf-8")
+    text = _json_text(values, phase, time_s).encode("utf-8")
     body = HEADER.pack(MAGIC, VERSION, len(text), len(core)) + text + core
     return body + CRC.pack(zlib.crc32(body))
 
@@ -95,7 +101,8 @@ def decode(blob, specs) -> FmuStateParts:
     if zlib.crc32(blob[:-CRC.size]) != CRC.unpack_from(blob, len(blob) - CRC.size)[0]:
         raise StateError("FMU state checksum mismatch: the state is corrupted")
     try:
-        scalars = json.loads(blob[HEADER.size:HEADER.size + n_text].decode("utf-8"))
+        text = blob[HEADER.size:HEADER.size + n_text].decode("utf-8")
+        scalars = json.loads(text)
     except (UnicodeDecodeError, ValueError) as exc:
         raise StateError(f"FMU state's variable table is not valid JSON ({exc})") from None
     if not (isinstance(scalars, dict) and set(scalars) == {"values", "phase", "time_s"}
@@ -113,6 +120,11 @@ def decode(blob, specs) -> FmuStateParts:
         problems.append(f"phase {phase} with{'out' if n_core == 0 else ''} the regulator's state")
     if type(time_s) not in (int, float) or not math.isfinite(time_s):
         problems.append(f"time_s = {time_s!r}: must be a finite number")
+    if not problems and _json_text(values, phase, time_s, allow_nan=True) != text:
+        # duplicate keys, other spacing or order: json.loads would take the last duplicate, which
+        # the guard (reading the first phase and time) would not see
+        problems.append("the variable table is not in the form this FMU writes (sorted keys, each once, "
+                        "json.dumps spacing)")
     if problems:
         raise StateError("invalid FMU state: " + "; ".join(problems))
     return FmuStateParts(values, phase, float(time_s), blob[HEADER.size + n_text:-CRC.size])

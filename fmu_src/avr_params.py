@@ -10,12 +10,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-try:
-    from .avr_errors import InputError, ParameterError
-    from .avr_specs import INPUT_SPECS, PARAM_BY_NAME, PARAM_SPECS, check_param
-except ImportError:  # inside the FMU the modules are top-level
-    from avr_errors import InputError, ParameterError
-    from avr_specs import INPUT_SPECS, PARAM_BY_NAME, PARAM_SPECS, check_param
+from .avr_errors import InputError, ParameterError
+from .avr_specs import INPUT_SPECS, PARAM_BY_NAME, PARAM_SPECS, check_param
 
 __all__ = ["RegulatorParams", "params_from_overrides", "validate_params", "network_key",
            "RegulatorInputs", "validate_inputs"]

@@ -18,20 +18,12 @@ from numbers import Real
 
 import numpy as np
 
-try:
-    from .avr_errors import InputError, ParameterError, StateError
-    from .avr_network import (INV_TAU_RC, NETWORK_NAMES, input_currents, lif_rates_times_tau_rc,
-                               readonly, scaled_inputs)
-    from .avr_params import network_key, validate_inputs
-    from .avr_specs import (ANGLE_LIMIT_RAD, DELTA_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
-                            VELOCITY_LIMIT_MPS)
-except ImportError:  # inside the FMU the modules are top-level
-    from avr_errors import InputError, ParameterError, StateError
-    from avr_network import (INV_TAU_RC, NETWORK_NAMES, input_currents, lif_rates_times_tau_rc,
-                             readonly, scaled_inputs)
-    from avr_params import network_key, validate_inputs
-    from avr_specs import (ANGLE_LIMIT_RAD, DELTA_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
-                           VELOCITY_LIMIT_MPS)
+from .avr_errors import InputError, ParameterError, StateError
+from .avr_network import (INV_TAU_RC, NETWORK_NAMES, input_currents, lif_rates_times_tau_rc,
+                           readonly, scaled_inputs)
+from .avr_params import network_key, validate_inputs
+from .avr_specs import (ANGLE_LIMIT_RAD, DELTA_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
+                        VELOCITY_LIMIT_MPS)
 
 __all__ = ["WEIGHT_ROWS", "N_WEIGHT_ROWS", "STRIDE_READY", "RegulatorState",
            "initial_state", "step"]
@@ -42,6 +34,10 @@ WEIGHT_ROWS = ("x", "y", "pitch", "roll")
 N_WEIGHT_ROWS = len(WEIGHT_ROWS)
 #: stride_boundaries at which two steps are complete (the first call, then 3 changes)
 STRIDE_READY = 4
+#: The largest n_calls and stride_calls (2**53: the largest count a float64 holds exactly, and the
+#: stride means divide by it).  A run never gets there (285 years at a microsecond per call); the
+#: counters stop at it instead of overflowing the state's int64 fields, and a state beyond it is refused.
+MAX_CALLS = 2**53
 #: stride_boundaries from which the step in progress began at a change of step_index
 #: (it is complete at the next change)
 _STEP_SEEN_FROM_START = 2
@@ -174,7 +170,8 @@ def step(state: RegulatorState, inputs, dt: float, params, networks) -> tuple[Re
     new_state = _new_state(RegulatorState)
     new_state.__dict__.update(  # skips __post_init__: weights are owned and read-only
         weights=weights, last_step_index=step_index, vx_at_step=vx_at, vy_at_step=vy_at,
-        pd_x=pd_x, pd_y=pd_y, n_calls=state.n_calls + 1, time_s=state.time_s + dt,
+        pd_x=pd_x, pd_y=pd_y, n_calls=state.n_calls + 1 if state.n_calls < MAX_CALLS else MAX_CALLS,
+        time_s=state.time_s + dt,
         network_key=state.network_key, **stride)
     return new_state, out
 
@@ -244,7 +241,8 @@ def _advance_stride(state: RegulatorState, step_index: int, vy: float, roll: flo
     its start, and this call starts the new step's sums."""
     if step_index == state.last_step_index:
         return dict(
-            stride_boundaries=state.stride_boundaries, stride_calls=state.stride_calls + 1,
+            stride_boundaries=state.stride_boundaries,
+            stride_calls=state.stride_calls + 1 if state.stride_calls < MAX_CALLS else MAX_CALLS,
             stride_sum_vy=state.stride_sum_vy + vy, stride_sum_roll=state.stride_sum_roll + roll,
             vy_mean_prev=state.vy_mean_prev, vy_mean_last=state.vy_mean_last,
             roll_mean_prev=state.roll_mean_prev, roll_mean_last=state.roll_mean_last)

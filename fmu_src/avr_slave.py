@@ -29,7 +29,9 @@ What this class adds is FMI behaviour that pythonfmu 0.7.0 does not give:
   from the instance's current values is refused.
 
 The variables, typed get/set, phases and the checks of a set and of a doStep come from
-:mod:`avr_slavebase`, shared with the plant FMU's slave.
+:mod:`avr_slavebase`, shared with the plant FMU's slave.  Inside the FMU this module and the
+core travel as one package in ``resources/avr_regulator_lib/``, imported under a name private
+to the build (``fmu_src/avr_packaging/pack.py``), so builds and instances never share code.
 
 Statuses (host sees; linux64 with the guard / pythonfmu's library alone):
     doStep in a wrong phase, non-finite or non-positive step, current time not
@@ -46,24 +48,14 @@ from __future__ import annotations
 
 from pythonfmu.enums import Fmi2Status
 
-try:  # inside the FMU these are top-level modules in resources/
-    from . import avr_fmustate as fmustate
-    from .avr_errors import AvrError, StateError
-    from .avr_network import build_networks
-    from .avr_params import RegulatorInputs, RegulatorParams
-    from .avr_regulator import initial_state, step
-    from .avr_slavebase import INITIALIZATION_MODE, STEP_COMPLETE, SpecSlave
-    from .avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
-    from .avr_statebytes import state_from_bytes, state_to_bytes
-except ImportError:  # pragma: no cover - exercised inside the built FMU
-    import avr_fmustate as fmustate
-    from avr_errors import AvrError, StateError
-    from avr_network import build_networks
-    from avr_params import RegulatorInputs, RegulatorParams
-    from avr_regulator import initial_state, step
-    from avr_slavebase import INITIALIZATION_MODE, STEP_COMPLETE, SpecSlave
-    from avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
-    from avr_statebytes import state_from_bytes, state_to_bytes
+from . import avr_fmustate as fmustate
+from .avr_errors import AvrError, StateError
+from .avr_network import build_networks
+from .avr_params import RegulatorInputs, RegulatorParams
+from .avr_regulator import initial_state, step
+from .avr_slavebase import INITIALIZATION_MODE, STEP_COMPLETE, SpecSlave
+from .avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+from .avr_statebytes import state_from_bytes, state_to_bytes
 
 _ALL_SPECS = (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)
 #: What deserializing a refused blob yields (then the reason); see _fmu_state_from_bytes.

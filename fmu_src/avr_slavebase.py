@@ -9,8 +9,7 @@ legality of a set (:meth:`SpecSlave.set_problem`, the same rules as the C guard)
 life-cycle calls common to both FMUs and the checks of a doStep's time and step size.
 A subclass decides what a refusal does (:meth:`SpecSlave._refuse`): the regulator
 raises, the plant only logs (the guard answers fmi2Error for a call that logged an
-error).  Inside the regulator FMU this module is top-level in ``resources/``; the plant
-FMU loads its own copy from ``resources/cassie_plant_lib/fmu_src/``.
+error).  Each FMU carries its own copy, in the package it imports under a private name.
 """
 from __future__ import annotations
 
@@ -20,14 +19,9 @@ import sys
 from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variability, Integer, Real, String
 from pythonfmu.enums import Fmi2Status
 
-try:
-    from .avr_errors import StateError
-    from .avr_fmustate import PHASES, value_problem
-    from .avr_specs import PYTHON_TYPES
-except ImportError:  # inside the regulator FMU the modules are top-level
-    from avr_errors import StateError
-    from avr_fmustate import PHASES, value_problem
-    from avr_specs import PYTHON_TYPES
+from .avr_errors import StateError
+from .avr_fmustate import PHASES, value_problem
+from .avr_specs import PYTHON_TYPES
 
 #: FMI 2.0 co-simulation phases the slaves track (section 4.2.4).
 INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED = PHASES

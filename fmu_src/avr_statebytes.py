@@ -18,14 +18,10 @@ import zlib
 
 import numpy as np
 
-try:
-    from .avr_errors import StateError
-    from .avr_params import network_key
-    from .avr_regulator import N_WEIGHT_ROWS, STRIDE_READY, RegulatorState
-except ImportError:  # inside the FMU the modules are top-level
-    from avr_errors import StateError
-    from avr_params import network_key
-    from avr_regulator import N_WEIGHT_ROWS, STRIDE_READY, RegulatorState
+from .avr_errors import StateError
+from .avr_params import network_key
+from .avr_regulator import MAX_CALLS, N_WEIGHT_ROWS, STRIDE_READY, RegulatorState
+from .avr_specs import INPUT_SPECS
 
 __all__ = ["state_to_bytes", "state_from_bytes"]
 
@@ -78,16 +74,40 @@ def state_from_bytes(blob: bytes, params) -> RegulatorState:
     scalars = (vx_at, vy_at, pd_x, pd_y, time_s, *stride)
     if not (np.all(np.isfinite(weights)) and all(math.isfinite(value) for value in scalars)):
         raise StateError("state contains non-finite values")
-    if last < -1 or n_calls < 0:
-        raise StateError(f"state has invalid counters (last_step_index = {last}, "
-                         f"n_calls = {n_calls})")
-    if not (0 <= boundaries <= STRIDE_READY and stride_calls >= 0
-            and (boundaries == 0) == (stride_calls == 0)):
-        raise StateError(f"state has invalid stride counters (stride_boundaries = "
-                         f"{boundaries}, stride_calls = {stride_calls})")
+    problems = counter_problems(last, n_calls, time_s, boundaries, stride_calls)
+    if problems:
+        raise StateError("state has invalid counters: " + "; ".join(problems))
     weights.flags.writeable = False
     return RegulatorState(weights, last, vx_at, vy_at, pd_x, pd_y, n_calls, time_s, key,
                           boundaries, stride_calls, *stride)
+
+
+#: The largest step_index (the input's declared maximum): the largest last_step_index.
+_MAX_STEP_INDEX = next(spec.max for spec in INPUT_SPECS if spec.name == "step_index")
+
+
+def counter_problems(last_step_index: int, n_calls: int, time_s: float, stride_boundaries: int,
+                     stride_calls: int) -> list[str]:
+    """Why these counters are not ones a run can reach (each problem names the field and its
+    range), or [].  A run starts with last_step_index = -1, n_calls = 0, time_s = 0 and no stride;
+    each call sets last_step_index to its step_index (in [0, max]), adds one to n_calls (up to
+    MAX_CALLS) and its dt > 0 to time_s; stride_calls counts calls of the current step, so at most
+    n_calls.  The native FMU checks the same (avr_state.c)."""
+    problems = []
+    if not 0 <= n_calls <= MAX_CALLS:
+        problems.append(f"n_calls = {n_calls}: must be in [0, {MAX_CALLS}]")
+    if not -1 <= last_step_index <= _MAX_STEP_INDEX:
+        problems.append(f"last_step_index = {last_step_index}: must be in [-1, {_MAX_STEP_INDEX}]")
+    elif (last_step_index == -1) != (n_calls == 0):
+        problems.append(f"last_step_index = {last_step_index} with n_calls = {n_calls}: -1 exactly before the first call")
+    if not (time_s >= 0.0 and (n_calls > 0 or time_s == 0.0)):
+        problems.append(f"time_s = {time_s!r} with n_calls = {n_calls}: a sum of steps > 0 (0 before the first call)")
+    if not 0 <= stride_boundaries <= STRIDE_READY:
+        problems.append(f"stride_boundaries = {stride_boundaries}: must be in [0, {STRIDE_READY}]")
+    if not 0 <= stride_calls <= n_calls or (stride_boundaries == 0) != (stride_calls == 0):
+        problems.append(f"stride_calls = {stride_calls}: must be in [0, n_calls = {n_calls}], 0 exactly when "
+                        f"stride_boundaries is (here {stride_boundaries})")
+    return problems
 
 
 def _checked_frame(blob) -> bytes:

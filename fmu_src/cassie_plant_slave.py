@@ -1,17 +1,19 @@
 """FMI 2.0 co-simulation slave ``CassiePlant`` (pythonfmu): the MuJoCo Cassie walker.
 
 A thin translator between FMI calls and the plant's pure core (``plant/fmu_core.py``).
-Inside the FMU the core and the plant package travel in ``resources/cassie_plant_lib/``
-(``build.py`` copies them with package-relative imports) and are loaded from there under
-a module name derived from the resources folder: the host's own ``plant`` package, the
-regulator FMU's modules and another copy of this FMU never mix with them (pythonfmu
-puts every FMU's ``resources/`` first on ``sys.path``; issue #228 of pythonfmu).
+Inside the FMU this module, the core and the plant package travel in
+``resources/cassie_plant_lib/`` (``build.py`` copies them with package-relative imports) and
+are imported under a name private to the build (``fmu_src/avr_packaging/pack.py``): the host's
+own ``plant`` package, the regulator FMU's modules and other builds of this FMU never mix with
+them (pythonfmu issue #228).  The models are read from each instance's own resources folder.
 
 Statuses: the FMU's linux64 library is the FMI guard (``fmu_src/guard/``, built with this
 FMU's variable table and ``AVR_STEP_QUANTUM`` = 0.5 ms): calls the state machine forbids,
 sets of outputs or of fixed parameters after initialization, NaN/inf or out-of-range
-values, communication steps that are not whole multiples of 0.5 ms and corrupt or
-foreign serialized states are ``fmi2Error`` without reaching Python.  pythonfmu reports a
+values, communication steps that are not whole multiples of 0.5 ms or longer than the
+maximum step (``AVR_MAX_STEP`` = ``plant.fmu_core.MAX_STEP_S``), corrupt or foreign
+serialized states and ones whose header and blob disagree on the phase or time are
+``fmi2Error`` without reaching Python.  pythonfmu reports a
 Python exception as ``fmi2Fatal`` only, so this slave never raises on bad input: it logs
 the problem with status Error and changes nothing, and the guard answers ``fmi2Error``
 for any call that logged an error.  That covers what only Python can check: the
@@ -20,8 +22,8 @@ problem at once, each naming its field and range) in ``fmi2ExitInitializationMod
 which then stays in initialization mode, and the contents of an FMU state.
 
 The variables, typed get/set, phases and the checks of a set and of a doStep come from
-``fmu_src/avr_slavebase.py`` (shared with the regulator's slave); inside the FMU that
-module is loaded from this FMU's own copy in ``resources/cassie_plant_lib/fmu_src/``.
+``fmu_src/avr_slavebase.py`` (shared with the regulator's slave; inside the FMU, this FMU's
+own copy).
 
 FMU state: the regulator's blob format (``fmu_src/avr_fmustate.py``: every variable
 value, the FMI phase and time, CRC-32) with the walker's exact state (MuJoCo's
@@ -31,59 +33,18 @@ a state restores only into an instance with the same fixed parameters.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import importlib
-import importlib.util
-import sys
 from pathlib import Path
 
 from pythonfmu.enums import Fmi2Status
 
+from fmu_src.avr_slavebase import INITIALIZATION_MODE, STEP_COMPLETE, SpecSlave
+from plant import fmu_core
+
 #: The folder in ``resources/`` that holds the plant package and the model files.
 LIB_DIR = "cassie_plant_lib"
-#: Characters of the folder's sha256 in the private package name of a loaded copy.
-_PRIVATE_NAME_CHARS = 16
 
 
-def _load_lib(root: Path):
-    """The package in ``root`` (a ``cassie_plant_lib`` folder), imported under a private name."""
-    name = "_cassie_plant_" + hashlib.sha256(str(root.resolve()).encode()).hexdigest()[:_PRIVATE_NAME_CHARS]
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, root / "__init__.py",
-                                                      submodule_search_locations=[str(root)])
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        try:
-            spec.loader.exec_module(module)
-        except BaseException:
-            del sys.modules[name]
-            raise
-    return sys.modules[name]
-
-
-def load_core(resources: str):
-    """``plant.fmu_core`` of the copy in ``resources/cassie_plant_lib``, under a private name."""
-    return importlib.import_module(_load_lib(Path(resources) / LIB_DIR).__name__ + ".plant.fmu_core")
-
-
-def _slave_base():
-    """This FMU's own copy of ``avr_slavebase`` (the repository's when the FMU is being built)."""
-    lib = Path(__file__).resolve().parent / LIB_DIR
-    if lib.is_dir():  # inside the FMU: resources/cassie_plant_lib
-        return importlib.import_module(_load_lib(lib).__name__ + ".fmu_src.avr_slavebase")
-    try:  # pythonfmu's builder imports this script from the repository's fmu_src/
-        from . import avr_slavebase
-    except ImportError:
-        import avr_slavebase
-    return avr_slavebase
-
-
-_base = _slave_base()
-INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED = (
-    _base.INSTANTIATED, _base.INITIALIZATION_MODE, _base.STEP_COMPLETE, _base.TERMINATED)
-
-
-class CassiePlant(_base.SpecSlave):
+class CassiePlant(SpecSlave):
     """MuJoCo Cassie with its nominal walking controller, started from rest."""
 
     author = "cassie-avr project"
@@ -95,7 +56,7 @@ class CassiePlant(_base.SpecSlave):
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
-        self._core = load_core(self.resources)
+        self._core = fmu_core
         self._walker = None
         self._init_variables(self._core.SPECS)
 
@@ -146,6 +107,8 @@ class CassiePlant(_base.SpecSlave):
 
     def _set_fmu_state(self, state):
         try:
+            if bytes(state[:len(self._core.avr_fmustate.REFUSED_STATE)]) == self._core.avr_fmustate.REFUSED_STATE:
+                raise self._core.StateError(bytes(state).decode("utf-8", "replace"))  # only without the guard
             parts, walker = self._restore(bytes(state))
         except Exception as exc:  # noqa: BLE001 - a bad state is refused (fmi2Error), the instance unchanged
             self._refuse(f"fmi2SetFMUstate refused: {exc}")
@@ -165,6 +128,16 @@ class CassiePlant(_base.SpecSlave):
 
     @staticmethod
     def _fmu_state_from_bytes(state: bytes):
-        # The guard has checked the serialized state's CRC-64, GUID, fixed parameters and this blob's
-        # header; the contents are checked by _set_fmu_state, which refuses a bad one with fmi2Error.
-        return bytes(state)
+        """The blob itself if its variable table is valid, else ``REFUSED_STATE`` + the reason (which
+        the guard reads back and answers with fmi2Error; pythonfmu would turn an exception into
+        fmi2Fatal).  pythonfmu calls this on the class, without an instance: the walker state, which
+        needs the instance's model, is checked when the state is set (:meth:`_set_fmu_state`, fmi2Error
+        too).  The guard has checked the serialized state's CRC-64, GUID, fixed parameters, this blob's
+        header and that both say the same phase and time."""
+        try:
+            blob = bytes(state)
+            fmu_core.decode_fmu_state(blob)
+        except Exception as exc:  # noqa: BLE001 - nothing may escape to pythonfmu (it would mean fmi2Fatal)
+            return fmu_core.avr_fmustate.REFUSED_STATE + f"{type(exc).__name__}: {exc}".encode("utf-8", "replace")
+        return blob
+

@@ -204,15 +204,72 @@ class CassiePhysics:
     def physics_state_size(self) -> int:
         return int(mujoco.mj_stateSize(self.model, self.STATE_SPEC)) + 2 * len(self._motor_ids)
 
-    def set_physics_state(self, state) -> None:
-        """Restore :meth:`physics_state`; ValueError (nothing changed) on a wrong size or
-        non-finite values.  Derived quantities (positions of bodies, contacts) are those of
-        the last step until the next step recomputes them, as after any ``mj_step``."""
-        state = np.asarray(state, dtype=float)
+    #: The largest magnitude of a value in a physics state: MuJoCo's own bound (mjMAXVAL), beyond
+    #: which its mj_checkPos/mj_checkVel/mj_checkAcc declare the simulation diverged and reset it.
+    MAX_STATE_VALUE = float(mujoco.mjMAXVAL)
+    #: How far from 1 the norm of a quaternion in a state may be: MuJoCo normalizes quaternions as it
+    #: integrates, so a saved one is within a few ulp of unit norm; 1e-6 only leaves room for a state
+    #: written by another MuJoCo build.
+    QUAT_NORM_TOL = 1e-6
+
+    def _state_parts(self, state: np.ndarray) -> dict[str, np.ndarray]:
+        """``state`` (of the right size) split into MuJoCo's components (in mjtState bit order) and the gains."""
+        m, parts, at = self.model, {}, 0
+        spec = int(self.STATE_SPEC)
+        for element in sorted((e for e in mujoco.mjtState.__members__.values()
+                               if int(e) & (int(e) - 1) == 0 and int(e) & spec), key=int):
+            n = int(mujoco.mj_stateSize(m, element))
+            parts[element.name.removeprefix("mjSTATE_").lower()] = state[at:at + n]
+            at += n
+        parts["servo_gains"] = state[at:]
+        return parts
+
+    def physics_state_problems(self, state) -> list[str]:
+        """Why ``state`` is not a physics state this model can have reached (every problem, each
+        naming the component, the index and the allowed range), or [] if it is one."""
+        try:
+            state = np.asarray(state, dtype=float)
+        except (TypeError, ValueError) as exc:
+            return [f"physics state is not an array of numbers ({exc})"]
         if state.shape != (self.physics_state_size(),):
-            raise ValueError(f"physics state has shape {state.shape}, this model needs ({self.physics_state_size()},)")
-        if not np.all(np.isfinite(state)):
-            raise ValueError("physics state has non-finite values")
+            return [f"physics state has shape {state.shape}, this model needs ({self.physics_state_size()},)"]
+        bound, problems = self.MAX_STATE_VALUE, []
+        parts = self._state_parts(state)
+        for name, values in parts.items():
+            bad = np.flatnonzero(~(np.abs(values) <= bound))  # also NaN
+            if bad.size:
+                problems.append(f"physics {name}[{bad[0]}] = {float(values[bad[0]])!r}: must be finite, in "
+                                f"[{-bound:g}, {bound:g}] ({bad.size} such value(s))")
+        if not parts["time"][0] >= 0.0:
+            problems.append(f"physics time = {float(parts['time'][0])!r}: must be >= 0")
+        m = self.model
+        free, ball = int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL)
+        for j in range(m.njnt):
+            kind = int(m.jnt_type[j])
+            if kind not in (free, ball):
+                continue
+            at = int(m.jnt_qposadr[j]) + (3 if kind == free else 0)
+            norm = float(np.linalg.norm(parts["qpos"][at:at + 4]))
+            if not abs(norm - 1.0) <= self.QUAT_NORM_TOL:
+                problems.append(f"physics qpos[{at}:{at + 4}] (quaternion of joint "
+                                f"{mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or j}) "
+                                f"has norm {norm!r}: must be 1 (within {self.QUAT_NORM_TOL:g})")
+        if "eq_active" in parts and not np.all((parts["eq_active"] == 0.0) | (parts["eq_active"] == 1.0)):
+            problems.append(f"physics eq_active = {parts['eq_active'].tolist()}: each must be 0 or 1")
+        gains = parts["servo_gains"]
+        if np.any(gains > 0.0):
+            problems.append(f"servo gains (-kp, -kd) = {gains.tolist()}: each must be <= 0")
+        return problems
+
+    def set_physics_state(self, state) -> None:
+        """Restore :meth:`physics_state`; ValueError naming every problem (nothing changed) unless
+        it is a state this model can have reached (:meth:`physics_state_problems`).  Derived
+        quantities (positions of bodies, contacts) are those of the last step until the next
+        step recomputes them, as after any ``mj_step``."""
+        problems = self.physics_state_problems(state)
+        if problems:
+            raise ValueError("invalid physics state: " + "; ".join(problems))
+        state = np.asarray(state, dtype=float)
         m, d = self.model, self.data
         n = int(mujoco.mj_stateSize(m, self.STATE_SPEC))
         mujoco.mj_setState(m, d, state[:n], self.STATE_SPEC)

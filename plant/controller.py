@@ -242,6 +242,65 @@ class NominalController:
                      "t_step_start", "tau", "vx_step_avg", "vy_filt", "vx_filt",
                      "_step_start_xy", "_swing_start", "_last_t", "yaw_ref")
 
+    #: The controller's modes, in the order it goes through them.
+    MODES = ("stand", "shift", "walk")
+    #: The largest step_index (the FMU's Integer output, a 32-bit int).
+    MAX_STEP_INDEX = 2**31 - 1
+
+    def memory_problems(self, memory: Mapping, time_s: float) -> list[str]:
+        """Why ``memory`` is not what :meth:`memory` can have returned at simulated time ``time_s``
+        (every problem, each naming the field and its allowed values), or [] if it is.
+
+        Numbers must be finite and at most ``CassiePhysics.MAX_STATE_VALUE`` in magnitude (MuJoCo's
+        own divergence bound), the mode and stance one of their values, the step times ordered
+        ``0 <= t_step_start <= _last_t <= time_s``, the phase in ``[0, switch_max_tau]``."""
+        bound = self.phys.MAX_STATE_VALUE
+        if not isinstance(memory, Mapping):
+            return [f"controller memory is a {type(memory).__name__}, not a table"]
+        problems = [f"controller memory lacks {n}" for n in self.MEMORY_FIELDS if n not in memory]
+        problems += [f"controller memory has an unknown field {n!r}" for n in memory if n not in self.MEMORY_FIELDS]
+        if problems:
+            return problems
+
+        def number(name, value, lo=-bound, hi=bound):
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not lo <= value <= hi:
+                problems.append(f"controller {name} = {value!r}: must be a finite number in [{lo:g}, {hi:g}]")
+                return False
+            return True
+
+        def pair(name, value, lo=-bound, hi=bound):
+            if not (isinstance(value, (list, tuple)) and len(value) == 2):
+                problems.append(f"controller {name} = {value!r}: must be two numbers")
+                return
+            for i, v in enumerate(value):
+                number(f"{name}[{i}]", v, lo, hi)
+
+        offsets = memory["offsets"]
+        if not (isinstance(offsets, Mapping) and set(offsets) == set(OFFSET_KEYS)):
+            problems.append(f"controller offsets = {offsets!r}: must have exactly the keys {', '.join(OFFSET_KEYS)}")
+        else:
+            for k in OFFSET_KEYS:
+                number(f"offsets[{k!r}]", offsets[k])
+        for name in ("vx_des", "vy_des", "cmd_vx", "cmd_vy", "yaw_rate_des", "cmd_yaw_rate", "vx_step_avg",
+                     "vy_filt", "vx_filt", "yaw_ref"):
+            number(name, memory[name])
+        if memory["mode"] not in self.MODES:
+            problems.append(f"controller mode = {memory['mode']!r}: must be one of {', '.join(map(repr, self.MODES))}")
+        if memory["stance"] not in SIDES:
+            problems.append(f"controller stance = {memory['stance']!r}: must be one of {', '.join(map(repr, SIDES))}")
+        step_index = memory["step_index"]
+        if isinstance(step_index, bool) or not isinstance(step_index, int) or not 0 <= step_index <= self.MAX_STEP_INDEX:
+            problems.append(f"controller step_index = {step_index!r}: must be an int in [0, {self.MAX_STEP_INDEX}]")
+        number("tau", memory["tau"], 0.0, self.p.switch_max_tau)
+        pair("_step_start_xy", memory["_step_start_xy"])
+        pair("_swing_start", memory["_swing_start"], -math.pi, math.pi)  # atan2 angles
+        if number("t_step_start", memory["t_step_start"], 0.0) and number("_last_t", memory["_last_t"], 0.0):
+            if not memory["t_step_start"] <= memory["_last_t"] <= time_s:
+                problems.append(f"controller t_step_start = {memory['t_step_start']!r}, _last_t = "
+                                f"{memory['_last_t']!r}: must satisfy 0 <= t_step_start <= _last_t <= the "
+                                f"simulated time {time_s!r}")
+        return problems
+
     def memory(self) -> dict:
         """The controller's memory as plain Python values (floats exact, arrays as lists)."""
         out = {}
@@ -259,12 +318,16 @@ class NominalController:
     def restore_memory(self, memory: Mapping) -> None:
         """Set the memory saved by :meth:`memory` (same library of gaits assumed).
 
-        Raises KeyError naming a missing field; the gait is looked up again for the
+        Raises KeyError naming a missing field and ValueError naming every invalid one
+        (:meth:`memory_problems`, against the physics' current time), nothing changed; the gait is looked up again for the
         saved gait speed (it is always ``lookup(vx_des, vy_des)``).
         """
         missing = [n for n in self.MEMORY_FIELDS if n not in memory]
         if missing:
             raise KeyError(f"controller memory lacks {', '.join(missing)}")
+        problems = self.memory_problems(memory, self.phys.time_s)
+        if problems:
+            raise ValueError("invalid controller memory: " + "; ".join(problems))
         for name in self.MEMORY_FIELDS:
             value = memory[name]
             if name == "_step_start_xy":

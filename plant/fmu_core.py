@@ -45,6 +45,14 @@ MODEL_FILES = {"menagerie": "menagerie/agility_cassie/scene.xml", "osu": "osu/ca
 #: A relative tolerance on "a whole number of plant steps" (the master's own rule is 1e-6
 #: of a plant step; any float h = k * 0.5 ms computed by a master is within 1e-12 of it).
 STEPS_TOL = 1e-6
+#: The longest communication step (s): 20,000 plant steps, 1.3 to 2 s of wall time on this
+#: project's 2-core machine (0.13 to 0.2 s per simulated second, alone or shared).  Nothing can
+#: stop a doStep once it runs: fmi2CancelStep is for asynchronous steps (canRunAsynchronuously is
+#: false), and neither the guard nor pythonfmu makes two threads' calls on one instance safe
+#: (fmi2Terminate or fmi2FreeInstance during a doStep would race on the instance).  So a longer
+#: step, which could run for hours, is refused (fmi2Error naming this maximum); a master takes
+#: several steps instead.
+MAX_STEP_S = 10.0
 
 
 def _p(name, default, lo, hi, unit, description, type="Real"):
@@ -189,14 +197,19 @@ def start(values: Mapping, models_dir: str | Path | None = None) -> CassieWalker
 
 
 def plant_steps(step_size_s: float) -> int | None:
-    """``step_size_s`` as a number of plant steps, or None unless it is a whole number >= 1."""
+    """``step_size_s`` as a number of plant steps, or None unless it is a whole number in
+    [1, MAX_STEP_S / PLANT_STEP_S]."""
     n = step_size_s / PLANT_STEP_S
-    if not (math.isfinite(n) and n >= 1.0 - STEPS_TOL and abs(n - round(n)) <= STEPS_TOL):
+    if not (math.isfinite(n) and n >= 1.0 - STEPS_TOL and abs(n - round(n)) <= STEPS_TOL
+            and step_size_s <= MAX_STEP_S):
         return None
     return int(round(n))
 
 
 def step_problem(step_size_s: float) -> str | None:
+    if not step_size_s <= MAX_STEP_S:  # also NaN
+        return (f"communicationStepSize = {step_size_s!r} s: exceeds the maximum communication step "
+                f"{MAX_STEP_S:g} s of this FMU (take several steps)")
     if plant_steps(step_size_s) is None:
         return (f"communicationStepSize = {step_size_s!r} s: must be a whole multiple of the plant step "
                 f"{PLANT_STEP_S} s")
@@ -265,12 +278,48 @@ def state_from_bytes(walker: CassieWalker, blob: bytes) -> None:
 
     StateError (the walker unchanged) when the blob is not such a state or does not fit.
     """
+    state = checked_state(walker, blob)
+    try:
+        walker.set_state(state)
+    except (ValueError, KeyError, TypeError) as exc:
+        raise StateError(f"CassiePlant walker state does not fit this plant: {exc}") from None
+
+
+def checked_state(walker: CassieWalker, blob: bytes) -> dict:
+    """The walker state in ``blob`` (:func:`state_to_bytes`) once it is one ``walker`` (built with the
+    same parameters) can have reached under this FMU (``CassieWalker.state_problems``, and the
+    command and offsets within the inputs' ranges); StateError naming every problem otherwise.
+    Nothing changes."""
     if len(blob) < _STATE_HEADER.size:
         raise StateError(f"plant state of {len(blob)} bytes is shorter than its header")
     magic, version, n = _STATE_HEADER.unpack_from(blob)
     if magic != _STATE_MAGIC or version != _STATE_VERSION or len(blob) != _STATE_HEADER.size + n:
         raise StateError(f"not a CassiePlant walker state (magic {magic!r}, version {version}, {len(blob)} bytes)")
     try:
-        walker.set_state(json.loads(blob[_STATE_HEADER.size:].decode("utf-8")))
-    except (ValueError, KeyError, TypeError) as exc:
-        raise StateError(f"CassiePlant walker state does not fit this plant: {exc}") from None
+        state = json.loads(blob[_STATE_HEADER.size:].decode("utf-8"))
+    except ValueError as exc:
+        raise StateError(f"CassiePlant walker state is not valid JSON ({exc})") from None
+    problems = walker.state_problems(state) or _command_problems(state)
+    if problems:
+        raise StateError("invalid CassiePlant walker state: " + "; ".join(problems))
+    return state
+
+
+#: The command and offsets a walker state holds, each with the input whose range it has (the
+#: controller's own copies too: its rate-limited gait speed and yaw rate lie between 0 and the
+#: command): a state outside them cannot come from this FMU.
+_STATE_INPUTS = (("walker", "vx_des_mps", "vx_des"), ("walker", "vy_des_mps", "vy_des"),
+                 ("walker", "yaw_rate_des_radps", "yaw_rate_des"),
+                 ("controller", "cmd_vx", "vx_des"), ("controller", "vx_des", "vx_des"),
+                 ("controller", "cmd_vy", "vy_des"), ("controller", "vy_des", "vy_des"),
+                 ("controller", "cmd_yaw_rate", "yaw_rate_des"), ("controller", "yaw_rate_des", "yaw_rate_des"))
+
+
+def _command_problems(state: Mapping) -> list[str]:
+    """The walker state's command and offsets outside the ranges of this FMU's inputs (the walker
+    has checked their types)."""
+    specs = {spec.name: spec for spec in INPUT_SPECS}
+    checks = [(f"{part} {field}", state[part][field], specs[name]) for part, field, name in _STATE_INPUTS]
+    checks += [(f"controller offsets[{k!r}]", state["controller"]["offsets"][k], specs[k]) for k in OFFSET_NAMES]
+    return [f"{label} = {value!r}: out of range [{spec.min:g}, {spec.max:g}] (the input {spec.name}'s)"
+            for label, value, spec in checks if not spec.min <= value <= spec.max]

@@ -25,6 +25,7 @@ benchmark all use it (the scenario suite has its own data flow in
 from __future__ import annotations
 
 import logging
+import math
 from typing import Mapping
 
 import mujoco
@@ -131,8 +132,9 @@ class CassieWalker:
     def set_state(self, state: Mapping) -> None:
         """Restore :meth:`get_state` of a walker on the same model and gaits.
 
-        Raises ValueError/KeyError/TypeError when the state does not fit; the walker is
-        then as it was.
+        Raises ValueError naming every problem (:meth:`state_problems`) when the state is not
+        one this walker can have reached, ValueError/KeyError/TypeError when it does not fit;
+        the walker is then as it was.
         """
         backup = self.get_state()
         try:
@@ -141,15 +143,43 @@ class CassieWalker:
             self._apply_state(backup)
             raise
 
+    #: The walker's own fields in a state (besides the physics and the controller's memory).
+    WALKER_FIELDS = ("substep", "fall_reason", "vx_des_mps", "vy_des_mps", "yaw_rate_des_radps")
+
+    def state_problems(self, state) -> list[str]:
+        """Why ``state`` is not what :meth:`get_state` of this walker can have returned (every
+        problem, each naming the field and its allowed values), or [] if it is: the physics
+        (``CassiePhysics.physics_state_problems``), the controller's memory
+        (``NominalController.memory_problems``) and the walker's own fields."""
+        if not (isinstance(state, Mapping) and set(state) == {"physics", "walker", "controller"}):
+            return ["walker state must be a table of exactly physics, walker and controller"]
+        walker = state["walker"]
+        if not (isinstance(walker, Mapping) and set(walker) == set(self.WALKER_FIELDS)):
+            return [f"walker fields must be exactly {', '.join(self.WALKER_FIELDS)}"]
+        problems = self.physics.physics_state_problems(state["physics"])
+        substep, sub = walker["substep"], self.params.control_substeps
+        if isinstance(substep, bool) or not isinstance(substep, int) or not 0 <= substep < sub:
+            problems.append(f"walker substep = {substep!r}: must be an int in [0, {sub})")
+        if not (walker["fall_reason"] is None or isinstance(walker["fall_reason"], str)):
+            problems.append(f"walker fall_reason = {walker['fall_reason']!r}: must be null or a text")
+        bound = self.physics.MAX_STATE_VALUE
+        for name in ("vx_des_mps", "vy_des_mps", "yaw_rate_des_radps"):
+            value = walker[name]
+            if isinstance(value, bool) or not isinstance(value, (int, float)) or not -bound <= value <= bound:
+                problems.append(f"walker {name} = {value!r}: must be a finite number in [{-bound:g}, {bound:g}]")
+        try:  # the controller's step times are ordered up to the physics' time
+            time_s = float(state["physics"][0])
+        except (TypeError, ValueError, IndexError, KeyError):
+            time_s = math.inf
+        return problems + self.controller.memory_problems(state["controller"], time_s)
+
     def _apply_state(self, state: Mapping) -> None:
+        problems = self.state_problems(state)
+        if problems:
+            raise ValueError("invalid walker state: " + "; ".join(problems))
         walker = state["walker"]
         substep = walker["substep"]
-        if not (isinstance(substep, int) and 0 <= substep < self.params.control_substeps):
-            raise ValueError(f"walker substep = {substep!r}: must be an int in [0, {self.params.control_substeps})")
-        missing = [n for n in self.controller.MEMORY_FIELDS if n not in state["controller"]]
-        if missing:
-            raise KeyError(f"controller memory lacks {', '.join(missing)}")
-        self.physics.set_physics_state(state["physics"])  # checks size and finiteness first
+        self.physics.set_physics_state(state["physics"])
         self.controller.restore_memory(state["controller"])
         self._substep = substep
         self._fall_reason = walker["fall_reason"]

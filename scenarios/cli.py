@@ -40,7 +40,7 @@ from fmu_src.avr_errors import AvrError
 from scenarios.errors import ScenarioError
 # load_build_module is re-exported: tests/conftest.py and the benchmarks import it from here
 from scenarios.fmus import (DEFAULT_FMU, REGULATOR_FMUS, REPO_ROOT, ensure_fmu, ensure_plant_fmu,  # noqa: F401
-                            fmu_version_problem, load_build_module)
+                            fmu_role_problem, fmu_version_problem, load_build_module)
 
 DEFAULT_OUT = Path("runs")
 
@@ -111,6 +111,7 @@ def _run_targets(args) -> tuple[list, list[str]]:
 def _run_problems(args, scenarios: list, mode: str) -> list[str]:
     """Everything ``run`` would fail on before simulating, beyond the scenarios themselves."""
     from scenarios import store
+    from scenarios.plantio import plant_fmu_problems
 
     problems = []
     if args.jobs < 1:
@@ -121,7 +122,14 @@ def _run_problems(args, scenarios: list, mode: str) -> list[str]:
     if args.fmu is not None and not Path(args.fmu).is_file():
         problems.append(f"--fmu {args.fmu}: no such file")
     elif args.fmu is not None and args.regulator in REGULATOR_FMUS:
-        problems += filter(None, [fmu_version_problem(args.regulator, Path(args.fmu))])
+        problems += filter(None, [fmu_version_problem(args.regulator, Path(args.fmu))
+                                  or fmu_role_problem("--fmu", Path(args.fmu), "regulator")])
+    if args.plant == "fmu":
+        if args.plant_fmu is not None and not Path(args.plant_fmu).is_file():
+            problems.append(f"--plant-fmu {args.plant_fmu}: no such file")
+        elif args.plant_fmu is not None:
+            problems += filter(None, [fmu_role_problem("--plant-fmu", Path(args.plant_fmu), "plant")])
+        problems += [f"{s.source or s.name}: {p} (--plant fmu)" for s in scenarios for p in plant_fmu_problems(s)]
     out_root = Path(args.out)
     out = store.out_problems(out_root)
     if not out and out_root.is_dir():

@@ -17,6 +17,11 @@ from scenarios.formatting import is_number, show
 #: Scenario, arm and campaign names: they name output folders and samples.
 NAME_RE = re.compile(r"^[a-z0-9][a-z0-9_\-]*$")
 NAME_PATTERN = "[a-z0-9][a-z0-9_-]*"
+#: Longest name: a name becomes file names (``DIR/<name>/``, ``.<name>.replaced-<pid>``,
+#: ``<arm>.mp4``), which file systems limit to 255 bytes; 100 leaves room for what is added.
+MAX_NAME_CHARS = 100
+#: Longest text of a value quoted in a problem (a huge list is shown cut, ending in ...).
+MAX_SHOWN_CHARS = 80
 #: How close a time must be to the grid (in grid steps) to count as on it.
 GRID_TOL_STEPS = 1e-6
 #: difflib similarity a misspelt key needs to be offered as "did you mean".
@@ -30,10 +35,31 @@ class Problems:
         self.items: list[str] = []
 
     def add(self, field: str, value: Any, why: str) -> None:
-        self.items.append(f"{field} = {show(value)}: {why}")
+        self.items.append(f"{field} = {shown(value)}: {why}")
 
     def note(self, field: str, why: str) -> None:
         self.items.append(f"{field}: {why}")
+
+
+def shown(value: Any) -> str:
+    """``value`` as a problem quotes it, cut to :data:`MAX_SHOWN_CHARS`; a list or table
+    is written only as far as it is shown (a 10^6-element list costs nothing)."""
+    if isinstance(value, (list, tuple)) and len(value) > MAX_SHOWN_CHARS:
+        value = list(value[:MAX_SHOWN_CHARS])
+    text = show(value)
+    return text if len(text) <= MAX_SHOWN_CHARS else text[:MAX_SHOWN_CHARS - 3] + "..."
+
+
+def as_finite(v: Any) -> float | None:
+    """A number (not a bool) as a finite double, or None (an int beyond the doubles'
+    range, inf, nan, anything else)."""
+    if not is_number(v):
+        return None
+    try:
+        f = float(v)
+    except OverflowError:
+        return None
+    return f if math.isfinite(f) else None
 
 
 def did_you_mean(word: str, known: Iterable[str], otherwise: str, cutoff: float = HINT_CUTOFF) -> str:
@@ -65,10 +91,10 @@ def number(table, key, field, probs, *, required=False, default=None, gt=None, g
     if not is_number(v):
         probs.add(field, v, "must be a number")
         return default
-    v = float(v)
-    if not math.isfinite(v):
-        probs.add(field, v, "must be finite")
+    if as_finite(v) is None:
+        probs.add(field, v, "must be finite" if isinstance(v, float) else "must be a finite number (within +-1.8e308)")
         return default
+    v = float(v)
     ok = True
     for bound, holds, op in ((gt, lambda b: v > b, ">"), (ge, lambda b: v >= b, ">="),
                              (le, lambda b: v <= b, "<="), (lt, lambda b: v < b, "<")):
@@ -106,6 +132,8 @@ def name(table, key, field, probs, why: str) -> str:
     v = string(table, key, field, probs, required=True)
     if isinstance(table.get(key), str) and not NAME_RE.match(v):
         probs.add(field, v, f"must match {NAME_PATTERN}{why}")
+    elif len(v) > MAX_NAME_CHARS:
+        probs.add(field, v, f"is {len(v)} characters long; at most {MAX_NAME_CHARS}{why}")
     return v
 
 
@@ -116,7 +144,7 @@ def vec3(table, key, field, probs, *, default=None):
     if not isinstance(v, list) or len(v) != 3 or not all(is_number(x) for x in v):
         probs.add(field, v, "must be a list of 3 numbers [x, y, z]")
         return default
-    if not all(math.isfinite(float(x)) for x in v):
+    if not all(as_finite(x) is not None for x in v):
         probs.add(field, v, "must be finite")
         return default
     return (float(v[0]), float(v[1]), float(v[2]))

@@ -86,6 +86,41 @@ def fmu_version_problem(regulator: str, fmu: Path) -> str | None:
     return None
 
 
+def _role_variables(role: str) -> tuple[str, dict[str, tuple[str, ...]]]:
+    """(what the role is, in words; the variables by causality the master sets or reads)."""
+    if role == "plant":
+        from plant import fmu_core
+
+        return "the CassiePlant FMU", {"input": fmu_core.INPUT_NAMES,
+                                      "output": tuple(s.name for s in fmu_core.OUTPUT_SPECS)}
+    from plant.constants import OFFSET_NAMES
+    from scenarios.master import SENSED_INPUTS
+
+    return "a regulator FMU (AdaptiveVelocityRegulator)", {"input": ("vx_des", "vy_des", *SENSED_INPUTS),
+                                                           "output": tuple(OFFSET_NAMES)}
+
+
+def fmu_role_problem(flag: str, fmu: Path, role: str) -> str | None:
+    """What is wrong with running ``fmu`` (given as ``flag``) as the ``role`` (``regulator``
+    or ``plant``): an unreadable file, or a model without the inputs and outputs the
+    master sets and reads for that role (e.g. a CassiePlant FMU given as the regulator)."""
+    from fmpy import read_model_description
+
+    try:
+        md = read_model_description(str(fmu))
+    except Exception as exc:
+        return f"{flag} {fmu}: not a readable FMU ({type(exc).__name__}: {exc})"
+    what, needed = _role_variables(role)
+    have = {(v.causality, v.name) for v in md.modelVariables}
+    missing = [f"{c} {n}" for c, names in needed.items() for n in names if (c, n) not in have]
+    if not missing:
+        return None
+    other = {"regulator": " (a CassiePlant FMU goes to --plant-fmu)",
+             "plant": " (a regulator FMU goes to --fmu)"}[role]
+    shown = ", ".join(missing[:4]) + (f" and {len(missing) - 4} more" if len(missing) > 4 else "")
+    return (f"{flag} {fmu}: model {md.modelName!r} is not {what}: it has no {shown}; {flag} takes {what}{other}")
+
+
 def ensure_fmu(fmu: Path | None, *, rebuild: bool = False, regulator: str = "fmu") -> Path:
     """The regulator FMU of ``--regulator regulator`` (:data:`REGULATOR_FMUS`): ``fmu`` if
     given, else its default file in ``dist/``, built from ``fmu_src/`` and ``build.py``."""

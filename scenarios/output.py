@@ -23,6 +23,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import logging
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -307,9 +308,30 @@ class _Kind:
         self.ok, self.allowed, self.items, self.keys, self.required = ok, allowed, items, keys, required
 
 
-NUM = _Kind(is_number, "a number")
+def _finite(v: Any) -> bool:
+    """A JSON number (not a bool) that is a finite double: an int beyond the doubles'
+    range cannot be formatted as one, NaN and infinities are no measurement."""
+    if not is_number(v):
+        return False
+    try:
+        return math.isfinite(float(v))
+    except OverflowError:
+        return False
+
+
+def _num(ge: float | None = None, gt: float | None = None) -> _Kind:
+    """A finite number, ``>= ge`` or ``> gt`` if given."""
+    if ge is not None:
+        return _Kind(lambda v: _finite(v) and v >= ge, f"a finite number >= {ge:g}")
+    if gt is not None:
+        return _Kind(lambda v: _finite(v) and v > gt, f"a finite number > {gt:g}")
+    return _Kind(_finite, "a finite number")
+
+
+NUM = _num()
 INT = _Kind(lambda v: isinstance(v, int) and not isinstance(v, bool), "an integer")
 STR = _Kind(lambda v: isinstance(v, str), "a string")
+BOOL = _Kind(lambda v: isinstance(v, bool), "true or false")
 ANY_OBJECT = _Kind(lambda v: isinstance(v, dict), "an object")
 
 
@@ -335,35 +357,49 @@ def _map(item: _Kind) -> _Kind:
     return _Kind(lambda v: isinstance(v, dict) and all(isinstance(k, str) for k in v), "an object", items=item)
 
 
-_METRIC = _Kind(lambda v: v is None or isinstance(v, bool) or is_number(v), "a number, true/false or null")
-_VEC3 = _Kind(lambda v: isinstance(v, list) and len(v) == 3 and all(map(is_number, v)), "a list of 3 numbers")
-_ARM = _obj("status", status=_one_of(*ARM_STATUSES), error=_opt(STR), fall_reason=_opt(STR),
-            **{k: _METRIC for k in (*CHECKABLE_METRICS, "wall_s", "realtime_factor", "sim_s")})
+_METRIC = _Kind(lambda v: v is None or isinstance(v, bool) or _finite(v), "a finite number, true/false or null")
+_VEC3 = _Kind(lambda v: isinstance(v, list) and len(v) == 3 and all(map(_finite, v)), "a list of 3 finite numbers")
+_TIME = _num(ge=0.0)
+#: Each metric's kind: errors, times and extents are >= 0 (null: not measured).
+_METRICS = {**{k: _METRIC for k in CHECKABLE_METRICS}, "fell": _opt(BOOL),
+            **{k: _opt(_num(ge=0.0)) for k in ("t_fall_s", "steady_state_error_vx", "steady_state_error_vy",
+                                                "steady_state_error_vy_stride", "steady_state_error_yaw_rate",
+                                                "run_error_vx", "convergence_time_s", "max_abs_pitch_rad",
+                                                "max_abs_roll_rad", "wall_s", "realtime_factor", "sim_s")}}
+_ARM = _obj("status", status=_one_of(*ARM_STATUSES), error=_opt(STR), fall_reason=_opt(STR), **_METRICS,
+            level_errors_vx=_list(_obj("t_s", "vx_des", t_s=_TIME, vx_des=NUM, error_vx=_opt(_num(ge=0.0)))))
 #: What the CLI and the report read from a summary.json, key by key (the required ones
-#: first); any other key may be missing, but not wrong.
+#: first), with the ranges the writer's values have; any other key may be missing, but
+#: not wrong.
 SUMMARY_SCHEMA = _obj(
     "scenario", "status", "arm_names", "arms",
     scenario=STR, description=_opt(STR), source=_opt(STR), tags=_list(STR), model=STR, regulator=STR,
-    duration_s=NUM, comm_step_s=NUM, seed=INT, perturbation_t_s=NUM, arm_names=_list(STR),
-    commands=_list(_Kind(lambda v: isinstance(v, list) and len(v) in (3, 4) and all(map(is_number, v)),
-                         "a list [t_s, vx_des, vy_des, yaw_rate_des] of numbers (older runs: no yaw_rate_des)")),
-    perturbation=_obj(torso_mass_kg=_opt(NUM), torso_added_mass_kg=_opt(NUM), torso_com_offset_m=_VEC3,
-                      joint_damping_scale=NUM,
-                      pushes=_list(_obj("t_s", "force_n", "duration_s", t_s=NUM, force_n=_VEC3, duration_s=NUM)),
-                      terrain=_opt(_obj("max_height_m", "max_slope_deg", "seed", max_height_m=NUM, max_slope_deg=NUM,
-                                        seed=INT, size_m=NUM, flat_radius_m=NUM))),
+    duration_s=_num(gt=0.0), comm_step_s=_num(gt=0.0), seed=INT, perturbation_t_s=_TIME, arm_names=_list(STR),
+    commands=_list(_Kind(lambda v: isinstance(v, list) and len(v) in (3, 4) and all(map(_finite, v))
+                         and v[0] >= 0,
+                         "a list [t_s, vx_des, vy_des, yaw_rate_des] of finite numbers, t_s >= 0 (older runs: "
+                         "no yaw_rate_des)")),
+    perturbation=_obj(torso_mass_kg=_opt(_num(gt=0.0)), torso_added_mass_kg=_opt(NUM), torso_com_offset_m=_VEC3,
+                      joint_damping_scale=_num(ge=0.0),
+                      pushes=_list(_obj("t_s", "force_n", "duration_s", t_s=_TIME, force_n=_VEC3,
+                                        duration_s=_num(gt=0.0))),
+                      terrain=_opt(_obj("max_height_m", "max_slope_deg", "seed", max_height_m=_num(gt=0.0),
+                                        max_slope_deg=_num(gt=0.0), seed=INT, size_m=_num(gt=0.0),
+                                        flat_radius_m=_num(ge=0.0)))),
     claim=_opt(_obj(text=STR, source=_opt(STR), checks=_list(_obj("arm", "metric", "op",
         arm=STR, metric=_one_of(*CHECKABLE_METRICS), op=_one_of(*CHECK_OPS),
         value=_METRIC, other_arm=_opt(STR))))),
     status=_one_of("complete", "failed", "interrupted"), error=_opt(STR), arms=_map(_ARM),
-    model_summary=_obj(pelvis_mass_kg=_opt(NUM), pelvis_com_m=_opt(_VEC3), total_mass_kg=NUM),
+    model_summary=_obj(pelvis_mass_kg=_opt(_num(gt=0.0)), pelvis_com_m=_opt(_VEC3), total_mass_kg=_num(gt=0.0)),
     verdict=ANY_OBJECT, plots=_list(_one_of(*PLOTS)),
     videos=_list(_Kind(lambda v: isinstance(v, str) and is_result_file(v) and v not in RESULT_FILES,
                        "a file name <arm>.mp4 or <arm>.gif")),
 )
+
+
 def _check(value: Any, kind: _Kind, where: str, problems: list[str]) -> None:
     if not kind.ok(value):
-        problems.append(f"{where} = {json.dumps(value)[:60]}: must be {kind.allowed}")
+        problems.append(f"{where} = {_quoted(value)}: must be {kind.allowed}")
         return
     if kind.keys is not None and isinstance(value, dict):
         problems.extend(f"{where}.{k}: required" if where else f"{k}: required"
@@ -375,6 +411,14 @@ def _check(value: Any, kind: _Kind, where: str, problems: list[str]) -> None:
         pairs = value.items() if isinstance(value, dict) else enumerate(value)
         for k, item in pairs:
             _check(item, kind.items, f"{where}.{k}" if isinstance(value, dict) else f"{where}[{k}]", problems)
+
+
+def _quoted(value: Any) -> str:
+    """``value`` as JSON, cut to 60 characters."""
+    try:
+        return json.dumps(value)[:60]
+    except (ValueError, RecursionError):  # an int Python does not write (> 4300 digits), a deep value
+        return f"(a {type(value).__name__} that cannot be shown)"
 
 
 def summary_problems(data: Any) -> list[str]:

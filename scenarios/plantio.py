@@ -132,3 +132,84 @@ def _shared_model(model: str, stamp: tuple | None, pert: "Perturbation | None") 
     compiled = load_model(model, pert)
     log.info("model %s, perturbation %s: compiled (shared in this process)", model, pert)
     return compiled, model_summary(compiled)
+
+
+# --------------------------------------------------------------------------- the plant FMU's ranges
+#: The scenario field each CassiePlant FMU parameter carries (named in problems).
+FMU_FIELDS = {"torso_mass_kg": "torso_mass_kg", "joint_damping_scale": "joint_damping_scale",
+              **{f"torso_com_offset_{a}_m": f"torso_com_offset_m[{a}]" for a in "xyz"},
+              **{f"terrain_{k}": f"terrain.{k}" for k in ("max_height_m", "max_slope_deg", "seed", "size_m")},
+}
+
+
+def _outside(spec, value) -> bool:
+    return (spec.min is not None and value < spec.min) or (spec.max is not None and value > spec.max)
+
+
+def _range(spec) -> str:
+    return f"[{spec.min:g}, {spec.max:g}]" if isinstance(spec.min, float) else f"[{spec.min}, {spec.max}]"
+
+
+def plant_parameter_problems(torso_mass_kg: float | None, torso_added_mass_kg: float | None,
+                             torso_com_offset_m, joint_damping_scale: float,
+                             terrain: dict[str, Any] | None) -> list[tuple[str, Any, str]]:
+    """``(field, value, why)`` for every perturbation value outside the range the
+    CassiePlant FMU declares for its parameter (``plant.fmu_core.PARAM_SPECS``, the one
+    source of those ranges; on the plant's nominal pelvis mass). For values the plant's
+    own checks (:func:`perturbation_problems`) accept: a scenario valid here runs on
+    either plant."""
+    from plant import fmu_core
+
+    pert = _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale, terrain,
+                         None)
+    values = fmu_core.values_from_perturbation("menagerie", None if pert.is_nominal else pert)
+    out: list[tuple[str, Any, str]] = []
+    for spec in fmu_core.PARAM_SPECS:
+        value = values.get(spec.name)
+        if spec.min is not None and value is not None and _outside(spec, value):
+            out.append((FMU_FIELDS.get(spec.name, spec.name), value,
+                        f"must be in {_range(spec)} (the plant's parameter {spec.name})"))
+    return out
+
+
+def plant_input_problems(scenario: "Scenario") -> list[tuple[str, Any, str]]:
+    """``(field, value, why)`` for every command value, and every sum of the pushes in force
+    together, outside the range the CassiePlant FMU declares for that input
+    (``plant.fmu_core.INPUT_SPECS``)."""
+    from plant import fmu_core
+
+    inputs = {s.name: s for s in fmu_core.INPUT_SPECS}
+    out: list[tuple[str, Any, str]] = []
+    for i, point in enumerate(scenario.commands):
+        for name in ("vx_des", "vy_des", "yaw_rate_des"):
+            spec = inputs.get(name)
+            if spec is not None and _outside(spec, getattr(point, name)):
+                out.append((f"command[{i}].{name}", getattr(point, name),
+                            f"must be in {_range(spec)} (the plant's input {name})"))
+    for k in scenario.push_switch_steps:
+        for axis, f in zip("xyz", scenario.push_force_at_step(k)):
+            spec = inputs.get(f"push_f{axis}")
+            if spec is not None and _outside(spec, f):
+                out.append((f"push (sum along {axis} at t = {k * scenario.comm_step_s:g} s)", f,
+                            f"the pushes in force together must be in {_range(spec)} N (the plant's input "
+                            f"push_f{axis})"))
+    return out
+
+
+def plant_fmu_problems(scenario: "Scenario") -> list[str]:
+    """Why ``scenario``'s plant cannot be the CassiePlant FMU (``--plant fmu``): a model
+    the FMU does not hold, or a value the FMU has no parameter for (it would silently run
+    another plant). Its ranges are checked on every scenario (:func:`plant_parameter_problems`,
+    :func:`plant_input_problems`)."""
+    from plant import fmu_core
+
+    if scenario.model not in fmu_core.MODEL_FILES:
+        return [f"model = {scenario.model!r}: the CassiePlant FMU holds {', '.join(fmu_core.MODEL_FILES)} only; "
+                "an MJCF path needs --plant inprocess"]
+    pert = build_perturbation(scenario, None)
+    if pert is None or pert.terrain is None:
+        return []
+    carried = fmu_core.perturbation_from_values(fmu_core.values_from_perturbation(scenario.model, pert)).terrain
+    return [f"terrain.{f.name} = {getattr(pert.terrain, f.name)!r}: the CassiePlant FMU has no parameter for it "
+            f"(it uses {getattr(carried, f.name)!r}); --plant inprocess runs it"
+            for f in dataclasses.fields(pert.terrain) if getattr(pert.terrain, f.name) != getattr(carried, f.name)]

@@ -5,6 +5,8 @@ Times are on the communication grid; the schedule is read by integer step counte
 """
 from __future__ import annotations
 
+import bisect
+import functools
 from dataclasses import dataclass
 from typing import Any
 
@@ -138,26 +140,71 @@ class Scenario:
 
     def command_at_step(self, k: int) -> tuple[float, float, float]:
         """The command (vx_des, vy_des, yaw_rate_des) in force over communication step
-        ``k`` (piecewise constant)."""
-        cmd = self.commands[0]
-        for point in self.commands:
-            if to_step(point.t_s, self.comm_step_s) <= k:
-                cmd = point
-            else:
-                break
+        ``k`` (piecewise constant): the last point of the schedule, read in order up to the
+        first one that starts after ``k``, that starts at or before ``k`` (the first point
+        before any). O(log n): a bisection over the points' running-maximum start steps."""
+        starts, points = self._command_index
+        cmd = points[max(bisect.bisect_right(starts, k) - 1, 0)]
         return cmd.vx_des, cmd.vy_des, cmd.yaw_rate_des
 
     def push_force_at_step(self, k: int) -> tuple[float, float, float]:
-        """Sum of the pushes active over communication step ``k``."""
-        fx = fy = fz = 0.0
-        for p in self.pushes:
+        """Sum of the pushes active over communication step ``k`` (push ``p`` is active over
+        steps ``[k0, k0 + n)``), added from 0.0 in the file's order. O(log n): a bisection
+        over the steps where the set of active pushes changes, each segment's sum computed
+        once, the first time it is asked for."""
+        bounds, sums, active = self._push_index
+        i = bisect.bisect_right(bounds, k) - 1
+        if i < 0:
+            return (0.0, 0.0, 0.0)
+        if sums[i] is None:
+            fx = fy = fz = 0.0
+            for j in active[i]:
+                f = self.pushes[j].force_n
+                fx += f[0]
+                fy += f[1]
+                fz += f[2]
+            sums[i] = (fx, fy, fz)
+        return sums[i]
+
+    @property
+    def push_switch_steps(self) -> list[int]:
+        """The steps at which the pushes in force change (their sum is constant in between)."""
+        return self._push_index[0]
+
+    @functools.cached_property
+    def _command_index(self) -> tuple[list[int], tuple[CommandPoint, ...]]:
+        """(running maximum of the points' start steps, the points): the first point
+        starting after ``k`` is the first whose running maximum exceeds ``k``, which is
+        where a linear scan of the schedule stops."""
+        starts, top = [], None
+        for point in self.commands:
+            step = to_step(point.t_s, self.comm_step_s)
+            top = step if top is None else max(top, step)
+            starts.append(top)
+        return starts, self.commands
+
+    @functools.cached_property
+    def _push_index(self) -> tuple[list[int], list, list[tuple[int, ...]]]:
+        """(the steps where the active set changes, each segment's force, filled in when
+        first asked for, and the pushes active over each segment in file order)."""
+        spans = []
+        for j, p in enumerate(self.pushes):
             k0 = to_step(p.t_s, self.comm_step_s)
-            k1 = k0 + to_step(p.duration_s, self.comm_step_s)
-            if k0 <= k < k1:
-                fx += p.force_n[0]
-                fy += p.force_n[1]
-                fz += p.force_n[2]
-        return (fx, fy, fz)
+            spans.append((k0, k0 + to_step(p.duration_s, self.comm_step_s), j))
+        bounds = sorted({k for k0, k1, _ in spans if k0 < k1 for k in (k0, k1)})
+        starts: dict[int, list[int]] = {}
+        ends: dict[int, list[int]] = {}
+        for k0, k1, j in spans:
+            if k0 < k1:
+                starts.setdefault(k0, []).append(j)
+                ends.setdefault(k1, []).append(j)
+        active: list[tuple[int, ...]] = []
+        now: set[int] = set()
+        for b in bounds:
+            now.difference_update(ends.get(b, ()))
+            now.update(starts.get(b, ()))
+            active.append(tuple(sorted(now)))
+        return bounds, [None] * len(bounds), active
 
     def arm(self, name: str) -> Arm:
         for a in self.arms:

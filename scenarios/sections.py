@@ -45,6 +45,9 @@ MAX_ABS_VY_DES = 1.0
 #: Yaw-rate command bound, rad/s (the walker's gaits are calibrated within +-0.5 rad/s).
 MAX_ABS_YAW_RATE_DES = 1.0
 MAX_PUSH_FORCE_N = 2000.0
+#: Most [[command]] or [[push]] entries a file may hold: one every 36 ms over the longest
+#: run (MAX_DURATION_S); the master looks each step's up in O(log n) (scenarios.scenario).
+MAX_SCHEDULE_POINTS = 100_000
 ARM_DESCRIPTIONS = {"adaptive": "all Psi outputs, adaptation on", "pd_only": "adaptation off (PD terms only)",
                     "rl_hzd": "RL-HZD policy: ARS-trained on the nominal model, fixed (scenarios/rl_hzd)"}
 
@@ -64,9 +67,13 @@ class Grid:
             probs.add(field, t, f"must be on the communication grid (a multiple of {self.h:g} s)")
 
     def check_span(self, dt: float | None, field: str, probs: Problems) -> None:
-        """``dt`` a whole number of communication steps."""
-        if dt is not None and self.ok and not on_grid(dt, self.h):
+        """``dt`` a whole number of communication steps, at least one."""
+        if dt is None or not self.ok:
+            return
+        if not on_grid(dt, self.h):
             probs.add(field, dt, f"must be a whole number of communication steps ({self.h:g} s)")
+        elif round(dt / self.h) < 1:
+            probs.add(field, dt, f"must be at least one communication step ({self.h:g} s)")
 
     def check_before_end(self, t: float | None, field: str, probs: Problems) -> None:
         """``t`` before the end of the run."""
@@ -127,10 +134,19 @@ def _grid(doc: Mapping[str, Any], probs: Problems) -> Grid:
 
 
 # --------------------------------------------------------------------------- schedule
+def _schedule(doc: Mapping[str, Any], key: str, probs: Problems) -> list[dict]:
+    """The ``[[key]]`` tables, at most :data:`MAX_SCHEDULE_POINTS` of them (else none are read)."""
+    tables = table_list(doc, key, key, probs)
+    if len(tables) > MAX_SCHEDULE_POINTS:
+        probs.note(key, f"{len(tables)} [[{key}]] entries; at most {MAX_SCHEDULE_POINTS}")
+        return []
+    return tables
+
+
 def commands(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> tuple[CommandPoint, ...]:
     """The piecewise-constant command schedule: the first at t = 0, times increasing."""
     out: list[CommandPoint] = []
-    tables = table_list(doc, "command", "command", probs)
+    tables = _schedule(doc, "command", probs)
     if doc.get("command", []) == []:  # absent, or `command = []`
         probs.note("command", "required: at least one [[command]] with t_s = 0")
     for i, c in enumerate(tables):
@@ -157,7 +173,7 @@ def commands(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> tuple[Comma
 def pushes(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> tuple[Push, ...]:
     """Constant pelvis forces on the communication grid, within the run."""
     out: list[Push] = []
-    for i, p in enumerate(table_list(doc, "push", "push", probs)):
+    for i, p in enumerate(_schedule(doc, "push", probs)):
         f = f"push[{i}]"
         unknown_keys(p, PUSH_KEYS, f + ".", probs)
         t = number(p, "t_s", f + ".t_s", probs, required=True, ge=0.0)
@@ -190,10 +206,14 @@ def perturbation(doc: Mapping[str, Any], probs: Problems) -> dict[str, Any]:
         probs.note("torso_added_mass_kg", "give torso_mass_kg (absolute) or torso_added_mass_kg, not both")
     values, out["terrain"] = _terrain(doc, probs)
     unreadable = [f"terrain.{k}=" for k, v in values.items() if v is None]  # already reported
-    for p in plantio.perturbation_problems(**{k: v for k, v in out.items() if k != "terrain"},
-                                           terrain=values or None):
+    plant_values = {k: v for k, v in out.items() if k != "terrain"}
+    found = plantio.perturbation_problems(**plant_values, terrain=values or None)
+    for p in found:
         if not p.startswith(tuple(unreadable)):
             probs.note("perturbation", p)
+    if not found:  # the plant FMU's ranges, on values the plant itself accepts
+        for field, value, why in plantio.plant_parameter_problems(**plant_values, terrain=values or None):
+            probs.add(field, value, why)
     return out
 
 

@@ -13,7 +13,8 @@ regulator core (``params_from_overrides``), perturbation and terrain ranges by t
 plant (``Perturbation.problems``); the time grid, the schedule and the arms here.
 Every problem in a file is collected and reported at once (``ScenarioError.problems``),
 each naming its field, e.g. ``push[1].duration_s = -0.1: must be > 0``; a file that
-cannot be read (missing, a directory, not UTF-8) is one problem naming it. Scenario
+cannot be read (missing, not a regular file, larger than 16 MiB, not UTF-8, nested
+too deeply: :mod:`scenarios.tomlfile`) is one problem naming it. Scenario
 names must be unique within a run (:func:`distinct`): the name is the output folder.
 
 Layout of a file (every key below is known; anything else is an error)::
@@ -76,17 +77,17 @@ reuse a built-in name, and every defined arm must be listed in ``compare`` when
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from pathlib import Path
 from typing import Any, Mapping
 
 from scenarios import plantio, sections
 from scenarios.errors import ScenarioError
-from scenarios.fields import Problems, did_you_mean, number, on_grid
+from scenarios.fields import Problems, did_you_mean, number
 # the scenario model is re-exported: callers build and read scenarios as spec.Scenario, spec.Push, ...
 from scenarios.scenario import (Arm, Claim, ClaimCheck, CommandPoint, Push, Scenario, Terrain,  # noqa: F401
                                 DEFAULT_COMM_STEP_S, BUILTIN_MODELS)
 from scenarios.sections import resolve_model
+from scenarios.tomlfile import depth_problem, read_toml
 
 SUITE_DIR = Path(__file__).resolve().parent / "suite"
 #: A suite name typed on the command line is offered as "did you mean" from this similarity.
@@ -102,6 +103,9 @@ def parse_scenario(doc: Mapping[str, Any], source: str | None = None, *, base_di
     model parses safely, compiles and is a Cassie, and the perturbation is valid on it
     (:func:`scenarios.plantio.check_plant`).
     """
+    too_deep = depth_problem(doc)  # before any reader walks the values
+    if too_deep:
+        raise ScenarioError([too_deep], source=source)
     probs = Problems()
     head, grid = sections.header(doc, base_dir, probs)
     plant = sections.perturbation(doc, probs)
@@ -111,7 +115,9 @@ def parse_scenario(doc: Mapping[str, Any], source: str | None = None, *, base_di
     scenario = None
     if not probs.items:
         scenario = Scenario(**head, **plant, **schedule, arms=arms, claim=claim, source=source)
-        if check_plant:
+        for field, value, why in plantio.plant_input_problems(scenario):
+            probs.add(field, value, why)
+        if check_plant and not probs.items:
             _check_plant(scenario, probs)
     if probs.items:
         raise ScenarioError(probs.items, source=source)
@@ -136,8 +142,7 @@ def override(scenario: Scenario, *, model: str | None = None, duration_s: float 
     if duration_s is not None:
         d = number({"duration_s": duration_s}, "duration_s", "--duration", probs, gt=0.0,
                    le=sections.MAX_DURATION_S)
-        if d is not None and not on_grid(d, scenario.comm_step_s):
-            probs.add("--duration", d, f"must be a whole number of communication steps ({scenario.comm_step_s:g} s)")
+        sections.Grid(scenario.comm_step_s, True, d).check_span(d, "--duration", probs)
         changes["duration_s"] = d
     if not probs.items and changes:
         scenario = dataclasses.replace(scenario, **changes)
@@ -151,20 +156,7 @@ def override(scenario: Scenario, *, model: str | None = None, duration_s: float 
 def load_scenario(path: str | Path, *, check_plant: bool = True) -> Scenario:
     """Read and validate one scenario file (every problem reported at once)."""
     path = Path(path)
-    try:
-        with open(path, "rb") as fh:
-            doc = tomllib.load(fh)
-    except FileNotFoundError:
-        raise ScenarioError([f"file not found: {path}"], source=str(path)) from None
-    except IsADirectoryError:
-        raise ScenarioError(["is a directory, not a scenario file"], source=str(path)) from None
-    except OSError as exc:
-        raise ScenarioError([f"cannot read: {exc.strerror or exc}"], source=str(path)) from None
-    except UnicodeDecodeError as exc:
-        raise ScenarioError([f"not UTF-8 text (TOML files must be UTF-8): byte {exc.object[exc.start]:#04x} "
-                             f"at offset {exc.start}"], source=str(path)) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError([f"TOML syntax error: {exc}"], source=str(path)) from None
+    doc = read_toml(path, "scenario file")
     return parse_scenario(doc, source=str(path), base_dir=path.parent, check_plant=check_plant)
 
 

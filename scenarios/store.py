@@ -79,12 +79,24 @@ def out_problems(root: Path) -> list[str]:
 
 def read_summary(path: Path) -> tuple[dict[str, Any] | None, list[str]]:
     """A summary.json and its problems (:func:`scenarios.output.summary_problems`)."""
+    from scenarios.errors import ScenarioError
+    from scenarios.tomlfile import depth_problem, read_regular_file
+
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = json.loads(read_regular_file(path, "summary.json").decode("utf-8"))
+    except ScenarioError as exc:  # not a regular file, or too large
+        return None, list(exc.problems)
     except (OSError, UnicodeDecodeError) as exc:
         return None, [f"cannot read: {getattr(exc, 'strerror', None) or exc}"]
     except json.JSONDecodeError as exc:
         return None, [f"not valid JSON: {exc}"]
+    except ValueError as exc:  # an integer of more than 4300 digits
+        return None, [f"a value Python does not read: {exc}"]
+    except RecursionError:
+        return None, ["not readable: nested too deeply"]
+    too_deep = depth_problem(data)
+    if too_deep:
+        return None, [too_deep]
     problems = output.summary_problems(data)
     return (None if problems else data), problems
 

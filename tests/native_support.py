@@ -5,6 +5,7 @@ from conftest.py (``built_fmu``, ``native_fmus``, ``regulator_fmu``).
 """
 from __future__ import annotations
 
+import itertools
 import subprocess
 import sys
 import tempfile
@@ -37,6 +38,14 @@ MINGW_CC = Path("/usr/bin/x86_64-w64-mingw32-gcc")
 WINE = Path("/usr/lib/wine/wine64")
 READELF = Path("/usr/bin/readelf")
 MINGW_OBJDUMP = Path("/usr/bin/x86_64-w64-mingw32-objdump")
+#: Linux aarch64: the cross compiler (Debian gcc-aarch64-linux-gnu, with its C library in
+#: AARCH64_SYSROOT) and the user-mode emulator that runs its programs here (Debian qemu-user).
+AARCH64_CC = Path("/usr/bin/aarch64-linux-gnu-gcc")
+AARCH64_SYSROOT = Path("/usr/aarch64-linux-gnu")
+QEMU_AARCH64 = Path("/usr/bin/qemu-aarch64")
+#: The plain C FMI 3.0 host (tests/native/fmi3_host.c, the same scripts as fmi2_host.c) and its headers.
+C_HOST3 = NATIVE_DIR / "fmi3_host.c"
+FMI3_INCLUDE = FMI2_INCLUDE.parent / "fmi3"
 
 
 def require(tool: Path) -> Path:
@@ -63,10 +72,34 @@ def unzipped(fmu_path) -> str:
     return extract(str(fmu_path), unzipdir=tempfile.mkdtemp(prefix="unzip_", dir=Path(fmu_path).parent))
 
 
+def logged_slave(fmu_path, messages: list, name="avr") -> "AnySlave":
+    """An AnySlave whose log messages (text) are appended to ``messages`` (FMI 2.0 or 3.0)."""
+    return AnySlave(fmu_path, name=name, messages=messages)
+
+
+#: Instance numbers of the logged slaves (their FMI 3.0 instanceEnvironment; above the scenarios' own).
+_LOGGED_NUMBERS = itertools.count(1_000_000)
+
+
+def _instantiate_logging(fmu, fmi3: bool, messages: list, number: int) -> None:
+    """Instantiate ``fmu`` with the scenarios' process-wide logger routing its messages to
+    ``messages``.  Never a logger of its own: fmpy's FMI 2.0 message formatter keeps one global
+    pointer to the last logger registered, which would dangle once that logger is collected
+    (scenarios/fmi_api.py explains)."""
+    from scenarios import fmi_api
+
+    fmi_api.route_messages(fmu.instanceName, number, messages)
+    fmi_api.FMI_APIS["3.0" if fmi3 else "2.0"].instantiate(fmu, number)
+
+
 class AnySlave:
     """fmpy's FMU2Slave or FMU3Slave (by the FMU's fmiVersion) addressed by variable name."""
 
-    def __init__(self, fmu_path, name="avr", unzip=None):
+    def __init__(self, fmu_path, name="avr", unzip=None, messages=None):
+        """``messages``: a list that gets every log message's text (fmpy prints them otherwise)."""
+        number = None if messages is None else next(_LOGGED_NUMBERS)
+        if number is not None:
+            name = f"{name}-{number}"  # the logger routes by instance name
         self.md = read_model_description(str(fmu_path))
         self.fmi3 = self.md.fmiVersion.startswith("3")
         self.unzip = unzip or unzipped(fmu_path)
@@ -74,7 +107,10 @@ class AnySlave:
         cls = FMU3Slave if self.fmi3 else FMU2Slave
         self.fmu = cls(guid=self.md.guid, unzipDirectory=self.unzip,
                        modelIdentifier=self.md.coSimulation.modelIdentifier, instanceName=name)
-        self.fmu.instantiate(loggingOn=False)
+        if messages is None:
+            self.fmu.instantiate(loggingOn=False)
+        else:
+            _instantiate_logging(self.fmu, self.fmi3, messages, number)
         self.out_vrs = [self.vars[n].valueReference for n in OUTPUT_NAMES]
 
     def init(self, **params):
@@ -161,3 +197,27 @@ def c_host_script(fmu, params, sequence) -> str:
 def c_host_outputs(stdout: str) -> np.ndarray:
     """The outputs tests/native/fmi2_host.c printed (rows: steps)."""
     return np.array([[float(x) for x in line.split()] for line in stdout.splitlines()])
+
+
+#: The plain C hosts and their FMI headers, by FMI version.
+HOST_SOURCES = {2: (C_HOST, FMI2_INCLUDE), 3: (C_HOST3, FMI3_INCLUDE)}
+
+
+def compile_host(compiler: Path, fmi: int, out: Path) -> Path:
+    """The plain C host for FMI ``fmi``, compiled with ``compiler`` (host or cross).  libm is linked
+    in even though the host calls nothing from it: fmpy's CMake build of the sources links no libm
+    (it ignores the FMI 3.0 buildDescription's ``<Library name="m"/>``; FMI 2.0 has no place for
+    one), so that library takes ``sqrt`` from the process, as it does in every Python host."""
+    source, include = HOST_SOURCES[fmi]
+    return compile_c(require(compiler), [source], out, "-std=c99", "-O1", f"-I{include}", "-ldl",
+                     "-Wl,--no-as-needed", "-lm")
+
+
+def run_host(host: Path, cpu: str, library: Path, token: str, script: Path) -> str:
+    """The host's stdout (one line of outputs per step); aarch64 programs run under qemu-aarch64."""
+    cmd = [str(host), str(library), token, str(script)]
+    if cpu == "aarch64":
+        cmd = [str(require(QEMU_AARCH64)), "-L", str(AARCH64_SYSROOT)] + cmd
+    proc = subprocess.run(cmd, capture_output=True, text=True, timeout=600, env={"PATH": "/usr/bin:/bin"})
+    assert proc.returncode == 0, f"{' '.join(cmd)} exited {proc.returncode}:\n{proc.stderr[-3000:]}"
+    return proc.stdout

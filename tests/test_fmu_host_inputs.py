@@ -19,6 +19,11 @@ def _hex(text):
     return (text.encode("utf-8") if isinstance(text, str) else text).hex()
 
 
+def _slave_module(fmu_dir) -> str:
+    """The entry module pythonfmu imports (its name is private to the build)."""
+    return (Path(fmu_dir) / "resources" / "slavemodule.txt").read_text().strip()
+
+
 @pytest.fixture(scope="module")
 def folders(tmp_path_factory, built_fmu, unzip):
     """Copies of the FMU at awkward paths, and folders that are not this FMU's resources."""
@@ -31,9 +36,9 @@ def folders(tmp_path_factory, built_fmu, unzip):
     (other / "other_slave.py").write_text("")
     no_module = base / "no_module"
     no_module.mkdir()
-    (no_module / "slavemodule.txt").write_text("avr_slave\n")
+    (no_module / "slavemodule.txt").write_text(_slave_module(spaced) + "\n")
     broken = Path(unzip(built_fmu, base / "broken"))  # this FMU, but its slave fails to import
-    (broken / "resources" / "avr_slave.py").write_text("raise RuntimeError('broken on purpose')\n")
+    (broken / "resources" / f"{_slave_module(broken)}.py").write_text("raise RuntimeError('broken on purpose')\n")
     return {"spaced": spaced / "resources", "pct20": pct20 / "resources", "other": other, "no_module": no_module,
             "broken": broken / "resources"}
 
@@ -66,7 +71,7 @@ def _attempts(fmu_dir, folders):
         "NULL": (None, "is NULL"),
         "the FMU's root, not resources/": (_hex(Path(fmu_dir).as_uri()), "not this FMU's resources folder"),
         "another FMU's resources": (_hex(folders["other"].as_uri()), "another FMU's resources"),
-        "resources without the slave module": (_hex(folders["no_module"].as_uri()), "lacks avr_slave.py"),
+        "resources without the slave module": (_hex(folders["no_module"].as_uri()), "lacks avr_slave_"),
         "a path pythonfmu would garble (%20 in a folder name)": (_hex(folders["pct20"].as_uri()), "%20"),
         "a slave that fails to import": (_hex(folders["broken"].as_uri()), "could not create the Python slave"),
     }

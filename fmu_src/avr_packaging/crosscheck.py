@@ -8,11 +8,27 @@ recorded every ``output_every`` steps (``<Model>_ref.csv``).  The results come f
 simulation of the built FMU with FMPy (``simulate``, in a process of its own: a pythonfmu
 FMU loaded into the build process would put its resources first on ``sys.path``).
 
-``add_references`` writes, into each FMU, ``extra/org.fmi-standard.fmi-ls-ref/`` with
-``fmi-ls-manifest.xml`` (one ``<Experiment>`` with its ``<Stimuli>`` and ``<References>``)
-and the two CSV files, as modelica/Reference-FMUs ship their results.  The GUID does not
-change: it identifies the model description, sources and binaries, which the reference
-results are computed from.
+``add_references`` writes, into each FMU, ``extra/org.fmi-standard.fmi-ls-ref/`` as the
+layered standard fmi-ls-ref 1.0.0-beta.1 (modelica/fmi-ls-ref, tag ``v1.0.0-beta.1``) defines
+it: ``fmi-ls-manifest.xml``, whose root ``fmiReferences`` lists each related file in a
+``<Related>`` element with its MIME type and role, and the files themselves, named and
+formatted as the FMI cross-check rules name them (FMI-CROSS-CHECK-RULES.md v4.1, sections
+9.1.4-9.1.5): ``<Model>_ref.opt`` (role ``experiment/validation``: start and stop time, step size,
+tolerance, output interval), ``<Model>_in.csv`` (role ``testcase``: the experiment's input
+signals) and ``<Model>_ref.csv`` (role ``result``: its results); a ``Label`` ties the three to
+the one experiment.  The standard leaves an experiment file's format to its MIME type (the
+one it names, ``application/x-ma-hs-experiments``, is the separate MA-HS-Experiments
+specification, which no fmi-ls-ref release defines a schema for), so the experiment is the
+cross-check rules' ``_ref.opt``, and the three files are byte for byte the cross-check
+tree's.  ``documentation/fmi-ls-ref.txt`` (the standard recommends one) says what the
+experiment is and which deviation to expect.  modelica/Reference-FMUs put their results in
+the same folder the same way (``<Related type="text/csv" role="result">``, ``<Model>_out.csv``
+of the default experiment, no inputs).  The GUID does not change: it
+identifies the model description, sources and binaries, which the reference results are
+computed from.
+
+Every FMU build function of build.py calls ``add_reference`` on the FMU it wrote, so an FMU
+has its reference whoever builds it (``build_all`` or a run building ``dist/`` on demand).
 
 ``write_vendor_tree`` writes ``cross-check/fmus/2.0/cs/<platform>/cassie-avr/<version>/<Model>/``
 (FMI-CROSS-CHECK-RULES.md v4.1, section 9.1.4-9.1.5) for every FMU that runs without
@@ -28,6 +44,7 @@ import json
 import logging
 import subprocess
 import sys
+import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
 from dataclasses import dataclass
@@ -40,9 +57,14 @@ log = logging.getLogger(__name__)
 
 LS_REF_DIR = "extra/org.fmi-standard.fmi-ls-ref"
 LS_NS = "http://fmi-standard.org/fmi-ls-manifest"
-LS_VERSION = "1.0.0-rc.1"
+#: The release of fmi-ls-ref followed (modelica/fmi-ls-ref tag v1.0.0-beta.1, commit 70ee1b84).
+LS_VERSION = "1.0.0-beta.1"
 #: The fixed description the fmi-ls-ref schema requires.
-LS_DESCRIPTION = "Layered Standard providing reference stimuli and results for an FMU."
+LS_DESCRIPTION = "Layered Standard providing information on related files included in an FMU."
+#: The documentation file fmi-ls-ref recommends (section "Documentation").
+LS_DOC = "documentation/fmi-ls-ref.txt"
+#: The label tying the experiment's three files together.
+EXPERIMENT_LABEL = "experiment:reference"
 TOOL_NAME = "cassie-avr"
 CROSS_CHECK_DIR = "cross-check"
 #: Platforms of the cross-check tree, by modelIdentifier: the FMUs that need nothing else to run.
@@ -111,6 +133,8 @@ _REGULATOR = Experiment("3 s of walking-like measurements, a walking step every 
 EXPERIMENTS = {
     "AdaptiveVelocityRegulator": _REGULATOR,
     "AdaptiveVelocityRegulatorNative": _REGULATOR,
+    "CommandSource": Experiment("2 s of the nominal schedule (0.5 m/s, no turn, no push); no inputs", 400, 0.005,
+                                10, lambda k: {}),
     "CassiePlant": Experiment("2 s from the home pose: stepping in place, then 0.3 m/s forward", 400, 0.005, 10,
                               _plant_inputs),
 }
@@ -179,38 +203,97 @@ def reference_results(fmus, work_dir: Path) -> dict[Path, tuple[bytes, bytes]]:
     return {Path(r["fmu"]): (Path(r["in"]).read_bytes(), Path(r["ref"]).read_bytes()) for r in request}
 
 
+def reference_file_names(model: str) -> dict[str, str]:
+    """The experiment's files by role, named as the cross-check rules name them."""
+    return {"experiment/validation": f"{model}_ref.opt", "testcase": f"{model}_in.csv", "result": f"{model}_ref.csv"}
+
+
 def ls_ref_manifest(model: str, experiment: Experiment) -> bytes:
-    """``fmi-ls-manifest.xml``: the one experiment, its stimuli and its reference results."""
+    """``fmi-ls-manifest.xml``: one ``<Related>`` per file of the reference experiment."""
+    names = reference_file_names(model)
     ET.register_namespace("fmi-ls", LS_NS)
     root = ET.Element("fmiReferences", {f"{{{LS_NS}}}fmi-ls-name": "org.fmi-standard.fmi-ls-ref",
                                         f"{{{LS_NS}}}fmi-ls-version": LS_VERSION,
                                         f"{{{LS_NS}}}fmi-ls-description": LS_DESCRIPTION})
-    exp = ET.SubElement(root, "Experiment", name="reference", description=experiment.description,
-                        startTime="0.0", stopTime=repr(experiment.stop_time), stepSize=repr(experiment.step_size))
-    ET.SubElement(exp, "Stimuli", type="text/csv", source=f"{model}_in.csv")
-    ET.SubElement(exp, "References", type="text/csv", source=f"{model}_ref.csv")
+    related = [
+        ("text/plain", "experiment/validation",
+         f"Reference experiment ({experiment.description}): FMI cross-check rules options file (StartTime, "
+         f"StopTime, StepSize, RelTol, OutputIntervalLength); inputs {names['testcase']}, results {names['result']}"),
+        ("text/csv", "testcase", "Input signals of the reference experiment, one row per communication point"),
+        ("text/csv", "result", f"Outputs of the reference experiment, every "
+         f"{experiment.step_size * experiment.output_every!r} s (FMPy on linux64)"),
+    ]
+    for mime, role, description in related:
+        element = ET.SubElement(root, "Related", type=mime, source=names[role], role=role, description=description)
+        ET.SubElement(element, "Label", name=EXPERIMENT_LABEL, description="the files of the reference experiment")
     ET.indent(root)
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
-
-
-def add_references(fmus, work_dir: Path) -> dict[Path, tuple[bytes, bytes]]:
-    """Simulate every FMU of ``fmus`` and rewrite it with ``extra/org.fmi-standard.fmi-ls-ref/``
-    (manifest, ``_in.csv``, ``_ref.csv``); returns {fmu: (_in.csv, _ref.csv)}."""
-    results = reference_results(fmus, work_dir)
-    for fmu, (in_csv, ref_csv) in results.items():
-        model = _model_identifier(fmu)
-        entries = read_entries(fmu)
-        entries[f"{LS_REF_DIR}/fmi-ls-manifest.xml"] = ls_ref_manifest(model, EXPERIMENTS[model])
-        entries[f"{LS_REF_DIR}/{model}_in.csv"] = in_csv
-        entries[f"{LS_REF_DIR}/{model}_ref.csv"] = ref_csv
-        write_zip(entries, fmu)
-        log.info("added reference results to %s", fmu)
-    return results
 
 
 def ref_opt(experiment: Experiment) -> bytes:
     return (f"StartTime, 0.0\nStopTime, {experiment.stop_time!r}\nStepSize, {experiment.step_size!r}\n"
             f"RelTol, {REL_TOL!r}\nOutputIntervalLength, {experiment.step_size * experiment.output_every!r}\n").encode()
+
+
+def _experiment_text(model: str, experiment: Experiment) -> str:
+    return f"""Reference experiment: {experiment.description}; {experiment.stop_time!r} s, communication step
+{experiment.step_size!r} s, one input row per communication point in `{model}_in.csv` (apply
+the row of each communication point before its doStep; no interpolation is needed), outputs
+every {experiment.step_size * experiment.output_every!r} s in `{model}_ref.csv`, the options in
+`{model}_ref.opt`.  The reference was computed with FMPy on linux64 by the project's build
+(`python build.py`); FMPy reproduces it bit for bit.  `RelTol` {REL_TOL!r} is the band for
+other importers and platforms (another libm may differ in the last bit)."""
+
+
+def _ls_ref_doc(model: str, experiment: Experiment) -> str:
+    return f"""{model}: reference results (fmi-ls-ref {LS_VERSION})
+
+The folder {LS_REF_DIR}/ holds one experiment, listed in its fmi-ls-manifest.xml
+and named as the FMI cross-check rules (v4.1, sections 9.1.4-9.1.5) name the files of one:
+
+{_experiment_text(model, experiment)}
+"""
+
+
+def add_references(fmus, work_dir: Path) -> None:
+    """Simulate every FMU of ``fmus`` and rewrite it with ``extra/org.fmi-standard.fmi-ls-ref/``
+    (manifest, ``_ref.opt``, ``_in.csv``, ``_ref.csv``) and ``documentation/fmi-ls-ref.txt``."""
+    results = reference_results(fmus, work_dir)
+    for fmu, (in_csv, ref_csv) in results.items():
+        model = _model_identifier(fmu)
+        experiment = EXPERIMENTS[model]
+        names = reference_file_names(model)
+        entries = read_entries(fmu)
+        entries[f"{LS_REF_DIR}/fmi-ls-manifest.xml"] = ls_ref_manifest(model, experiment)
+        entries[f"{LS_REF_DIR}/{names['experiment/validation']}"] = ref_opt(experiment)
+        entries[f"{LS_REF_DIR}/{names['testcase']}"] = in_csv
+        entries[f"{LS_REF_DIR}/{names['result']}"] = ref_csv
+        entries[LS_DOC] = _ls_ref_doc(model, experiment).encode()
+        write_zip(entries, fmu)
+        log.info("added reference results to %s", fmu)
+
+
+def add_reference(fmu: Path, *, sanitize: bool = False) -> Path:
+    """``fmu`` with its reference results inside (``add_references``); returns ``fmu``.  A
+    ``sanitize`` build (tests only) gets none: its guard runs only with libasan preloaded."""
+    if sanitize:
+        log.info("%s: a sanitize build, no reference results", fmu)
+        return Path(fmu)
+    with tempfile.TemporaryDirectory(prefix="avr_reference_") as tmp:
+        add_references([fmu], Path(tmp))
+    return Path(fmu)
+
+
+def reference_files(fmu: Path) -> dict[str, bytes]:
+    """The experiment's files inside ``fmu``, by file name."""
+    model = _model_identifier(fmu)
+    with zipfile.ZipFile(fmu) as archive:
+        names = set(archive.namelist())
+        wanted = list(reference_file_names(model).values())
+        missing = [n for n in wanted if f"{LS_REF_DIR}/{n}" not in names]
+        if missing:
+            raise RuntimeError(f"{fmu}: no {', '.join(missing)} in {LS_REF_DIR}/ (a sanitize build has none)")
+        return {n: archive.read(f"{LS_REF_DIR}/{n}") for n in wanted}
 
 
 def _readme(model: str, platform: str, version: str, experiment: Experiment) -> str:
@@ -221,14 +304,8 @@ foot-placement and torso regulators plus online-learning neural networks that ou
 virtual-constraint offsets.  No Python and no other library is needed (linux64: libc and
 libm; win64: kernel32 and msvcrt); the C sources are in the FMU.
 
-Reference experiment: {experiment.description}; {experiment.stop_time!r} s, communication step
-{experiment.step_size!r} s, one input row per communication point in `{model}_in.csv` (apply
-the row of each communication point before its doStep; no interpolation is needed), outputs
-every {experiment.step_size * experiment.output_every!r} s in `{model}_ref.csv`.  The reference
-was computed with FMPy on linux64 by the project's `python build.py`; FMPy reproduces it bit
-for bit.  `RelTol` {REL_TOL!r}
-is the band for other importers and platforms (another libm may differ in the last bit).
-The same files travel inside the FMU in `{LS_REF_DIR}/` (fmi-ls-ref).
+{_experiment_text(model, experiment)}
+The same three files travel inside the FMU in `{LS_REF_DIR}/` (fmi-ls-ref {LS_VERSION}).
 
 Only this FMU is in the tree: the project's pythonfmu FMUs (AdaptiveVelocityRegulator,
 CassiePlant) need a Python 3 installation with numpy (the plant also MuJoCo) on the importing
@@ -239,9 +316,10 @@ License: MIT (`LICENSE.txt`); the FMI headers in `sources/` are BSD-2-Clause (Mo
 """
 
 
-def write_vendor_tree(out_dir: Path, fmus, results: dict, version: str) -> Path:
+def write_vendor_tree(out_dir: Path, fmus, version: str) -> Path:
     """``<out_dir>/cross-check/fmus/2.0/cs/<platform>/cassie-avr/<version>/<Model>/`` for every
-    FMI 2.0 FMU of ``fmus`` with platforms in ``CROSS_CHECK_PLATFORMS``; returns the tree's root."""
+    FMI 2.0 FMU of ``fmus`` with platforms in ``CROSS_CHECK_PLATFORMS`` (those it carries binaries
+    for), with the reference files inside the FMU; returns the tree's root."""
     import shutil
 
     root = Path(out_dir) / CROSS_CHECK_DIR
@@ -250,19 +328,18 @@ def write_vendor_tree(out_dir: Path, fmus, results: dict, version: str) -> Path:
     for fmu in map(Path, fmus):
         with zipfile.ZipFile(fmu) as archive:
             md = ET.fromstring(archive.read("modelDescription.xml"))
+            carried = {name.split("/")[1] for name in archive.namelist() if name.startswith("binaries/")}
         model = md.find("CoSimulation").get("modelIdentifier") if md.find("CoSimulation") is not None else None
         if md.get("fmiVersion") != "2.0" or model not in CROSS_CHECK_PLATFORMS:
             continue
-        in_csv, ref_csv = results[fmu]
-        experiment = EXPERIMENTS[model]
-        for platform in CROSS_CHECK_PLATFORMS[model]:
+        files = reference_files(fmu)
+        for platform in [p for p in CROSS_CHECK_PLATFORMS[model] if p in carried]:  # without a cross compiler: not all
             folder = root / "fmus" / "2.0" / "cs" / platform / TOOL_NAME / version / model
             folder.mkdir(parents=True)
             shutil.copyfile(fmu, folder / f"{model}.fmu")
-            (folder / f"{model}_in.csv").write_bytes(in_csv)
-            (folder / f"{model}_ref.csv").write_bytes(ref_csv)
-            (folder / f"{model}_ref.opt").write_bytes(ref_opt(experiment))
-            (folder / "ReadMe.md").write_text(_readme(model, platform, version, experiment))
+            for name, data in files.items():
+                (folder / name).write_bytes(data)
+            (folder / "ReadMe.md").write_text(_readme(model, platform, version, EXPERIMENTS[model]))
             (folder / "LICENSE.txt").write_text(MIT_LICENSE)
     return root
 

@@ -1,5 +1,7 @@
-"""The CassiePlant FMU's ``resources/``: the plant package's modules it needs, vendored with
-their project imports made package-relative, and the robot models with their licenses."""
+"""A pythonfmu FMU's Python code as one package: the project modules a slave needs, vendored
+with their project imports made package-relative (:func:`vendor_modules`; :mod:`.pack` loads
+the package under a private name), and the CassiePlant FMU's data and robot models with their
+licenses."""
 from __future__ import annotations
 
 import ast
@@ -8,8 +10,7 @@ import shutil
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parents[2]
-#: The plant FMU's core module and data files (repository paths); the slave loads them from resources/.
-PLANT_CORE = Path("plant") / "fmu_core.py"
+#: The plant FMU's data files (repository paths); its package carries them.
 PLANT_DATA = (Path("plant") / "data" / "gait_library.json",)
 #: Packages whose absolute imports are rewritten to package-relative ones.
 PROJECT_PACKAGES = ("plant", "fmu_src")
@@ -51,10 +52,11 @@ def _vendored_source(path: Path) -> tuple[str, list[Path]]:
     return "".join(lines), needed
 
 
-def vendor_plant(lib: Path, project_files=()) -> None:
-    """Copy plant/fmu_core.py, every project module it needs (imports made relative) and the
-    regulator's ``project_files`` (the slave base and the specs the plant slave uses) to ``lib``."""
-    todo, done = [REPO_ROOT / PLANT_CORE, *project_files], set()
+def vendor_modules(lib: Path, roots) -> None:
+    """Copy the modules ``roots`` (repository paths) and every project module they import with
+    ``from plant|fmu_src... import`` to ``lib``, those imports made package-relative, and an
+    ``__init__.py`` for ``lib`` and each project package in it."""
+    todo, done = list(roots), set()
     while todo:
         path = todo.pop()
         if path in done:
@@ -65,8 +67,13 @@ def vendor_plant(lib: Path, project_files=()) -> None:
         (lib / path.relative_to(REPO_ROOT)).write_text(text)
         todo.extend(needed)
     for package in PROJECT_PACKAGES:
-        (lib / package / "__init__.py").write_text(f'"""The {package} modules the CassiePlant FMU needs."""\n')
-    (lib / "__init__.py").write_text('"""CassiePlant FMU: the plant package, loaded by cassie_plant_slave."""\n')
+        if (lib / package).is_dir():
+            (lib / package / "__init__.py").write_text(f'"""The {package} modules this FMU needs."""\n')
+    (lib / "__init__.py").write_text('"""This FMU\'s Python code, loaded under a private name by its entry module."""\n')
+
+
+def copy_plant_data(lib: Path) -> None:
+    """The plant's data files (``PLANT_DATA``) into the package folder ``lib``."""
     for data in PLANT_DATA:
         (lib / data).parent.mkdir(parents=True, exist_ok=True)
         shutil.copyfile(REPO_ROOT / data, lib / data)

@@ -2,10 +2,11 @@
 scenario's command and pushes (``resources/schedule.csv``) into the CassieAVR system.
 
 One C source for both FMI versions (``cmdsrc.c`` + the layer ``cmdsrc_fmi<2|3>.c``),
-compiled for linux and windows x86-64 with the same compilers and options as the
-regulator's native FMU (:mod:`fmu_src.native.build_native`).  The GUID hashes the model
-description and the sources, not ``resources/schedule.csv``: :func:`with_schedule` makes a
-copy with another schedule that is the same FMU (same binaries, same GUID).
+compiled for the platforms and with the compilers and options of the regulator's native
+FMU (:mod:`fmu_src.native.build_native`; a platform whose cross compiler is missing is
+skipped).  The GUID hashes the model description and the sources, not
+``resources/schedule.csv``: :func:`with_schedule` makes a copy with another schedule that is
+the same FMU (same binaries, same GUID).
 
 The schedule (:func:`schedule_csv`): a header ``time,vx_des,vy_des,yaw_rate_des,push_fx,push_fy,push_fz``
 then one row per change, times strictly increasing from the start time, numbers in C
@@ -29,6 +30,8 @@ from ..native import build_native
 
 SRC = Path(__file__).resolve().parent
 MODEL_IDENTIFIER = "CommandSource"
+#: where the nominal build's reference results live in the FMU (fmi-ls-ref; added by build.py)
+REFERENCE_PREFIX = "extra/org.fmi-standard.fmi-ls-ref/"
 INSTANCE_NAME = "command"
 #: (name, unit, description) in value-reference order: the columns after ``time``.
 OUTPUTS = (
@@ -190,16 +193,9 @@ def _text_entries(fmi_version: int, guid: str) -> dict[str, bytes]:
 
 
 def _compile(src: Path, fmi_version: int, target: str, out: Path) -> Path:
-    """The library for ``target`` ("linux", "windows"): the regulator's compilers and options."""
+    """The library for ``target`` (a target of ``build_native.PLATFORMS``): the regulator's compilers and options."""
     name = out.name
-    flags = build_native.cflags()
-    files = sources(fmi_version)
-    if target == "linux":
-        cmd = [compiler.host_compiler("for the CommandSource FMU"), *flags, "-shared", "-fPIC",
-               "-Wl,--build-id=none", "-I.", *files, "-o", name, "-lm"]
-    else:
-        cmd = [compiler.mingw_compiler(), *flags, "-shared", "-static-libgcc", "-Wl,--no-insert-timestamp",
-               "-I.", *files, "-o", name]
+    cmd = build_native.compile_command(target, sources(fmi_version), name)
     compiler.run(cmd, "the CommandSource FMU", cwd=src)
     shutil.move(str(src / name), out)
     return out
@@ -217,7 +213,7 @@ def fmu_entries(fmi_version: int, schedule: str | None = None) -> dict[str, byte
         for name, data in entries.items():
             if name.startswith("sources/"):
                 (src / name[len("sources/"):]).write_bytes(data)
-        for platform, target in PLATFORMS[fmi_version].items():
+        for platform, target in build_native.buildable_platforms(fmi_version, fmu_name(fmi_version)).items():
             suffix = build_native.LIBRARY_SUFFIX[target]
             lib = _compile(src, fmi_version, target, Path(tmp) / f"{MODEL_IDENTIFIER}{suffix}")
             entries[f"binaries/{platform}/{lib.name}"] = lib.read_bytes()
@@ -242,5 +238,7 @@ def with_schedule(fmu: str | Path, schedule: str, out: str | Path) -> Path:
     if root.get("modelName") != MODEL_IDENTIFIER:
         raise ValueError(f"{fmu} is {root.get('modelName')!r}, not a {MODEL_IDENTIFIER} FMU")
     entries[SCHEDULE] = schedule.encode()
+    # the nominal build's reference results (fmi-ls-ref) describe the nominal schedule, not this one
+    entries = {name: data for name, data in entries.items() if not name.startswith(REFERENCE_PREFIX)}
     write_zip(entries, Path(out))
     return Path(out)

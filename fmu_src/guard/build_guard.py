@@ -40,10 +40,11 @@ def _row(var: ET.Element) -> tuple[str, bool]:
 
 
 def guard_header(root: ET.Element, guid: str, inner_library: str, slave_module: str,
-                 step_quantum_s: float | None = None) -> str:
+                 step_quantum_s: float | None = None, max_step_s: float | None = None) -> str:
     """The guard's generated table (avr_guard_vars.h): every variable by value reference, the fixed
     parameters, the log categories, the GUID, pythonfmu's library and the slave module's name, and
-    (if given) the step quantum communication steps must be whole multiples of."""
+    (if given) the step quantum communication steps must be whole multiples of and the longest
+    communication step."""
     rows, fixed = [], []
     for var in root.find("ModelVariables"):
         row, is_fixed = _row(var)
@@ -70,6 +71,8 @@ def guard_header(root: ET.Element, guid: str, inner_library: str, slave_module: 
         + ", ".join(f'"{c}"' for c in categories) + "};"]
     if step_quantum_s is not None:
         lines.append(f"#define AVR_STEP_QUANTUM {step_quantum_s!r}")
+    if max_step_s is not None:
+        lines.append(f"#define AVR_MAX_STEP {float(max_step_s)!r}")
     return "\n".join(lines) + "\n"
 
 
@@ -94,6 +97,13 @@ def slave_blob_header() -> str:
         f"#define AVR_SLAVE_HEAD_BYTES {avr_fmustate.HEADER.size}u  /* magic, u32 version, u32 JSON bytes, u32 core bytes */",
         f"#define AVR_SLAVE_CRC_BYTES {avr_fmustate.CRC.size}u  /* u32 CRC-32 after the JSON and the core bytes */",
         f"#define AVR_SLAVE_REFUSED {c_string(avr_fmustate.REFUSED_STATE.decode('ascii'))}",
+        "/* The slave's FMI phases (its JSON's \"phase\"), indexed instantiated .. terminated. */",
+        f"#define AVR_SLAVE_N_PHASES {len(avr_fmustate.PHASES)}u",
+        "static const char *const AVR_SLAVE_PHASES[] __attribute__((unused)) = {"
+        + ", ".join(c_string(p) for p in avr_fmustate.PHASES) + "};",
+        f"#define AVR_SLAVE_JSON_PREFIX {c_string(avr_fmustate.JSON_PREFIX)}  /* then the phase */",
+        f"#define AVR_SLAVE_JSON_TIME {c_string(avr_fmustate.JSON_TIME)}  /* then the time */",
+        f"#define AVR_SLAVE_JSON_VALUES {c_string(avr_fmustate.JSON_VALUES)}  /* then the values */",
         ""])
 
 

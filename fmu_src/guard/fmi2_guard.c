@@ -33,7 +33,8 @@
  *
  * The same sources guard a second FMU (CassiePlant) built with its own table; its
  * avr_guard_vars.h may define AVR_STEP_QUANTUM: communication steps must then be whole
- * multiples of it.
+ * multiples of it, and AVR_MAX_STEP: the longest communication step (one that long must
+ * finish in bounded time; a longer one is refused before it reaches the slave).
  *
  * The variable table (AVR_VARS, the fixed parameters, the log categories) is generated
  * by build.py from the model description into avr_guard_vars.h.  Each FMI function's
@@ -295,6 +296,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint, fmi2R
                       currentCommunicationPoint, g->time);
     if (!isfinite(currentCommunicationPoint + communicationStepSize))
         return refuse(g, call, "currentCommunicationPoint + communicationStepSize overflows");
+#ifdef AVR_MAX_STEP
+    if (!(communicationStepSize <= AVR_MAX_STEP))
+        return refuse(g, call, "communicationStepSize = %.17g s: exceeds the maximum communication step %g s of this "
+                      "FMU (take several steps)", communicationStepSize, AVR_MAX_STEP);
+#endif
 #ifdef AVR_STEP_QUANTUM
     const double quanta = communicationStepSize / AVR_STEP_QUANTUM;
     if (!(quanta >= 1.0 - STEP_QUANTUM_TOL && fabs(quanta - nearbyint(quanta)) <= STEP_QUANTUM_TOL))

@@ -17,12 +17,15 @@
  *    h+8+n      8  u64 CRC-64/XZ of every byte before it
  *
  * A state is accepted only if the size, magic, version, lengths and checksum are right,
- * the GUID is this FMU's, the time is finite, the phase is known, and its fixed
+ * the GUID is this FMU's, the time is finite, the phase is known, the slave's blob says
+ * the same phase and time as this header (its JSON begins with them, see agreement()), and its fixed
  * parameters (n_neurons, seed, the input scales) equal the instance's current values:
  * otherwise fmi2Error names the reason and nothing changes.  The CRC detects every
  * error of up to 64 consecutive bits (so every single-bit flip) and any other random
  * corruption with probability 1 - 2^-64.
  */
+#define _GNU_SOURCE /* strtod_l */
+#include <locale.h>
 #include <math.h>
 #include <pthread.h>
 #include <stdio.h>
@@ -124,6 +127,55 @@ static fmi2Status check_slave_blob(Guard *g, const char *call, const fmi2Byte *b
     return fmi2OK;
 }
 
+/* strtod in the "C" locale: the slave writes '.' whatever locale the host has set. */
+static locale_t c_locale;
+static pthread_once_t c_locale_once = PTHREAD_ONCE_INIT;
+static void c_locale_init(void) { c_locale = newlocale(LC_NUMERIC_MASK, "C", (locale_t)0); }
+
+/* The slave's phase name for a guard phase: the slave has no stepFailed (a failed step leaves
+ * it in stepComplete, as the guard's last successful time). */
+static const char *slave_phase(enum Phase phase) {
+    static const unsigned index[] = {[INSTANTIATED] = 0, [INIT_MODE] = 1, [STEP_COMPLETE] = 2, [STEP_FAILED] = 2,
+                                     [TERMINATED] = 3};
+    _Static_assert(AVR_SLAVE_N_PHASES == 4, "the slave's phases are instantiated .. terminated");
+    return AVR_SLAVE_PHASES[index[phase]];
+}
+
+/* fmi2OK if the slave's blob (its header checked) says the phase and the time of the guard's
+ * header `meta`: its JSON begins AVR_SLAVE_JSON_PREFIX phase AVR_SLAVE_JSON_TIME time
+ * AVR_SLAVE_JSON_VALUES (json.dumps with sorted keys; the slave refuses any other form).  The
+ * guard restores its phase and time from the header and the slave from its blob: a state in
+ * which they differ would leave the two disagreeing (an exit from initialization mode that the
+ * slave answers with fmi2Fatal, every doStep refused for its time). */
+static fmi2Status agreement(Guard *g, const char *call, const fmi2Byte *blob, const GuardState *meta) {
+    const size_t n_json = get_u32(blob + SLAVE_JSON_BYTES_AT);
+    char head[160]; /* prefix, the longest phase name, a number of at most 32 characters, the next key */
+    const size_t k = n_json < sizeof head - 1 ? n_json : sizeof head - 1;
+    memcpy(head, blob + AVR_SLAVE_HEAD_BYTES, k);
+    head[k] = '\0';
+    const char *phase = slave_phase(meta->phase);
+    char want[64];
+    snprintf(want, sizeof want, "%s%s%s", AVR_SLAVE_JSON_PREFIX, phase, AVR_SLAVE_JSON_TIME);
+    if (strncmp(head, want, strlen(want)) != 0)
+        return refuse(g, call, "the state's header says phase %s, its slave part does not (header and contents "
+                      "must agree)", PHASE_NAMES[meta->phase]);
+    pthread_once(&c_locale_once, c_locale_init);
+    if (c_locale == (locale_t)0) return refuse(g, call, "cannot read the state's time: no C locale");
+    const char *number = head + strlen(want);
+    char *end = NULL;
+    const double time = strtod_l(number, &end, c_locale);
+    if (end == number || end - number > 32 || strncmp(end, AVR_SLAVE_JSON_VALUES, strlen(AVR_SLAVE_JSON_VALUES)) != 0)
+        return refuse(g, call, "the state's slave part has no readable time");
+    if (!(time == meta->time)) {
+        char a[32], b[32];
+        format_double(meta->time, a, sizeof a);
+        format_double(time, b, sizeof b);
+        return refuse(g, call, "the state's header says time %s s, its slave part %s s (header and contents must "
+                      "agree)", a, b);
+    }
+    return fmi2OK;
+}
+
 /* The slave checks a blob's contents (every value, the core's weights) when it deserializes
  * it, and yields AVR_SLAVE_REFUSED + the reason instead of raising (which pythonfmu would turn
  * into fmi2Fatal): read its verdict back; fmi2Error with the reason if it refused. */
@@ -182,7 +234,8 @@ static fmi2Status check_serialized(Guard *g, const char *call, const fmi2Byte *s
     if (st != fmi2OK) return st;
     *blob = s + HEAD_BYTES;
     *blob_size = n;
-    return check_slave_blob(g, call, *blob, n);
+    st = check_slave_blob(g, call, *blob, n);
+    return st == fmi2OK ? agreement(g, call, *blob, meta) : st;
 }
 
 /* ---- FMI functions ---------------------------------------------------------------------- */

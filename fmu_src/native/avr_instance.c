@@ -233,6 +233,53 @@ AvrStatus avr_check_set(const AvrInstance *inst, const char *call, uint32_t vr, 
     return AVR_OK;
 }
 
+/* ---- logging --------------------------------------------------------------------------- */
+/* The length of s if it is a NUL-terminated, valid UTF-8 string of at most max_bytes bytes
+ * (no overlong forms, no surrogates, nothing above U+10FFFF), else -1.  Reads at most
+ * max_bytes + 1 bytes, and none past the terminating NUL. */
+static long utf8_length(const char *s, size_t max_bytes) {
+    size_t i = 0;
+    while (i <= max_bytes) {
+        const unsigned char c = (unsigned char)s[i];
+        if (c == 0) return (long)i;
+        size_t extra;
+        unsigned lo = 0x80, hi = 0xBF;
+        if (c < 0x80) extra = 0;
+        else if (c >= 0xC2 && c <= 0xDF) extra = 1;
+        else if (c >= 0xE0 && c <= 0xEF) extra = 2, lo = c == 0xE0 ? 0xA0 : 0x80, hi = c == 0xED ? 0x9F : 0xBF;
+        else if (c >= 0xF0 && c <= 0xF4) extra = 3, lo = c == 0xF0 ? 0x90 : 0x80, hi = c == 0xF4 ? 0x8F : 0xBF;
+        else return -1;
+        for (size_t k = 1; k <= extra; ++k) {
+            const unsigned char d = (unsigned char)s[i + k]; /* a NUL here ends the check: never read past it */
+            if (d < (k == 1 ? lo : 0x80) || d > (k == 1 ? hi : 0xBF)) return -1;
+        }
+        i += 1 + extra;
+    }
+    return -1;
+}
+
+AvrStatus avr_check_categories(const AvrInstance *inst, const char *call, size_t n, const char *const categories[]) {
+    if (n > 0 && categories == NULL) return avr_refuse(inst, call, "categories is NULL with nCategories = %zu", n);
+    for (size_t i = 0; i < n; ++i) {
+        if (categories[i] == NULL) return avr_refuse(inst, call, "categories[%zu] is NULL", i);
+        if (utf8_length(categories[i], AVR_MAX_CATEGORY_BYTES) < 0)
+            return avr_refuse(inst, call, "categories[%zu] is not valid UTF-8 of at most %u bytes", i,
+                              (unsigned)AVR_MAX_CATEGORY_BYTES);
+        int known = 0;
+        for (int k = 0; k < AVR_N_LOG_CATEGORIES; ++k) known |= strcmp(categories[i], AVR_LOG_CATEGORIES[k]) == 0;
+        if (!known) {
+            char list[256] = "";
+            for (int k = 0; k < AVR_N_LOG_CATEGORIES; ++k) {
+                size_t used = strlen(list);
+                snprintf(list + used, sizeof list - used, "%s%s", k ? ", " : "", AVR_LOG_CATEGORIES[k]);
+            }
+            return avr_refuse(inst, call, "categories[%zu] = \"%.100s\" is not a log category of this FMU (known: %s)",
+                              i, categories[i], list);
+        }
+    }
+    return AVR_OK;
+}
+
 /* ---- stepping ------------------------------------------------------------------------- */
 AvrStatus avr_do_step(AvrInstance *inst, const char *call, double t, double h) {
     char a[40], b[40];
@@ -244,6 +291,8 @@ AvrStatus avr_do_step(AvrInstance *inst, const char *call, double t, double h) {
     avr_fmt_double(b, sizeof b, inst->time);
     if (!(isfinite(t) && fabs(t - inst->time) <= tolerance))
         return avr_refuse(inst, call, "currentCommunicationPoint = %s: must equal the end of the last step (%s)", a, b);
+    if (!isfinite(t + h) || !isfinite(inst->core.time_s + h))
+        return avr_refuse(inst, call, "currentCommunicationPoint + communicationStepSize overflows");
     avr_step(inst->net, &inst->core, inst->values, h);
     inst->time = t + h;
     return AVR_OK;

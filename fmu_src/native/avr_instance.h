@@ -75,6 +75,13 @@ AvrStatus avr_check_set(const AvrInstance *inst, const char *call, uint32_t vr, 
 
 AvrStatus avr_do_step(AvrInstance *inst, const char *call, double t, double h);
 
+/* The longest log category accepted (a longer or unterminated one is refused). */
+#define AVR_MAX_CATEGORY_BYTES 256u
+/* fmi*SetDebugLogging's categories: AVR_OK if each is non-NULL, valid UTF-8 and one the model
+ * description declares (AVR_LOG_CATEGORIES, generated with the variable table), else a refusal
+ * naming the index (and the declared categories); the same rule as the pythonfmu FMU's guard. */
+AvrStatus avr_check_categories(const AvrInstance *inst, const char *call, size_t n, const char *const categories[]);
+
 /* Shared by avr_instance.c and avr_state.c. */
 void avr_fmt_double(char *out, size_t size, double x);
 int avr_value_problem(const AvrVar *v, double x, char *out, size_t size);

@@ -306,7 +306,7 @@ static void clip_offsets(double *values, double limit) {
  * that ends is closed if it was seen from its start; this call starts the new step's sums. */
 static void advance_stride(AvrCore *c, int64_t si, double vy, double roll) {
     if (si == c->last_step_index) {
-        c->stride_calls += 1;
+        if (c->stride_calls < AVR_MAX_CALLS) c->stride_calls += 1; /* as avr_regulator: stops at MAX_CALLS */
         c->stride_sum_vy = c->stride_sum_vy + vy;
         c->stride_sum_roll = c->stride_sum_roll + roll;
         return;
@@ -359,6 +359,6 @@ void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) 
     V(error_pitch) = V(pitch) - V(pitch_des);
     V(error_roll) = V(roll) - V(roll_des);
     core->last_step_index = si;
-    core->n_calls += 1;
+    if (core->n_calls < AVR_MAX_CALLS) core->n_calls += 1;
     core->time_s += dt;
 }

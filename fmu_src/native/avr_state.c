@@ -17,8 +17,8 @@
  *        f64 weights (4 rows of n_neurons)
  *   end-4: u32 CRC-32 (zlib's) of every byte before it
  * A blob is refused unless its size, checksum, GUID and variable count match and every
- * value is finite, of its type and within its range, and the networks it names are the
- * ones its variables define.  In memory an FMUstate is this same blob, so get/set and
+ * value is finite, of its type and within its range, the networks it names are the
+ * ones its variables define, and its counters are ones a run can reach (check_counters).  In memory an FMUstate is this same blob, so get/set and
  * serialize/deserialize round trips are bit-exact by construction.
  */
 #include "avr_instance.h" /* first: see avr_types.h */
@@ -154,6 +154,8 @@ static AvrStatus check_frame(const AvrInstance *inst, const char *call, const un
     return AVR_OK;
 }
 
+static AvrStatus check_counters(const AvrInstance *inst, const char *call, const unsigned char *p);
+
 /* The contents: phase, time, every value in its range, networks consistent with the values. */
 static AvrStatus check_contents(const AvrInstance *inst, const char *call, const unsigned char *p, size_t size) {
     uint32_t phase = get_u32(p + 68), n = get_u32(p + 80);
@@ -173,13 +175,34 @@ static AvrStatus check_contents(const AvrInstance *inst, const char *call, const
     if (n == 0) return AVR_OK;
     if (n != (uint32_t)get_f64(values + 8 * AVR_VR_n_neurons) || get_u32(p + 84) != (uint32_t)get_f64(values + 8 * AVR_VR_seed))
         return avr_refuse(inst, call, "state's networks do not match its n_neurons and seed");
-    if ((int64_t)get_u64(p + 88) < -1 || (int64_t)get_u64(p + 96) < 0)
-        return avr_refuse(inst, call, "state has invalid counters");
-    int64_t boundaries = (int64_t)get_u64(p + STRIDE_OFFSET), stride_calls = (int64_t)get_u64(p + STRIDE_OFFSET + 8);
-    if (boundaries < 0 || boundaries > AVR_STRIDE_READY || stride_calls < 0 || (boundaries == 0) != (stride_calls == 0))
-        return avr_refuse(inst, call, "state has invalid stride counters");
     if (!finite_doubles(p + 104, N_CORE_DOUBLES) || !finite_doubles(p + STRIDE_OFFSET + 16, N_STRIDE_DOUBLES) || !finite_doubles(values + 8 * AVR_N_VARS, (size_t)AVR_N_ROWS * n))
         return avr_refuse(inst, call, "state contains non-finite values");
+    return check_counters(inst, call, p);
+}
+
+/* The counters a run can reach (as avr_statebytes.counter_problems): it starts with
+ * last_step_index -1, n_calls 0, time_s 0 and no stride; each call sets last_step_index to its
+ * step_index, adds one to n_calls (stopping at AVR_MAX_CALLS) and its dt > 0 to time_s;
+ * stride_calls counts the calls of the current step, so at most n_calls.  Beyond these the
+ * next step's arithmetic would overflow (signed overflow is undefined behaviour). */
+static AvrStatus check_counters(const AvrInstance *inst, const char *call, const unsigned char *p) {
+    const int64_t last = (int64_t)get_u64(p + 88), n_calls = (int64_t)get_u64(p + 96);
+    const int64_t boundaries = (int64_t)get_u64(p + STRIDE_OFFSET), stride_calls = (int64_t)get_u64(p + STRIDE_OFFSET + 8);
+    const double time_s = get_f64(p + 104 + 8 * 4), max_step_index = AVR_VARS[AVR_VR_step_index].max;
+    if (n_calls < 0 || n_calls > AVR_MAX_CALLS)
+        return avr_refuse(inst, call, "state has n_calls = %lld: must be in [0, %lld]", (long long)n_calls,
+                          (long long)AVR_MAX_CALLS);
+    if (last < -1 || (double)last > max_step_index || (last == -1) != (n_calls == 0))
+        return avr_refuse(inst, call, "state has last_step_index = %lld with n_calls = %lld: must be in [-1, %.0f], "
+                          "-1 exactly before the first call", (long long)last, (long long)n_calls, max_step_index);
+    if (!(time_s >= 0.0 && (n_calls > 0 || time_s == 0.0)))
+        return avr_refuse(inst, call, "state has time_s = %g with n_calls = %lld: a sum of steps > 0 (0 before the "
+                          "first call)", time_s, (long long)n_calls);
+    if (boundaries < 0 || boundaries > AVR_STRIDE_READY || stride_calls < 0 || stride_calls > n_calls ||
+        (boundaries == 0) != (stride_calls == 0))
+        return avr_refuse(inst, call, "state has stride_boundaries = %lld, stride_calls = %lld: must be in [0, %d] "
+                          "and [0, n_calls = %lld], both 0 or neither", (long long)boundaries, (long long)stride_calls,
+                          AVR_STRIDE_READY, (long long)n_calls);
     return AVR_OK;
 }
 

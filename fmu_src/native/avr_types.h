@@ -6,6 +6,23 @@
 #ifndef AVR_TYPES_H
 #define AVR_TYPES_H
 
+/* The floating-point contract, stated here so that no compiler flag is needed: no FMA
+ * contraction (a * b + c stays a rounded product and a rounded sum).  The numerics give
+ * the same bits as the numpy core only so (see avr_model.c), whatever the compiler's mode
+ * (GCC contracts by default in its GNU modes, clang within expressions, MSVC on ARM64)
+ * and CPU.  Every C file includes this header before anything else (through avr_vars.h),
+ * so the pragmas cover every function, system headers' inline ones included.
+ * - GCC ignores the standard pragma: its per-function optimize option does the same.
+ * - clang, and any other C99 compiler: the standard pragma (C99 7.12.2).
+ * - MSVC: its own pragma. */
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC optimize("fp-contract=off")
+#elif defined(_MSC_VER) && !defined(__clang__)
+#pragma fp_contract(off)
+#else
+#pragma STDC FP_CONTRACT OFF
+#endif
+
 /* MinGW: C99 printf (%zu, nan/inf spelled as elsewhere); must precede every system header. */
 #if defined(__MINGW32__) && !defined(__USE_MINGW_ANSI_STDIO)
 #define __USE_MINGW_ANSI_STDIO 1

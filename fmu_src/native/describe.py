@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 
 from ..avr_packaging.describe import xml_value
 from ..avr_packaging.method_page import method_html
-from .header import all_specs
+from .header import LOG_CATEGORIES, all_specs
 
 AUTHOR = "cassie-avr project"
 VERSION = "0.1.0"
@@ -22,13 +22,13 @@ LICENSE = "MIT"
 DESCRIPTION = ("Adaptive velocity regulator for bipedal walking (native C implementation): PD foot-placement "
                "and torso regulators plus online-learning neural networks (PES) that output virtual-constraint "
                "offsets")
-#: Compiler options of the shipped binaries.  -ffp-contract=off (no FMA contraction) is what the
-#: numerics rely on (the operation order of the numpy core); -O3 -fno-trapping-math only let the
-#: element-wise loops vectorize (same IEEE operations, same bits as -O2).  Never -ffast-math.
-COMPILER_OPTIONS = "-std=c99 -O3 -fno-trapping-math -ffp-contract=off"
+#: Compiler options of the shipped binaries.  None is needed for the numerics' bits: the sources
+#: state their floating-point contract (no FMA contraction, avr_types.h), so any C99 compiler in
+#: any mode and at any optimization level gives the same bits; -O3 -fno-trapping-math only let
+#: the element-wise loops vectorize (same IEEE operations).  Never -ffast-math (it allows
+#: reassociation, which no pragma in the sources can undo).
+COMPILER_OPTIONS = "-std=c99 -O3 -fno-trapping-math"
 _FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
-_LOG_CATEGORIES = (("logStatusError", "Refused calls and errors (always logged)"),
-                   ("logAll", "Debug messages (with logging on)"))
 
 
 def _units(root: ET.Element, units: dict) -> None:
@@ -83,7 +83,7 @@ def model_description(fmi_version: int, model_identifier: str, guid: str, source
     _interface(root, fmi_version, model_identifier, source_files)
     _units(root, units)
     categories = ET.SubElement(root, "LogCategories")
-    for name, text in _LOG_CATEGORIES:
+    for name, text in LOG_CATEGORIES:
         ET.SubElement(categories, "Category", name=name, description=text)
     ET.SubElement(root, "DefaultExperiment", default_experiment)
     variables = ET.SubElement(root, "ModelVariables")
@@ -114,7 +114,8 @@ def build_description(model_identifier: str, source_files) -> bytes:
     """FMI 3.0 ``sources/buildDescription.xml``: compile every listed C file, link libm."""
     root = ET.Element("fmiBuildDescription", fmiVersion="3.0")
     config = ET.SubElement(root, "BuildConfiguration", modelIdentifier=model_identifier,
-                           description="Any C99 compiler; keep -ffp-contract=off (or its equivalent) and never fast-math")
+                           description="Any C99 compiler, any options but fast-math: the sources themselves "
+                                       "forbid FMA contraction, so every build gives the shipped binaries' bits")
     files = ET.SubElement(config, "SourceFileSet", language="C99", compilerOptions=COMPILER_OPTIONS)
     for name in source_files:
         ET.SubElement(files, "SourceFile", name=name)
@@ -124,9 +125,14 @@ def build_description(model_identifier: str, source_files) -> bytes:
     return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
 
 
-def documentation(fmi_version: int, model_identifier: str) -> str:
-    """``documentation/index.html``: the FMI behaviour, the method (``docs/method.md``) and the variables."""
+def documentation(fmi_version: int, model_identifier: str, platforms) -> str:
+    """``documentation/index.html``: the platforms with binaries (``platforms``: (folder, what it
+    runs on) pairs), the FMI behaviour, the method (``docs/method.md``) and the variables."""
     specs = all_specs()
+    binaries = "".join(f"<li><code>binaries/{html.escape(folder)}/</code>: {html.escape(name)}</li>"
+                       for folder, name in platforms)
+    aarch64_note = (" FMI 2.0 names no platform folder for Linux aarch64: there, use the FMI 3.0 FMU (which "
+                    "carries that binary) or build this one from its sources." if fmi_version == 2 else "")
     rows = "\n".join(
         "<tr>" + "".join(f"<td>{html.escape(str(cell))}</td>" for cell in (
             vr, s.name, s.causality, s.type, s.variability, s.unit, xml_value(s.default),
@@ -135,14 +141,25 @@ def documentation(fmi_version: int, model_identifier: str) -> str:
     return f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>{model_identifier} (FMI {fmi_version}.0)</title></head><body>
 <h1>{model_identifier} (FMI {fmi_version}.0 co-simulation, native C)</h1>
-<p>{html.escape(DESCRIPTION)}. Binaries for Linux and Windows x86-64; the C sources in <code>sources/</code>
-compile with any C99 compiler ({COMPILER_OPTIONS}) for other platforms. No Python is needed.</p>
+<p>{html.escape(DESCRIPTION)}. No Python is needed.</p>
+<h2>Platforms</h2>
+<p>This FMU carries binaries for:</p>
+<ul>{binaries}</ul>
+<p>For any other platform, the C sources in <code>sources/</code> build the library with any C99 compiler
+(shipped binaries: <code>{COMPILER_OPTIONS}</code>; no option is needed, only never fast-math). The sources
+forbid FMA contraction themselves (<code>#pragma STDC FP_CONTRACT OFF</code> and the GCC and MSVC
+equivalents), so a library built from them, in any C mode and at any optimization level, computes the same
+bits as the shipped binaries on any CPU whose C compiler evaluates doubles in double precision
+(FLT_EVAL_METHOD 0: x86-64, aarch64 and the other 64-bit CPUs; not 32-bit x87 code).{aarch64_note}</p>
 <h2>FMI behaviour</h2>
-<p>Any communication step &gt; 0. Calls the FMI {fmi_version}.0 state machine forbids, sets of outputs or of
-fixed parameters after initialization, NaN/inf values and values outside [min, max] are refused with Error and
-a log message naming the variable and its range; a refused call changes nothing and the instance stays usable.
+<p>Any communication step &gt; 0 (one regulator call per step whatever its length: no maximum; a step whose
+end time overflows is refused). Calls the FMI {fmi_version}.0 state machine forbids, sets of outputs or of
+fixed parameters after initialization, NaN/inf values and values outside [min, max], and log categories the
+model description does not declare are refused with Error and a log message naming the variable and its range
+(or the category); a refused call changes nothing and the instance stays usable.
 FMU state can be saved, restored and serialized (all variables, weights and memories; the serialized form carries
-the GUID and a CRC-32 and is refused if corrupt or from another FMU). Outputs change only in doStep (no direct
+the GUID and a CRC-32 and is refused if corrupt or from another FMU, and so is one whose contents no run can
+reach: a value out of range, counters beyond what a run counts). Outputs change only in doStep (no direct
 feedthrough). Same value references, variables and numerics as the pythonfmu FMU AdaptiveVelocityRegulator.</p>
 {method_html()}<h2>Variables</h2>
 <table border="1"><tr><th>valueReference</th><th>name</th><th>causality</th><th>type</th><th>variability</th>

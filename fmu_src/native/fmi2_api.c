@@ -82,7 +82,7 @@ FREE_INSTANCE(fmi2FreeInstance)
 fmi2Status fmi2SetDebugLogging(fmi2Component instance, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[]) {
     BEGIN(fmi2SetDebugLogging)
-    if (nCategories > 0 && categories == NULL) REFUSE("categories is NULL with nCategories = %zu", nCategories);
+    if (avr_check_categories(inst, call, nCategories, categories) != AVR_OK) return fmi2Error;
     inst->logging_on = loggingOn == fmi2True;
     return fmi2OK;
 }

@@ -111,7 +111,7 @@ FREE_INSTANCE(fmi3FreeInstance)
 fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
                                const fmi3String categories[]) {
     BEGIN(fmi3SetDebugLogging)
-    if (nCategories > 0 && categories == NULL) REFUSE("categories is NULL with nCategories = %zu", nCategories);
+    if (avr_check_categories(inst, call, nCategories, categories) != AVR_OK) return fmi3Error;
     inst->logging_on = loggingOn;
     return fmi3OK;
 }

@@ -43,13 +43,22 @@ def add_parser(sub) -> None:
 
 
 def _check_args(args) -> list[str]:
+    from scenarios.campaign.spec import MAX_TASK_TIMEOUT_S
+
     problems = []
     if args.workers is not None and args.workers < 1:
         problems.append(f"--workers {args.workers}: must be >= 1")
-    if args.task_timeout is not None and not args.task_timeout > 0:
-        problems.append(f"--task-timeout {args.task_timeout:g}: must be > 0")
+    if args.task_timeout is not None and not 0 < args.task_timeout <= MAX_TASK_TIMEOUT_S:
+        problems.append(f"--task-timeout {args.task_timeout:g}: must be within (0, {MAX_TASK_TIMEOUT_S:g}] s")
     if args.retries is not None and not 0 <= args.retries <= 10:
         problems.append(f"--retries {args.retries}: must be within [0, 10]")
+    if args.fmu is not None and not Path(args.fmu).is_file():
+        problems.append(f"--fmu {args.fmu}: no such file")
+    elif args.fmu is not None and args.regulator in REGULATOR_FMUS:
+        from scenarios.fmus import fmu_role_problem, fmu_version_problem
+
+        problems += filter(None, [fmu_version_problem(args.regulator, Path(args.fmu))
+                                  or fmu_role_problem("--fmu", Path(args.fmu), "regulator")])
     return problems
 
 

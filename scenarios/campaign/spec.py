@@ -8,9 +8,10 @@ Layout (every key below is known; anything else is an error)::
                                     # this file), or an inline [base] table (a scenario)
     duration_s = 30.0               # optional: replaces the base's duration_s
     compare = ["adaptive", "pd_only"]   # optional: replaces the base's arms
-    samples = 60                    # random draws; a grid multiplies them
+    samples = 60                    # random draws; a grid multiplies them (at most 100,000 in all)
     seed = 2026                     # every draw comes from it (same seed, same samples)
-    task_timeout_s = 600.0          # optional: one sample (all arms); default from the duration
+    task_timeout_s = 600.0          # optional: one sample (all arms), at most a week; default
+                                    # from the duration
     retries = 2                     # optional (0-10, default 2): re-runs of a task whose
                                     # worker or run process died
 
@@ -29,7 +30,6 @@ from __future__ import annotations
 
 import copy
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Mapping
@@ -37,10 +37,11 @@ from typing import Any, Mapping
 from scenarios.errors import ScenarioError
 from scenarios import spec as scenario_spec
 from scenarios.campaign import factors as fx
-from scenarios.fields import Problems, did_you_mean, integer, name as name_field, number, string, unknown_keys
+from scenarios.fields import Problems, as_finite, did_you_mean, integer, name as name_field, number, string, unknown_keys
 from scenarios.formatting import show
 from scenarios.scenario import BUILTIN_MODELS, DEFAULT_COMM_STEP_S
 from scenarios.sections import resolve_model
+from scenarios.tomlfile import depth_problem, read_toml
 
 CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
 TOP_KEYS = ("name", "description", "base", "duration_s", "compare", "samples", "seed",
@@ -49,7 +50,12 @@ DISTS = ("uniform", "lhs", "randint", "choice", "grid")
 DIST_KEYS = {"uniform": ("dist", "low", "high", "step"), "lhs": ("dist", "low", "high", "step"),
              "randint": ("dist", "low", "high"), "choice": ("dist", "values", "weights"),
              "grid": ("dist", "values")}
+#: Most samples (random draws x grid cells) a campaign may have.
 MAX_SAMPLES = 100_000
+#: Longest task_timeout_s / --task-timeout, s: a week, well above the default of the
+#: longest sample (120 s + 10 s per simulated s of each arm: 30 h for 3 arms of 3600 s)
+#: and below what the waits accept (poll(2) takes at most 2**31 - 1 ms, 24.8 days).
+MAX_TASK_TIMEOUT_S = 7 * 24 * 3600.0
 MAX_RETRIES = 10
 DEFAULT_RETRIES = 2
 
@@ -121,8 +127,7 @@ def _check_weights(tab: Mapping[str, Any], f: str, n: int, probs: Problems) -> t
     if "weights" not in tab:
         return None
     w = tab["weights"]
-    good = isinstance(w, list) and all(isinstance(x, (int, float)) and not isinstance(x, bool)
-                                       and math.isfinite(x) and x >= 0 for x in w)
+    good = isinstance(w, list) and all(as_finite(x) is not None and x >= 0 for x in w)
     if not good or len(w) != n or sum(w) <= 0:
         probs.add(f + ".weights", w, f"must be {n} non-negative numbers (one per value) with a positive sum")
         return None
@@ -175,9 +180,8 @@ def parse_factor(name: str, tab: Any, probs: Problems) -> Factor | None:
 
 
 # --------------------------------------------------------------------------- base scenario
-def _read_toml(path: Path) -> dict[str, Any]:
-    with open(path, "rb") as fh:
-        return tomllib.load(fh)
+def _read_toml(path: Path, what: str) -> dict[str, Any]:
+    return read_toml(path, what)
 
 
 def _resolve_base(raw: Any, base_dir: Path, probs: Problems) -> tuple[str, dict | None, Path]:
@@ -188,20 +192,19 @@ def _resolve_base(raw: Any, base_dir: Path, probs: Problems) -> tuple[str, dict 
         probs.add("base", raw, "must be a suite scenario name, a scenario file or an inline [base] table")
         return "", None, base_dir
     path = (base_dir / raw) if not Path(raw).is_absolute() else Path(raw)
-    if raw.endswith(".toml") or path.exists():
+    if raw.endswith(".toml") or path.exists() or path.is_symlink():
         try:
-            return str(path), _read_toml(path), path.parent
-        except FileNotFoundError:
-            probs.add("base", raw, f"no such scenario file ({path})")
-        except tomllib.TOMLDecodeError as exc:
-            probs.add("base", raw, f"TOML syntax error: {exc}")
+            return str(path), _read_toml(path, "scenario file"), path.parent
+        except ScenarioError as exc:
+            for p in exc.problems:
+                probs.add("base", raw, p if not p.startswith("file not found") else f"no such scenario file ({path})")
         return raw, None, base_dir
     suite = {p.stem: p for p in scenario_spec.suite_files()}
     if raw not in suite:
         hint = did_you_mean(raw, suite, f"; suite: {', '.join(suite)}", cutoff=scenario_spec.TARGET_HINT_CUTOFF)
         probs.add("base", raw, "no such suite scenario" + hint)
         return raw, None, base_dir
-    return raw, _read_toml(suite[raw]), suite[raw].parent
+    return raw, _read_toml(suite[raw], "scenario file"), suite[raw].parent
 
 
 def _base_document(doc: Mapping[str, Any], name: str, base_dir: Path, probs: Problems) -> tuple[str, dict | None]:
@@ -260,6 +263,9 @@ def _flatten_regulator(raw: dict[str, Any]) -> dict[str, Any]:
 def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_dir: Path | None = None) -> Campaign:
     """Validate a parsed campaign document; raise ScenarioError listing every problem."""
     base_dir = base_dir or Path.cwd()
+    too_deep = depth_problem(doc)  # before any reader walks or copies the values
+    if too_deep:
+        raise ScenarioError([too_deep], source=source)
     probs = Problems()
     unknown_keys(doc, TOP_KEYS, "", probs)
     name = name_field(doc, "name", "name", probs, " (it names samples)")
@@ -271,7 +277,7 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
     retries = integer(doc, "retries", "retries", probs, default=DEFAULT_RETRIES, ge=0)
     if retries is not None and retries > MAX_RETRIES:
         probs.add("retries", retries, f"must be <= {MAX_RETRIES}")
-    timeout = number(doc, "task_timeout_s", "task_timeout_s", probs, gt=0.0)
+    timeout = number(doc, "task_timeout_s", "task_timeout_s", probs, gt=0.0, le=MAX_TASK_TIMEOUT_S)
     if "base" not in doc:
         probs.note("base", "required: a suite scenario name, a scenario file or an inline [base] table")
     ref, base = _base_document(doc, name or "campaign", base_dir, probs) if "base" in doc else ("", None)
@@ -285,6 +291,10 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
         factor = parse_factor(fname, tab, probs)
         if factor is not None:
             factors.append(factor)
+    grid_cells = math.prod(len(f.values) for f in factors if f.dist == "grid")
+    if samples is not None and samples * grid_cells > MAX_SAMPLES:  # before anything is drawn or expanded
+        probs.add("samples", samples, f"x {grid_cells} grid cells = {samples * grid_cells} samples; at most "
+                                      f"{MAX_SAMPLES} in all")
     if "terrain" in raw and any(n.startswith("terrain_") for n in raw):
         probs.note("factors.terrain", "give the terrain factor or terrain_* factors, not both")
     if base is not None and not probs.items:
@@ -299,12 +309,7 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
 
 def load_campaign(path: str | Path) -> Campaign:
     path = Path(path)
-    try:
-        doc = _read_toml(path)
-    except FileNotFoundError:
-        raise ScenarioError([f"file not found: {path}"], source=str(path)) from None
-    except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError([f"TOML syntax error: {exc}"], source=str(path)) from None
+    doc = _read_toml(path, "campaign file")
     return parse_campaign(doc, source=str(path), base_dir=path.parent)
 
 

@@ -328,6 +328,140 @@ def case_crafted_states(fmu, _args):
     return results
 
 
+PHASE_OFFSET = 16  # u32 FMI phase in the guard's serialized state (guard_state.c)
+
+
+def _header_patched(blob: bytes, offset: int, fmt: str, value) -> bytes:
+    """``blob`` with one header field changed and the CRC-64 resealed."""
+    body = bytearray(blob)
+    struct.pack_into(fmt, body, offset, value)
+    return reseal(bytes(body))
+
+
+def _duplicate_time(scalars_text: bytes) -> bytes:
+    """The slave's JSON with a second "time_s" key at its end: json.loads keeps the last one, the
+    guard reads the first (which agrees with its header)."""
+    return scalars_text[:-1] + b', "time_s": 9.0}'
+
+
+def case_forged_agreement(fmu, _args):
+    """Sealed states (every checksum right) whose guard header and slave blob disagree on the
+    phase or the time, or whose slave JSON repeats a key: each must answer fmi2Error at
+    deserialization, the instance unchanged and still able to go on.  Uses no variable, so it
+    runs on the regulator and on the plant FMU alike."""
+    fresh = fmu.instantiate(b"fresh")
+    instantiated = fmu.serialize(fresh)
+    c = fmu.init(fmu.instantiate(b"stepping"))
+    assert fmu.lib.fmi2DoStep(c, 0.0, H, 1) == OK, fmu.log[-3:]
+    stepped = fmu.serialize(c)
+
+    def duplicate_key(blob):
+        head, slave = split_state(blob)
+        _, version, n_text, n_core = struct.unpack_from("<4sIII", slave)
+        text = _duplicate_time(slave[16:16 + n_text])
+        body = struct.pack("<4sIII", b"AVRS", version, len(text), n_core) + text + slave[16 + n_text:16 + n_text + n_core]
+        slave = body + struct.pack("<I", zlib.crc32(body))
+        out = head[:-8] + struct.pack("<Q", len(slave)) + slave
+        return out + struct.pack("<Q", crc64(out))
+
+    cases = {
+        "header initializationMode, slave instantiated": _header_patched(instantiated, PHASE_OFFSET, "<I", 1),
+        "header stepComplete, slave instantiated": _header_patched(instantiated, PHASE_OFFSET, "<I", 2),
+        "header instantiated, slave stepComplete": _header_patched(stepped, PHASE_OFFSET, "<I", 0),
+        "header time 5 s, slave 0.005 s": _header_patched(stepped, TIME_OFFSET, "<d", 5.0),
+        "header time 0.005 s, slave 7 s": forge(stepped, lambda j: j.update(time_s=7.0)),
+        "slave JSON repeats time_s": duplicate_key(stepped),
+    }
+    results = {}
+    for label, bad in cases.items():
+        since = len(fmu.log)
+        status, state = fmu.deserialize(c, bad)
+        if status == OK:
+            status = [status, fmu.lib.fmi2SetFMUstate(c, state), fmu.lib.fmi2DoStep(c, H, H, 1)]
+            fmu.lib.fmi2FreeFMUstate(c, byref(state))
+        results[label] = {"status": status, "log": fmu.messages(since)}
+    results["unchanged"] = fmu.serialize(c) == stepped
+    results["own states restore"] = [fmu.restore(fresh, instantiated), fmu.restore(c, stepped)]
+    results["steps after"] = [fmu.lib.fmi2DoStep(c, (1 + k) * H, H, 1) for k in range(2)]
+    for inst in (fresh, c):
+        fmu.lib.fmi2FreeInstance(inst)
+    return results
+
+
+def _walker_edit(edit):
+    """An edit_core for forge(): the CassiePlant walker state (plant/fmu_core.py: "CPWS", u32 version,
+    u32 JSON length, JSON) with ``edit`` applied to its JSON."""
+    def apply(core: bytes) -> bytes:
+        magic, version, n = struct.unpack_from("<4sII", core)
+        state = json.loads(core[12:12 + n])
+        edit(state)
+        text = json.dumps(state, sort_keys=True).encode()
+        return struct.pack("<4sII", magic, version, len(text)) + text
+    return apply
+
+
+def _set_item(key, index, value):
+    return lambda state: state[key].__setitem__(index, value)
+
+
+#: The plant's forged walker states: (what is forged, the edit of the walker state's JSON).
+WALKER_FORGERIES = {
+    "walker vx_des_mps = NaN": lambda s: s["walker"].update(vx_des_mps=math.nan),
+    "controller mode = 'garbage'": lambda s: s["controller"].update(mode="garbage"),
+    "controller stance = 'up'": lambda s: s["controller"].update(stance="up"),
+    "controller offsets NaN": lambda s: s["controller"]["offsets"].update(delta_swing_knee=math.nan),
+    "pelvis quaternion zero": lambda s: s["physics"].__setitem__(slice(4, 8), [0.0] * 4),  # time, x, y, z, quat
+    "pelvis z = 1e300": _set_item("physics", 3, 1e300),
+    "commanded vx 5 m/s (input range [-3, 3])": lambda s: s["controller"].update(cmd_vx=5.0),
+    "controller step times after the physics time": lambda s: s["controller"].update(_last_t=1e6),
+}
+
+
+def case_forged_walker(fmu, _args):
+    """The CassiePlant FMU: sealed states whose walker memory no run can reach.  Each must be
+    refused with fmi2Error (at deserialization or at fmi2SetFMUstate, never OK then, never
+    Fatal), the instance unchanged and still stepping."""
+    c = fmu.init(fmu.instantiate(b"plant"))
+    for k in range(4):
+        assert fmu.lib.fmi2DoStep(c, k * H, H, 1) == OK, fmu.log[-3:]
+    blob = fmu.serialize(c)
+    results = {}
+    for label, edit in WALKER_FORGERIES.items():
+        since = len(fmu.log)
+        status, state = fmu.deserialize(c, forge(blob, edit_core=_walker_edit(edit)))
+        if status == OK:
+            status = [status, fmu.lib.fmi2SetFMUstate(c, state)]
+            fmu.lib.fmi2FreeFMUstate(c, byref(state))
+            if status[1] == OK:
+                status.append(fmu.lib.fmi2DoStep(c, 4 * H, H, 1))
+        results[label] = {"status": status, "log": fmu.messages(since)}
+    results["unchanged"] = fmu.serialize(c) == blob
+    results["steps after"] = [fmu.lib.fmi2DoStep(c, (4 + k) * H, H, 1) for k in range(2)]
+    fmu.lib.fmi2FreeInstance(c)
+    return results
+
+
+def case_step_bound(fmu, args):
+    """Communication steps beyond the FMU's maximum (args["max_step"], s) right after
+    initialization: each must answer fmi2Error at once (wall time recorded), leave the instance
+    where it was (the next step from the same time is accepted), and a step of exactly the
+    maximum must be done."""
+    import time
+
+    c = fmu.init(fmu.instantiate(b"bound"))
+    results = {}
+    for label, h in (("1e9 s", 1e9), ("1e300 s", 1e300), ("just over the maximum", args["max_step"] + H)):
+        since, start = len(fmu.log), time.perf_counter()
+        results[label] = {"status": fmu.lib.fmi2DoStep(c, 0.0, h, 1), "wall_s": time.perf_counter() - start,
+                          "log": fmu.messages(since)}
+    results["then a 5 ms step"] = fmu.lib.fmi2DoStep(c, 0.0, H, 1)
+    start = time.perf_counter()
+    results["then the maximum"] = fmu.lib.fmi2DoStep(c, H, args["max_step"], 1)
+    results["maximum_wall_s"] = time.perf_counter() - start
+    fmu.lib.fmi2FreeInstance(c)
+    return results
+
+
 def case_foreign_state(fmu, _args):
     """A state from an instance with other fixed parameters is refused until they match."""
     a, blob = _learned(fmu, {"n_neurons": 20, "seed": 0})
