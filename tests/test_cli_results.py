@@ -20,36 +20,11 @@ from pathlib import Path
 import pytest
 
 from scenarios.cli import main as cli_main
+from scenario_support import scenario_file
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
-# 0.5 s of standing is enough for every arm to complete and for every file to be written.
-QUICK_S = 0.5
 # long enough that it is still running when the test interrupts it (about 6 s per arm here)
 SLOW_S = 60.0
-
-
-def scenario_file(folder: Path, name: str, *, duration_s: float = QUICK_S, arms=("adaptive",), file=None,
-                  model: str | None = None) -> Path:
-    path = folder / (file or f"{name}.toml")
-    compare = ", ".join(f'"{a}"' for a in arms)
-    model_line = f'model = "{model}"\n' if model else ""
-    path.write_text(f'''name = "{name}"
-description = "a test scenario"
-duration_s = {duration_s}
-seed = 1
-{model_line}compare = [{compare}]
-[[command]]
-t_s = 0.0
-vx_des = 0.5
-[claim]
-text = "it stands"
-[[claim.check]]
-arm = "adaptive"
-metric = "fell"
-op = "=="
-value = false
-''')
-    return path
 
 
 def cli(capsys, *argv) -> tuple[int, str, str]:

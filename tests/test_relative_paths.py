@@ -17,31 +17,11 @@ from pathlib import Path
 import pytest
 
 from plant_fmu_support import built_plant_fmu
+from scenario_support import scenario_file
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 OSU_XML = REPO_ROOT.parent / "shared" / "cassie" / "osu" / "cassie.xml"
-# 0.5 s of standing: every arm completes, every file is written (as in test_cli_results)
-QUICK_S = 0.5
-
-
-def scenario_text(name: str, model: str | None = None) -> str:
-    model_line = f'model = "{model}"\n' if model else ""
-    return f'''name = "{name}"
-description = "a scenario given by a relative path"
-duration_s = {QUICK_S}
-seed = 1
-{model_line}compare = ["adaptive", "pd_only"]
-[[command]]
-t_s = 0.0
-vx_des = 0.5
-[claim]
-text = "it stands"
-[[claim.check]]
-arm = "adaptive"
-metric = "fell"
-op = "=="
-value = false
-'''
+ARMS = ("adaptive", "pd_only")
 
 
 @pytest.fixture(scope="module")
@@ -52,9 +32,9 @@ def workdir(tmp_path_factory, built_fmu, build_module) -> Path:
     shutil.copy(built_fmu, wd / "fmus" / "AVR.fmu")
     shutil.copy(built_plant_fmu(tmp_path_factory, build_module), wd / "fmus" / "Plant.fmu")
     (wd / "scen").mkdir()
-    (wd / "scen" / "rel_a.toml").write_text(scenario_text("rel_a"))
+    scenario_file(wd / "scen", "rel_a", arms=ARMS)
     # the model path is relative to the scenario file's folder
-    (wd / "scen" / "rel_osu.toml").write_text(scenario_text("rel_osu", os.path.relpath(OSU_XML, wd / "scen")))
+    scenario_file(wd / "scen", "rel_osu", arms=ARMS, model=os.path.relpath(OSU_XML, wd / "scen"))
     return wd
 
 
