@@ -254,15 +254,15 @@ def fmu_entry(path: Path, implementation: str) -> dict:
 
 def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Path]:
     """Build every FMU (the pythonfmu regulator, both native regulators, the CassiePlant
-    FMU, the CommandSource FMU), each with its reference results inside, the FMI cross-check vendor tree
+    FMU, the CommandSource FMUs, FMI 2.0 and 3.0), each with its reference results inside, the FMI cross-check vendor tree
     ``<out_dir>/cross-check/`` (``fmu_src/avr_packaging/crosscheck.py``), ``<out_dir>/fmus.json``
     listing the FMUs, and the CassieAVR system (SSP and OSP)."""
     regulator = build_fmu(out_dir, sanitize=sanitize)
     built = [(regulator, "python")] + [(build_native_fmu(v, out_dir), "native") for v in (2, 3)]
     plant = build_plant_fmu(out_dir)
     built.append((plant, "python"))
-    command = build_command_source(2, out_dir)
-    built.append((command, "native"))
+    command, command3 = (build_command_source(v, out_dir) for v in (2, 3))
+    built += [(command, "native"), (command3, "native")]
     crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], build_native.describe.VERSION)
     listing = {"fmus": [fmu_entry(path, kind) for path, kind in built]}
     tmp = Path(out_dir) / (FMUS_JSON + ".tmp")

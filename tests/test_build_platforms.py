@@ -39,7 +39,7 @@ def test_build_without_cross_compilers_builds_the_host_binaries_and_exits_0(tmp_
                                   for p in platforms):
             assert any(f"{platform} binaries of AdaptiveVelocityRegulatorNative_{fmu}.fmu" in line
                        and f"apt-get install {package}" in line for line in skipped), proc.stderr
-    assert len(skipped) == 4, skipped  # the regulator's FMI 2.0 and 3.0 FMUs, the CommandSource FMI 2.0 FMU
+    assert len(skipped) == 6, skipped  # the regulator's and the CommandSource's FMI 2.0 and 3.0 FMUs
     listing = {e["file"]: e["platforms"] for e in json.loads((out / "fmus.json").read_text())["fmus"]}
     assert listing["AdaptiveVelocityRegulatorNative_fmi2.fmu"] == ["linux64"]
     assert listing["AdaptiveVelocityRegulatorNative_fmi3.fmu"] == ["x86_64-linux"]
@@ -48,7 +48,8 @@ def test_build_without_cross_compilers_builds_the_host_binaries_and_exits_0(tmp_
             listed = z.read("documentation/index.html").decode().split("<h2>Platforms</h2>")[1].split("</ul>")[0]
         assert listed.count("<li>") == 1 and f"<code>binaries/{folder}/</code>" in listed
     assert (out / "CassieAVR.ssp").is_file()
-    with zipfile.ZipFile(out / "CommandSource_fmi2.fmu") as z:  # the other native FMU: the same platforms
-        assert sorted({n.split("/")[1] for n in z.namelist() if n.startswith("binaries/")}) == ["linux64"]
+    for name, folder in (("fmi2", "linux64"), ("fmi3", "x86_64-linux")):  # the other native FMUs: the same rule
+        with zipfile.ZipFile(out / f"CommandSource_{name}.fmu") as z:
+            assert sorted({n.split("/")[1] for n in z.namelist() if n.startswith("binaries/")}) == [folder]
     cross_check = out / "cross-check" / "fmus" / "2.0" / "cs"
     assert sorted(p.name for p in cross_check.iterdir()) == ["linux64"]  # no win64 entry without its binary

@@ -122,7 +122,8 @@ def test_an_fmu_built_alone_is_build_alls(dist, built_fmu, native_fmus, tmp_path
     alone = {"AdaptiveVelocityRegulator.fmu": built_fmu, "AdaptiveVelocityRegulatorNative_fmi2.fmu": native_fmus[2],
              "AdaptiveVelocityRegulatorNative_fmi3.fmu": native_fmus[3],
              "CassiePlant.fmu": built_plant_fmu(tmp_path_factory, build_module),
-             "CommandSource_fmi2.fmu": build_module.build_command_source(2, tmp_path_factory.mktemp("command"))}
+             **{f"CommandSource_fmi{v}.fmu": build_module.build_command_source(v, tmp_path_factory.mktemp("command"))
+                for v in (2, 3)}}
     assert sorted(alone) == sorted(fmu.name for fmu in fmus_of(dist))
     for name, fmu in alone.items():
         assert experiment_of(Path(fmu))[2] == experiment_of(dist / name)[2], name

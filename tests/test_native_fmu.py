@@ -47,5 +47,6 @@ def test_build_all_writes_fmus_json_listing_every_fmu_built(build_module, tmp_pa
         ("2.0", "AdaptiveVelocityRegulatorNative", "native", ["linux64", "win64"]),
         ("3.0", "AdaptiveVelocityRegulatorNative", "native", ["aarch64-linux", "x86_64-linux", "x86_64-windows"]),
         ("2.0", "CassiePlant", "python", ["linux64"]),
-        ("2.0", "CommandSource", "native", ["linux64", "win64"])]
+        ("2.0", "CommandSource", "native", ["linux64", "win64"]),
+        ("3.0", "CommandSource", "native", ["aarch64-linux", "x86_64-linux", "x86_64-windows"])]
     assert all(e["sha256"] == hashlib.sha256(p.read_bytes()).hexdigest() for e, p in zip(listing, paths))

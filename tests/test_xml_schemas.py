@@ -28,6 +28,7 @@ CROSS_CHECK_FMUS = tuple(f"cross-check/fmus/2.0/cs/{platform}/cassie-avr/0.1.0/A
 #: reference results (fmi-ls-ref).
 EVERY_FMU = ("AdaptiveVelocityRegulator.fmu", "AdaptiveVelocityRegulatorNative_fmi2.fmu",
              "AdaptiveVelocityRegulatorNative_fmi3.fmu", "CassiePlant.fmu", "CommandSource_fmi2.fmu",
+             "CommandSource_fmi3.fmu",
              *(f"{system}/{fmu}" for system in ("CassieAVR.ssp/resources", "CassieAVR_osp")
                for fmu in ("AdaptiveVelocityRegulator.fmu", "CassiePlant.fmu", "CommandSource_fmi2.fmu")),
              *CROSS_CHECK_FMUS)
@@ -47,6 +48,8 @@ DOCUMENTS = {
     "CassieAVR_osp/AdaptiveVelocityRegulator.fmu/modelDescription.xml": "fmi2-model",
     "CassieAVR_osp/CassiePlant.fmu/modelDescription.xml": "fmi2-model",
     "CommandSource_fmi2.fmu/modelDescription.xml": "fmi2-model",
+    "CommandSource_fmi3.fmu/modelDescription.xml": "fmi3-model",
+    "CommandSource_fmi3.fmu/sources/buildDescription.xml": "fmi3-build",
     "CassieAVR.ssp/resources/CommandSource_fmi2.fmu/modelDescription.xml": "fmi2-model",
     "CassieAVR_osp/CommandSource_fmi2.fmu/modelDescription.xml": "fmi2-model",
     **{f"{fmu}/modelDescription.xml": "fmi2-model" for fmu in CROSS_CHECK_FMUS},
