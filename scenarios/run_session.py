@@ -121,8 +121,8 @@ class RunSession:
         if failed:
             return 1
         if self.args.require_pass:
-            short = [f"{su['scenario']}: {output.verdict(su).get('overall', 'n/a')}" for su in ordered
-                     if output.verdict(su).get("overall") != "pass"]
+            overall = {su["scenario"]: output.verdict(su).get("overall", "n/a") for su in ordered}
+            short = [f"{name}: {v}" for name, v in overall.items() if v != "pass"]
             if short:
                 print(f"--require-pass: {len(short)} of {len(ordered)} scenario verdict(s) are not pass: "
                       + "; ".join(short), file=sys.stderr)

@@ -26,6 +26,7 @@ from fmpy.fmi1 import FMICallException
 from fmu_src import avr_fmustate as fmustate
 from fmu_src.avr_regulator import MAX_CALLS
 from fmu_src.avr_slave import _ALL_SPECS, REFUSED_STATE, AdaptiveVelocityRegulator
+from test_fmu_slave_state import _slave as initialized_slave
 from native_support import input_sequence, logged_slave
 from plant_fmu_support import built_plant_fmu
 
@@ -87,13 +88,7 @@ _LAST, _N_CALLS, _TIME_S, _BOUNDARIES, _STRIDE_CALLS = 44, 52, 92, 100, 108
 
 
 def _slave(**params):
-    s = AdaptiveVelocityRegulator(instance_name="forged")
-    for name, value in params.items():
-        s._set(name, value)
-    s.setup_experiment(0.0)
-    s.enter_initialization_mode()
-    s.exit_initialization_mode()
-    return s
+    return initialized_slave("forged", **params)
 
 
 def _with_core_field(blob: bytes, offset: int, fmt: str, value) -> bytes:

@@ -21,8 +21,9 @@ from fmu_src.avr_slave import _ALL_SPECS, REFUSED_STATE, AdaptiveVelocityRegulat
 H = 0.005
 
 
-def _slave(**params):
-    s = AdaptiveVelocityRegulator(instance_name="unit")
+def _slave(instance_name="unit", **params):
+    """The regulator slave, its parameters set, initialized."""
+    s = AdaptiveVelocityRegulator(instance_name=instance_name)
     for name, value in params.items():
         s._set(name, value)
     s.setup_experiment(0.0)
