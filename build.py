@@ -12,7 +12,7 @@ without one, its platform is skipped with a warning naming the package, and the 
     python build.py [--out DIR] [--sanitize]
 
 Steps for a pythonfmu FMU: the slave and its modules become one package imported under a name
-private to the build (``fmu_src/avr_packaging/pack.py``), which pythonfmu packs; the model
+private to the build (``fmu_src/packing/pack.py``), which pythonfmu packs; the model
 description is post-processed (units, ranges, default experiment, a content-derived
 GUID, no generation time), a documentation page and a ``requirements.txt`` are added,
 the FMI guard (``fmu_src/guard/*.c``) is compiled as the linux64 library the host loads
@@ -20,13 +20,13 @@ the FMI guard (``fmu_src/guard/*.c``) is compiled as the linux64 library the hos
 written with sorted entries and fixed timestamps, so two builds of the same sources give
 the same sha256.  Every FMU build function then simulates the FMU it wrote once with FMPy
 and puts the results inside (``extra/org.fmi-standard.fmi-ls-ref/``, the fmi-ls-ref layered
-standard; ``fmu_src/avr_packaging/crosscheck.py``), so an FMU is the same file whoever builds
+standard; ``fmu_src/packing/crosscheck.py``), so an FMU is the same file whoever builds
 it.  Prints each FMU's path and sha256.  ``--sanitize`` compiles the guard
 with AddressSanitizer + UndefinedBehaviorSanitizer instead (for the ``sanitize`` tests).
 Temporary folders are removed when the build ends, also when it fails.
 
 This file is the entry point and the orchestration; the pieces live beside what they
-build: ``fmu_src/avr_packaging/`` (archives and GUIDs, model descriptions, documentation
+build: ``fmu_src/packing/`` (archives and GUIDs, model descriptions, documentation
 pages, the pythonfmu library fix, the plant's vendored modules),
 ``fmu_src/guard/build_guard.py`` and ``fmu_src/native/build_native.py``.
 """
@@ -52,27 +52,22 @@ from fmu_src.guard.build_guard import (GUARD_TEXTS, SANITIZE_FLAGS,  # noqa: E40
 from fmu_src.native import build_native  # noqa: E402
 from fmu_src.command_source import build_command_source as command_source  # noqa: E402
 from fmu_src.native.build_native import compile_native  # noqa: E402,F401 (the tests' sanitizer build)
-from fmu_src.avr_packaging import crosscheck, pack, pages, vendor  # noqa: E402
-from fmu_src.avr_packaging.archive import content_guid, read_entries, sha256_of, write_zip  # noqa: E402
-from fmu_src.avr_packaging.describe import (DEFAULT_EXPERIMENT, PLANT_INITIAL_UNKNOWNS, UNITS,  # noqa: E402
+from fmu_src.packing import crosscheck, pack, pages, vendor  # noqa: E402
+from fmu_src.packing.archive import content_guid, read_entries, sha256_of, write_zip  # noqa: E402
+from fmu_src.packing.describe import (DEFAULT_EXPERIMENT, PLANT_INITIAL_UNKNOWNS, UNITS,  # noqa: E402
                                             model_description)
-from fmu_src.avr_packaging.pythonfmu_fix import (EXIT_BUG_PATCH, EXIT_BUG_SYMBOL,  # noqa: E402,F401 (tests)
+from fmu_src.packing.pythonfmu_fix import (EXIT_BUG_PATCH, EXIT_BUG_SYMBOL,  # noqa: E402,F401 (tests)
                                              _elf_symbol_file_offset, patch_pythonfmu_exit_bug)
 
 FMU_SRC = REPO_ROOT / "fmu_src"
-SLAVE_SCRIPT = FMU_SRC / "avr_slave.py"
-#: The regulator FMU's modules besides the slave script; the plant FMU carries them too: its
-#: slave uses avr_slavebase, its core avr_specs.  Each pythonfmu FMU's code is one package in
-#: resources/<lib>/, imported under a name private to the build (fmu_src/avr_packaging/pack.py).
-PROJECT_FILES = tuple(FMU_SRC / f"avr_{name}.py" for name in (
-    "core", "errors", "fmustate", "network", "params", "regulator", "slavebase", "specs", "statebytes"))
+SLAVE_SCRIPT = FMU_SRC / "regulator_fmu" / "avr_slave.py"
 MODEL_IDENTIFIER = "AdaptiveVelocityRegulator"
 #: The regulator's package folder in resources/.
 REGULATOR_LIB = "avr_regulator_lib"
 DEFAULT_OUT = REPO_ROOT / "dist"
 REQUIREMENTS = "numpy>=1.24\n"
 FMUS_JSON = "fmus.json"
-PLANT_SLAVE_SCRIPT = FMU_SRC / "cassie_plant_slave.py"
+PLANT_SLAVE_SCRIPT = FMU_SRC / "plant_fmu" / "cassie_plant_slave.py"
 PLANT_IDENTIFIER = "CassiePlant"
 #: The plant's package folder in resources/ (with the models and their licenses, see the slave).
 PLANT_LIB = "cassie_plant_lib"
@@ -86,7 +81,7 @@ log = logging.getLogger("avr_build")
 
 
 def _specs():
-    from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+    from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
 
     return (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)
 
@@ -145,7 +140,7 @@ def build_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path:
     """
     specs = _specs()
     with tempfile.TemporaryDirectory(prefix="avr_fmu_") as tmp:
-        packed = pack.pack(Path(tmp) / "stage", SLAVE_SCRIPT, MODEL_IDENTIFIER, REGULATOR_LIB, PROJECT_FILES)
+        packed = pack.pack(Path(tmp) / "stage", SLAVE_SCRIPT, MODEL_IDENTIFIER, REGULATOR_LIB)
         entries = _pythonfmu_entries(packed, Path(tmp) / "raw")
     tree = model_description(entries.pop("modelDescription.xml"), specs)
     entries["documentation/index.html"] = pages.regulator_page(MODEL_IDENTIFIER, specs).encode("utf-8")
@@ -171,7 +166,7 @@ def _plant_entries(tmp: Path) -> tuple[pack.Packed, dict[str, bytes]]:
         vendor.copy_plant_data(lib)
         vendor.copy_models(lib / "models")
 
-    packed = pack.pack(tmp / "stage", PLANT_SLAVE_SCRIPT, PLANT_IDENTIFIER, PLANT_LIB, PROJECT_FILES, fill=data)
+    packed = pack.pack(tmp / "stage", PLANT_SLAVE_SCRIPT, PLANT_IDENTIFIER, PLANT_LIB, fill=data)
     entries = _pythonfmu_entries(packed, tmp / "raw")
     if PYTHONFMU_LINUX.format(PLANT_IDENTIFIER) not in entries:
         import pythonfmu
@@ -188,7 +183,7 @@ def build_plant_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path
 
     ``sanitize``: the guard with AddressSanitizer and UBSan, as for ``build_fmu`` (tests only).
     """
-    from plant import fmu_core
+    from fmu_src.plant_fmu import fmu_core
 
     with tempfile.TemporaryDirectory(prefix="cassie_plant_fmu_") as tmp:
         packed, entries = _plant_entries(Path(tmp))
@@ -216,8 +211,8 @@ def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: 
     """Write ``<out_dir>/CassieAVR.ssp``: the plant, the regulator and the command source (its
     nominal schedule, built into ``out_dir`` if not given) wired name to name, every
     parameter at its start value in the parameter sets, a 30 s, 5 ms default experiment
-    (the structure is ``scenarios/system.py``'s); reproducible zip."""
-    from scenarios import system
+    (the structure is ``scenarios/ssp/system.py``'s); reproducible zip."""
+    from scenarios.ssp import system
 
     command_fmu = command_fmu or build_command_source(2, out_dir)
     path = Path(out_dir) / f"{system.SYSTEM_NAME}.ssp"
@@ -229,7 +224,7 @@ def build_osp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: 
     """Write the folder ``<out_dir>/CassieAVR_osp/``: OspSystemStructure.xml beside copies of the three FMUs."""
     import shutil
 
-    from scenarios import system
+    from scenarios.ssp import system
 
     command_fmu = command_fmu or build_command_source(2, out_dir)
     folder = Path(out_dir) / f"{system.SYSTEM_NAME}_osp"
@@ -255,7 +250,7 @@ def fmu_entry(path: Path, implementation: str) -> dict:
 def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Path]:
     """Build every FMU (the pythonfmu regulator, both native regulators, the CassiePlant
     FMU, the CommandSource FMUs, FMI 2.0 and 3.0), each with its reference results inside, the FMI cross-check vendor tree
-    ``<out_dir>/cross-check/`` (``fmu_src/avr_packaging/crosscheck.py``), ``<out_dir>/fmus.json``
+    ``<out_dir>/cross-check/`` (``fmu_src/packing/crosscheck.py``), ``<out_dir>/fmus.json``
     listing the FMUs, and the CassieAVR system (SSP and OSP)."""
     regulator = build_fmu(out_dir, sanitize=sanitize)
     built = [(regulator, "python")] + [(build_native_fmu(v, out_dir), "native") for v in (2, 3)]

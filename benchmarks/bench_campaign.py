@@ -51,14 +51,14 @@ sys.path.insert(0, str(REPO_ROOT))
 
 SMOKE = REPO_ROOT / "scenarios" / "campaigns" / "smoke.toml"
 #: (file, function) under cProfile -> the part of a task it measures
-PARTS = {("scenarios/plantio.py", "check_plant"): "model check before the run, a compile (overhead)",
-         ("scenarios/plantio.py", "load_plant_model"): "plant model compilation (overhead)",
-         ("scenarios/plots.py", "write_plots"): "plots, matplotlib (overhead)",
-         ("scenarios/output.py", "write_timeseries"): "time series CSV (overhead)",
-         ("scenarios/master.py", "run_arm"): "arms: co-simulation incl. FMU start (work)",
-         ("scenarios/regulators.py", "start"): "  of which regulator start (FMU extract + instantiate)"}
+PARTS = {("scenarios/cosim/plantio.py", "check_plant"): "model check before the run, a compile (overhead)",
+         ("scenarios/cosim/plantio.py", "load_plant_model"): "plant model compilation (overhead)",
+         ("scenarios/results/plots.py", "write_plots"): "plots, matplotlib (overhead)",
+         ("scenarios/results/output.py", "write_timeseries"): "time series CSV (overhead)",
+         ("scenarios/cosim/master.py", "run_arm"): "arms: co-simulation incl. FMU start (work)",
+         ("scenarios/cosim/regulators.py", "start"): "  of which regulator start (FMU extract + instantiate)"}
 #: what a run process imports (the imports of a campaign task's run, matplotlib not among them)
-RUN_IMPORTS = "import scenarios.cli, scenarios.run_session, scenarios.master, scenarios.output, mujoco, fmpy, plant.sim"
+RUN_IMPORTS = "import scenarios.cli, scenarios.run.run_session, scenarios.cosim.master, scenarios.results.output, mujoco, fmpy, plant.sim"
 
 
 def campaign_file(folder: Path, duration: float) -> Path:
@@ -151,7 +151,7 @@ def main(argv=None) -> int:
                     help="also run the campaigns with the code in this folder (before/after in one run)")
     ap.add_argument("--json", default=None, help="also write the numbers to this file")
     args = ap.parse_args(argv)
-    from scenarios.cli import ensure_fmu
+    from scenarios.cosim.fmus import ensure_fmu
 
     fmu = str(Path(ensure_fmu(Path(args.fmu) if args.fmu else None)).resolve())
     trees = {"this tree": (REPO_ROOT, ()), "this tree, --fork-runs": (REPO_ROOT, ("--fork-runs",))}

@@ -6,13 +6,13 @@ Measured on the same machine in the same process, one after the other:
 
 - ``bare mj_step``: ``mujoco.mj_step`` on the nominal model from ``home``, no
   controller (the physics alone; the robot falls, which does not slow MuJoCo down);
-- ``plant only``: the master loop (``scenarios.master.run_arm``) with a regulator path
+- ``plant only``: the master loop (``scenarios.cosim.master.run_arm``) with a regulator path
   that returns zero offsets: walker + nominal controller + the loop's bookkeeping
   (without the regulator the walker may fall early: its rate is over the part run);
 - ``in-process``: the same loop with the regulator core called directly;
 - ``FMU``: the same loop through the built FMU (fmpy);
 - ``native FMU``: the same loop through the native FMI 2.0 FMU (C, ``fmu_src/native``) via
-  the master's own FMU path (``scenarios.master.FmuRegulator`` takes any FMI 2.0 FMU);
+  the master's own FMU path (``scenarios.cosim.master.FmuRegulator`` takes any FMI 2.0 FMU);
 - ``lean loop``: ``plant.sim.CassieWalker`` stepped directly with zero offsets and with the
   native FMU called through its raw C functions (``LeanNativeFmu``): what the FMU itself
   adds to a closed loop, without the master's per-step Python bookkeeping.
@@ -31,7 +31,6 @@ per wall second. Targets: FMU wall <= 1.2 x in-process wall; FMU closed loop
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import json
 import subprocess
 import sys
@@ -43,17 +42,20 @@ from typing import Any, Mapping
 REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
-from scenarios import master, spec  # noqa: E402
+from scenarios.cosim import master  # noqa: E402
+from scenarios.lang import spec  # noqa: E402
 from ctypes import c_double as c_double_t  # noqa: E402
+from scenarios.cosim.regulators import FmuRegulator, InProcessRegulator, RegulatorPath
+from scenarios.lang.scenario import Scenario
 
 
-class ZeroRegulator(master.RegulatorPath):
+class ZeroRegulator(RegulatorPath):
     """A regulator path that outputs zeros: the plant-only baseline of the same loop."""
 
     kind = "zero"
 
     def __init__(self) -> None:
-        from fmu_src.avr_core import OUTPUT_SPECS
+        from fmu_src.core.avr_specs import OUTPUT_SPECS
 
         self._outputs = tuple(s.name for s in OUTPUT_SPECS)
         self._zeros = {n: 0.0 for n in self._outputs}
@@ -90,9 +92,9 @@ def bare_mj_step(seconds: float, model=None) -> dict[str, float]:
     return {"sim_s": sim, "wall_s": wall, "cpu_s": cpu, "rtf": sim / wall, "rtf_cpu": sim / cpu}
 
 
-def closed_loop_all(scenario: spec.Scenario, makers: dict[str, Any], repeat: int) -> dict[str, dict[str, float]]:
+def closed_loop_all(scenario: Scenario, makers: dict[str, Any], repeat: int) -> dict[str, dict[str, float]]:
     """Best of ``repeat`` runs per regulator path, the paths interleaved (fair under load)."""
-    from scenarios.plantio import load_plant_model
+    from scenarios.cosim.plantio import load_plant_model
 
     model, summary = load_plant_model(scenario)
     best: dict[str, dict[str, float]] = {}
@@ -136,7 +138,7 @@ class LeanNativeFmu:
         from fmpy import extract, read_model_description
         from fmpy.fmi2 import FMU2Slave, fmi2ValueReference
 
-        from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS
+        from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS
 
         md = read_model_description(str(fmu_path))
         vr = {v.name: v.valueReference for v in md.modelVariables}
@@ -180,7 +182,7 @@ class LeanZero:
     """Zero offsets with the same ``step(inputs, dt)``: the lean loop's plant-only baseline."""
 
     def __init__(self) -> None:
-        from fmu_src.avr_core import OUTPUT_SPECS
+        from fmu_src.core.avr_specs import OUTPUT_SPECS
 
         self._zeros = {s.name: 0.0 for s in OUTPUT_SPECS}
 
@@ -195,7 +197,8 @@ def lean_loop(makers: dict[str, Any], seconds: float, repeat: int) -> dict[str, 
     """CPU s per simulated s of ``plant.sim`` walking at 0.5 m/s with each regulator (5 ms
     communication step, 10 plant steps each), best of ``repeat``, interleaved."""
     from plant.model import load_model
-    from plant.sim import CassieWalker, apply_regulator
+    from plant.sim import CassieWalker
+    from scenarios.cosim.inprocess import apply_regulator
 
     model = load_model("menagerie")
     best: dict[str, dict[str, float]] = {}
@@ -219,7 +222,7 @@ def ensure_fmu(path: str | None, native: bool = False) -> Path:
     if path:
         return Path(path)
     out = Path(tempfile.mkdtemp(prefix="bench_fmu_"))
-    from scenarios.cli import load_build_module
+    from scenarios.cosim.fmus import load_build_module
 
     build = load_build_module()
     return Path(build.build_native_fmu(2, out) if native else build.build_fmu(out))
@@ -228,14 +231,14 @@ def ensure_fmu(path: str | None, native: bool = False) -> Path:
 def build_system(fmu: Path, out: Path) -> tuple[Path, Path]:
     """The plant FMU and CassieAVR.ssp in ``out`` (before any FMU is loaded: pythonfmu's builder must be
     the installed package, not an FMU's copy of it)."""
-    from scenarios.cli import load_build_module
+    from scenarios.cosim.fmus import load_build_module
 
     build = load_build_module()
     plant_fmu = Path(build.build_plant_fmu(out))
     return plant_fmu, build.build_ssp(out, plant_fmu, fmu)
 
 
-def system_loop(scenario: spec.Scenario, fmu: Path, plant_fmu: Path, ssp: Path, repeat: int) -> dict[str, Any]:
+def system_loop(scenario: Scenario, fmu: Path, plant_fmu: Path, ssp: Path, repeat: int) -> dict[str, Any]:
     """The loop with the plant as an FMU too (issue 10), best of ``repeat``, interleaved:
 
     - ``libcosim_ssp``: libcosim running ``CassieAVR.ssp`` (both FMUs, 5 ms Jacobi steps in
@@ -247,8 +250,8 @@ def system_loop(scenario: spec.Scenario, fmu: Path, plant_fmu: Path, ssp: Path, 
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
 
-    from scenarios.plant_fmu import plant_factory
-    from scenarios.plantio import load_plant_model
+    from scenarios.cosim.plant_fmu import plant_factory
+    from scenarios.cosim.plantio import load_plant_model
 
     log_output_level(CosimLogLevel.ERROR)
     model, summary = load_plant_model(scenario)
@@ -262,7 +265,7 @@ def system_loop(scenario: spec.Scenario, fmu: Path, plant_fmu: Path, ssp: Path, 
         del execution
         runs = {"libcosim_ssp": {"sim_s": n * scenario.comm_step_s, "wall_s": wall, "cpu_s": cpu, "ok": ok}}
         c0 = time.process_time()
-        r = master.run_arm(scenario, "adaptive", master.FmuRegulator(fmu), model=model, model_summary=summary,
+        r = master.run_arm(scenario, "adaptive", FmuRegulator(fmu), model=model, model_summary=summary,
                            plant=plant_factory(plant_fmu))
         runs["master_plant_fmu"] = {"sim_s": r.sim_s, "wall_s": r.wall_s, "cpu_s": time.process_time() - c0,
                                     "ok": not r.fell}
@@ -307,17 +310,17 @@ def main(argv=None) -> int:
     res["bare_mj_step"] = max(bare, key=lambda m: m["rtf_cpu"])
     res.update(closed_loop_all(scenario, {
         "plant_only": ZeroRegulator,
-        "inprocess": master.InProcessRegulator,
-        "fmu": lambda: master.FmuRegulator(fmu),
-        "native_fmu": lambda: master.FmuRegulator(native_fmu),
+        "inprocess": InProcessRegulator,
+        "fmu": lambda: FmuRegulator(fmu),
+        "native_fmu": lambda: FmuRegulator(native_fmu),
     }, args.repeat))
     res["regulator_step_us"] = {
-        "inprocess": 1e6 * regulator_step_cost(master.InProcessRegulator),
-        "fmu": 1e6 * regulator_step_cost(lambda: master.FmuRegulator(fmu)),
-        "native_fmu": 1e6 * regulator_step_cost(lambda: master.FmuRegulator(native_fmu)),
+        "inprocess": 1e6 * regulator_step_cost(InProcessRegulator),
+        "fmu": 1e6 * regulator_step_cost(lambda: FmuRegulator(fmu)),
+        "native_fmu": 1e6 * regulator_step_cost(lambda: FmuRegulator(native_fmu)),
     }
     t0 = time.perf_counter()
-    reg = master.FmuRegulator(fmu)
+    reg = FmuRegulator(fmu)
     reg.start({}, 0.0, 1.0)
     reg.close()
     res["fmu_startup_s"] = time.perf_counter() - t0

@@ -7,7 +7,7 @@
   time as the walker, restarting from ``home`` whenever the (uncontrolled) robot
   has fallen (pelvis < 0.6 m) so that the contact load stays comparable;
 * walker: :class:`plant.sim.CassieWalker` walking at 0.5 m/s from rest with the
-  regulator core ``fmu_src.avr_core`` (adaptation off, default gains) called
+  regulator core ``fmu_src.core.avr_core`` (adaptation off, default gains) called
   in-process every 10 ms (``advance(20)``) through
   :func:`plant.sim.apply_regulator`, including the regulator and telemetry calls
   the co-simulation makes.
@@ -22,10 +22,11 @@ import time
 
 import mujoco
 
-from fmu_src.avr_core import Regulator
-from plant.make_gaits import COMM_STEPS, PD_ONLY_PARAMS
+from fmu_src.core.avr_core import Regulator
+from scenarios.gaits.make_gaits import COMM_STEPS, PD_ONLY_PARAMS
 from plant.model import load_model
-from plant.sim import CassieWalker, apply_regulator
+from plant.sim import CassieWalker
+from scenarios.cosim.inprocess import apply_regulator
 
 
 def bench_bare(model, sim_s: float) -> float:

@@ -40,14 +40,16 @@ from pathlib import Path
 import numpy as np
 
 try:
-    from fmu_src.avr_core import (
-        Regulator, RegulatorInputs, RegulatorParams, build_networks, initial_state, step,
-    )
+    from fmu_src.core.avr_core import Regulator
+    from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams
+    from fmu_src.core.avr_network import build_networks
+    from fmu_src.core.avr_regulator import initial_state, step
 except ImportError:  # run from a checkout without the editable install
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-    from fmu_src.avr_core import (
-        Regulator, RegulatorInputs, RegulatorParams, build_networks, initial_state, step,
-    )
+    from fmu_src.core.avr_core import Regulator
+    from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams
+    from fmu_src.core.avr_network import build_networks
+    from fmu_src.core.avr_regulator import initial_state, step
 
 DT = 0.005  # s, a typical co-simulation communication step
 WARMUP = 200
@@ -139,7 +141,7 @@ def _setup_fmu(inputs, dt, n_neurons, build):
     from fmpy import extract, read_model_description
     from fmpy.fmi2 import FMU2Slave
 
-    from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS
+    from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS
 
     tmp = tempfile.TemporaryDirectory(prefix="bench_fmu_")
     fmu_path = build(Path(tmp.name))
@@ -177,7 +179,7 @@ def _setup_fmu(inputs, dt, n_neurons, build):
 
 
 def _build_module():
-    from scenarios.cli import load_build_module
+    from scenarios.cosim.fmus import load_build_module
 
     return load_build_module()
 
@@ -201,7 +203,7 @@ def measure_c_host(inputs, dt, n_neurons, repeats: int = 5) -> float | None:
 
     from fmpy import read_model_description
 
-    from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS
+    from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS
 
     root = Path(__file__).resolve().parents[1]
     cc = shutil.which("cc")

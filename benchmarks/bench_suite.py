@@ -17,7 +17,7 @@ one run, one after the other:
   has terrain, on its terrain;
 - the suite: ``python -m scenarios run TARGET... --jobs N`` in a subprocess: its wall
   time, the CPU time of it and its workers (``RUSAGE_CHILDREN``), and from each
-  ``summary.json`` every arm's ``timings`` (``scenarios.master.TIMINGS``; start-up =
+  ``summary.json`` every arm's ``timings`` (``scenarios.cosim.master.TIMINGS``; start-up =
   worker start for its first arm, model, walker, regulator start) and each
   scenario's writing (csv, plots, their CPU time, and which process wrote).
 
@@ -47,20 +47,22 @@ sys.path.insert(0, str(REPO_ROOT / "benchmarks"))
 sys.path.insert(0, str(REPO_ROOT))
 
 import bench_cosim  # noqa: E402
-from scenarios import master, spec  # noqa: E402
-from scenarios.plantio import load_plant_model  # noqa: E402
+from scenarios.lang import spec  # noqa: E402
+from scenarios.cosim.plantio import load_plant_model  # noqa: E402
+from scenarios.cosim.regulators import FmuRegulator
+from scenarios.lang.scenario import Scenario
 
 #: summary.json keys that differ between runs of the same thing (time, where the file was).
 VOLATILE_ARM_KEYS = ("wall_s", "realtime_factor", "timings", "status")
 VOLATILE_TOP_KEYS = ("source", "timings", "status", "error")
 
 
-def floor_kind(scenario: spec.Scenario) -> str:
+def floor_kind(scenario: Scenario) -> str:
     return "terrain" if scenario.terrain is not None else "flat"
 
 
 # --------------------------------------------------------------------------- the yardsticks
-def physics_rates(scenarios: list[spec.Scenario], repeat: int) -> dict[str, dict[str, float]]:
+def physics_rates(scenarios: list[Scenario], repeat: int) -> dict[str, dict[str, float]]:
     """Bare mj_step on each scenario's compiled plant (measured once per distinct plant),
     best of ``repeat`` by CPU rate, by scenario name."""
     plants = {s.name: load_plant_model(s, shared=True)[0] for s in scenarios}
@@ -73,14 +75,14 @@ def physics_rates(scenarios: list[spec.Scenario], repeat: int) -> dict[str, dict
     return {name: best[id(model)] for name, model in plants.items()}
 
 
-def loop_rates(scenarios: list[spec.Scenario], fmu: Path, repeat: int) -> dict[str, dict[str, float]]:
+def loop_rates(scenarios: list[Scenario], fmu: Path, repeat: int) -> dict[str, dict[str, float]]:
     """The FMU loop benchmark on the flat nominal plant and on each terrain of the targets."""
     benches = {"flat": spec.resolve_targets(["nominal"])[0]}
     benches.update({"terrain": s for s in scenarios if s.terrain is not None})
     out = {}
     for kind, s in benches.items():
         short = spec.override(s, duration_s=10.0)
-        out[kind] = bench_cosim.closed_loop_all(short, {"fmu": lambda: master.FmuRegulator(fmu)}, repeat)["fmu"]
+        out[kind] = bench_cosim.closed_loop_all(short, {"fmu": lambda: FmuRegulator(fmu)}, repeat)["fmu"]
     return out
 
 
@@ -106,7 +108,7 @@ def run_suite(targets: list[str], jobs: int, fmu: Path, out: Path, duration: flo
             "table": proc.stdout}
 
 
-def read_arms(out: Path, scenarios: list[spec.Scenario]) -> tuple[list[dict[str, Any]], dict[str, dict]]:
+def read_arms(out: Path, scenarios: list[Scenario]) -> tuple[list[dict[str, Any]], dict[str, dict]]:
     """Every arm's metrics and timings, and each scenario's writing timings, from summary.json."""
     arms, writes = [], {}
     for s in scenarios:
@@ -123,7 +125,7 @@ def startup_s(t: dict[str, float]) -> float:
 
 
 # --------------------------------------------------------------------------- comparing with an earlier run
-def compare_runs(new: Path, old: Path, scenarios: list[spec.Scenario]) -> list[str]:
+def compare_runs(new: Path, old: Path, scenarios: list[Scenario]) -> list[str]:
     """Differences: timeseries.csv bytes, and every summary.json key of ``old`` except the
     volatile ones (wall time, statuses added later, the source path, timings)."""
     problems = []

@@ -1,7 +1,12 @@
-"""Sources of the AdaptiveVelocityRegulator FMU (numpy only).
+"""The FMUs' sources, in layers that import downward only:
 
-The modules import each other package-relative: inside an FMU they travel as one package
-imported under a name private to the build (``avr_packaging/pack.py``).  Nothing here may
-import mujoco, the plant or the scenarios; the exception is ``cassie_plant_slave.py``, the
-slave of the other FMU (CassiePlant), which imports the plant's core (see its docstring).
+- ``core/``: the regulator itself, numpy only (and, in ``native/``, its C twin's numerics);
+- ``fmi/``: what both pythonfmu slaves share: the FMI phase rules and the FMU-state blob;
+- ``regulator_fmu/``, ``plant_fmu/``: the two pythonfmu slaves (the plant's imports ``plant``);
+- ``guard/``, ``native/``, ``command_source/``: the C parts (the guard in front of the
+  pythonfmu regulator, the native regulator FMUs, the CommandSource FMUs);
+- ``packing/``: build-time helpers of ``build.py`` (never inside an FMU).
+
+Inside an FMU the Python modules travel as one package imported under a name private to the
+build (``packing/pack.py``), their absolute project imports made package-relative.
 """

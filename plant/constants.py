@@ -4,7 +4,7 @@ Cassie's names are the same in both models (Menagerie's ``agility_cassie`` and O
 ``cassie.xml``): joints and actuators are ``{side}-{joint}``, the pelvis is one body.
 
 ``OFFSET_JOINTS`` are the six joints the regulator's ``delta_*`` outputs offset, in the
-regulator's output order; ``tests`` ties them to ``fmu_src.avr_core.OUTPUT_JOINTS``
+regulator's output order; ``tests`` ties them to ``fmu_src.core.avr_core.OUTPUT_JOINTS``
 (``fmu_src`` is vendored into the FMU alone, so it cannot import them from here).
 """
 

@@ -77,7 +77,7 @@ held constant during a step (0 until the first step completes);
 first-order low-pass filter with time constant ``vy_filter_tau_s`` = 0.1 s (a
 continuously filtered signal: the paper's mid-step average mixes the periodic
 sway with the drift and made the lateral loop unstable); pitch/roll and their
-rates as above.  Because ``fmu_src.avr_core`` samples and holds its lateral PD
+rates as above.  Because ``fmu_src.core.avr_core`` samples and holds its lateral PD
 once per step (like the longitudinal one), a held lateral term alone was unstable
 here too (falls within 8-17 s at Kp_y = 0.3); the nominal controller therefore
 closes the lateral sway loop itself, continuously, with the same filtered ``vy``:
@@ -88,10 +88,10 @@ All offsets are applied on top of the calibrated gait, so zero offsets at the
 commanded speed give (on the nominal model) the commanded speed.
 
 Recommended regulator defaults (measured with this plant and
-``fmu_src.avr_core`` with adaptation off): ``Kp_x = 0.10`` rad/(m/s) (0.15 works
+``fmu_src.core.avr_core`` with adaptation off): ``Kp_x = 0.10`` rad/(m/s) (0.15 works
 too; 0.25 oscillates step to step and falls within 4-12 s), ``Kd_x = 0`` (0.05 is
 fine), ``Kp_y = 0.1`` rad/(m/s), ``Kd_y = 0``, torso gains 0 (the stance hip PD
-already holds the torso).  These are ``fmu_src.avr_core.RegulatorParams``'
+already holds the torso).  These are ``fmu_src.core.avr_core.RegulatorParams``'
 defaults; the gait calibration, the walking tests and the plant benchmark run
 that core in-process with ``adaptation_enabled=False`` through
 :func:`plant.sim.apply_regulator`.
@@ -115,12 +115,10 @@ from plant.cassie import CassiePhysics
 from plant.constants import MOTOR_JOINTS, OFFSET_NAMES, SIDES
 from plant.controller_params import ControllerParams
 from plant.gaits import GaitLibrary, GaitParams
-from plant.kinematics import LegKinematics, bezier  # noqa: F401  (re-exported)
+from plant.kinematics import LegKinematics, bezier
 
 log = logging.getLogger(__name__)
 
-#: The regulator's joint offsets the controller takes (``plant.constants.OFFSET_NAMES``).
-OFFSET_KEYS = OFFSET_NAMES
 
 #: The neutral-point landing angle asin(v T / 2L) takes its argument clipped to +-this:
 #: at most 30 degrees from vertical, beyond any speed the gait library covers.
@@ -197,7 +195,7 @@ class NominalController:
                                    + qpos[la["tarsus"]] + qpos[la["foot"]])
         # Ankle height above ground when standing (m).
         self.ankle_height0 = float(np.mean([phys.foot_position(s)[2] for s in SIDES]))
-        self.offsets = {k: 0.0 for k in OFFSET_KEYS}
+        self.offsets = {k: 0.0 for k in OFFSET_NAMES}
         self.gait = None
         #: Gait speed (m/s): the command through the rate limiter.
         self.vx_des = 0.0
@@ -276,10 +274,10 @@ class NominalController:
                 number(f"{name}[{i}]", v, lo, hi)
 
         offsets = memory["offsets"]
-        if not (isinstance(offsets, Mapping) and set(offsets) == set(OFFSET_KEYS)):
-            problems.append(f"controller offsets = {offsets!r}: must have exactly the keys {', '.join(OFFSET_KEYS)}")
+        if not (isinstance(offsets, Mapping) and set(offsets) == set(OFFSET_NAMES)):
+            problems.append(f"controller offsets = {offsets!r}: must have exactly the keys {', '.join(OFFSET_NAMES)}")
         else:
-            for k in OFFSET_KEYS:
+            for k in OFFSET_NAMES:
                 number(f"offsets[{k!r}]", offsets[k])
         for name in ("vx_des", "vy_des", "cmd_vx", "cmd_vy", "yaw_rate_des", "cmd_yaw_rate", "vx_step_avg",
                      "vy_filt", "vx_filt", "yaw_ref"):
@@ -335,7 +333,7 @@ class NominalController:
             elif name == "_swing_start":
                 value = tuple(float(v) for v in value)
             elif name == "offsets":
-                value = {k: float(value[k]) for k in OFFSET_KEYS}
+                value = {k: float(value[k]) for k in OFFSET_NAMES}
             setattr(self, name, value)
         self.gait = self._gaits.lookup(self.vx_des, self.vy_des)
 
@@ -372,7 +370,7 @@ class NominalController:
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
         for k in offsets:
             if k not in self.offsets:
-                raise KeyError(f"unknown offset key {k!r}; allowed: {', '.join(OFFSET_KEYS)}")
+                raise KeyError(f"unknown offset key {k!r}; allowed: {', '.join(OFFSET_NAMES)}")
         for k, v in offsets.items():
             v = float(v)
             if not math.isfinite(v):

@@ -1,11 +1,15 @@
-"""The plant package's exceptions (both derive from :class:`fmu_src.avr_errors.AvrError`)."""
+"""The plant package's exceptions: :class:`PlantError` and its kinds.  The plant imports
+nothing of the FMUs' sources, so its errors have their own root; the scenarios' command
+line reports both roots (``scenarios.errors.USER_ERRORS``)."""
 
-from fmu_src.avr_errors import AvrError
+
+class PlantError(Exception):
+    """Root of the plant's errors."""
 
 
-class ModelError(AvrError):
+class ModelError(PlantError):
     """The Cassie model cannot be loaded or lacks a joint, actuator or body by name."""
 
 
-class PerturbationError(AvrError, ValueError):
+class PerturbationError(PlantError, ValueError):
     """A plant perturbation (mass, COM offset, damping, push, terrain) is invalid."""

@@ -2,7 +2,7 @@
 
 Each grid point of ``plant/data/gait_library.json`` holds the numeric fields of
 :class:`GaitParams` (step time, landing leg-angle offset,
-lateral offset, step width, torso pitch) found by ``python -m plant.make_gaits``
+lateral offset, step width, torso pitch) found by ``python -m scenarios.gaits.make_gaits``
 on the nominal Menagerie model; the Bezier shapes are shared by all points.
 :meth:`GaitLibrary.lookup` interpolates bilinearly in (vx, vy) and clamps to the
 grid's range (commands outside it get the edge gait).

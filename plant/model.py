@@ -31,16 +31,15 @@ import pathlib
 import mujoco
 import numpy as np
 
-from plant.constants import (  # noqa: F401  (re-exported)
+from plant.constants import (
     ACTUATOR_NAMES, HOME_JOINT_QPOS, HOME_KEY, HOME_PELVIS_POS_M, HOME_PELVIS_QUAT, JOINT_NAMES,
-    NOMINAL_PELVIS_MASS_KG, PELVIS_BODY,
+    PELVIS_BODY,
 )
 from plant.errors import ModelError, PerturbationError
-from plant.mjcf import check_mjcf_file, spec_from_file  # noqa: F401  (re-exported)
+from plant.mjcf import spec_from_file
 from plant.perturbation import Perturbation, apply_to_compiled
-from plant.terrain import (  # noqa: F401  (re-exported)
-    TERRAIN_GEOM, TERRAIN_HFIELD, TerrainSpec, add_terrain, generate_terrain, terrain_height_at,
-    terrain_max_slope_deg, terrain_summary,
+from plant.terrain import (
+    add_terrain, terrain_summary,
 )
 
 log = logging.getLogger(__name__)

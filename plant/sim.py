@@ -4,9 +4,9 @@ Typical use::
 
     walker = CassieWalker(load_model("menagerie"))
     walker.set_command(0.5, 0.0)
-    regulator = Regulator(RegulatorParams(adaptation_enabled=False))  # fmu_src.avr_core
+    regulator = Regulator(RegulatorParams(adaptation_enabled=False))  # fmu_src.core.avr_core
     while walker.time_s < 10:
-        apply_regulator(walker, regulator, 0.01)
+        apply_regulator(walker, regulator, 0.01)  # scenarios.cosim.inprocess
         walker.advance(20)          # 20 plant steps of 0.5 ms = 10 ms
         log(walker.telemetry())
 
@@ -17,10 +17,9 @@ definition of the regulator inputs).  The joint PD runs inside MuJoCo at every
 plant step; the Python controller refreshes its targets every
 ``ControllerParams.control_substeps`` steps, counted across ``advance`` calls.
 
-:func:`apply_regulator` steps a regulator core (``fmu_src.avr_core.Regulator``)
-on a walker in-process; the gait calibration, the plant tests and the plant
-benchmark all use it (the scenario suite has its own data flow in
-``scenarios/master.py``).
+The plant imports nothing of the regulator: ``scenarios.cosim.inprocess.apply_regulator``
+steps a regulator core on a walker in-process (the gait calibration, the plant tests and the
+plant benchmark use it; the scenario suite has its own data flow in ``scenarios/cosim/master.py``).
 """
 from __future__ import annotations
 
@@ -30,9 +29,9 @@ from typing import Mapping
 
 import mujoco
 
-from fmu_src.avr_core import RegulatorInputs
 from plant.cassie import CassiePhysics
-from plant.controller import OFFSET_KEYS, ControllerParams, NominalController
+from plant.controller_params import ControllerParams
+from plant.controller import NominalController
 from plant.gaits import GaitLibrary
 
 log = logging.getLogger(__name__)
@@ -89,7 +88,7 @@ class CassieWalker:
         self.controller.set_command(self.vx_des_mps, self.vy_des_mps, self.gaits, self.yaw_rate_des_radps)
 
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
-        """Regulator joint offsets (rad); keys from ``OFFSET_KEYS``; unknown key -> KeyError."""
+        """Regulator joint offsets (rad); keys from ``OFFSET_NAMES``; unknown key -> KeyError."""
         self.controller.set_offsets(offsets)
 
     def regulator_inputs(self) -> dict:
@@ -221,30 +220,4 @@ class CassieWalker:
         }
 
 
-def apply_regulator(walker: CassieWalker, regulator, dt_s: float) -> dict[str, float]:
-    """Step ``regulator`` once on the walker's signals and apply its six offsets.
-
-    Args:
-        walker: the plant; its :meth:`CassieWalker.regulator_inputs` (vx, vy in m/s,
-            pitch, roll in rad, their rates in rad/s, step_index) and its commanded
-            speeds ``vx_des_mps``/``vy_des_mps`` (m/s) are the regulator inputs.
-        regulator: an ``fmu_src.avr_core.Regulator`` (e.g. with
-            ``RegulatorParams(adaptation_enabled=False)``: the paper's PD only), or
-            any object with the same ``step(RegulatorInputs, dt) -> dict`` whose dict
-            holds at least the ``OFFSET_KEYS``.
-        dt_s: length of this regulator call (s), the communication step (0.01 s
-            for ``advance(20)``).
-
-    Returns:
-        The six ``delta_*`` joint offsets (rad) passed to :meth:`CassieWalker.set_offsets`
-        (the core's diagnostic outputs ``psi_*``/``error_*`` are dropped).
-    """
-    u = walker.regulator_inputs()
-    out = regulator.step(RegulatorInputs(vx_des=walker.vx_des_mps, vy_des=walker.vy_des_mps,
-                                         **u), dt_s)
-    offsets = {k: out[k] for k in OFFSET_KEYS}
-    walker.set_offsets(offsets)
-    return offsets
-
-
-__all__ = ["CassieWalker", "ControllerParams", "GaitLibrary", "OFFSET_KEYS", "apply_regulator"]
+__all__ = ["CassieWalker"]

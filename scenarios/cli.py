@@ -7,17 +7,17 @@
                             [--duration S] [--no-plots] [--rebuild-fmu] [--overwrite | --resume]
                             [--plant inprocess|fmu] [--plant-fmu PATH] [--render] [--require-pass]
     python -m scenarios report DIR
-    python -m scenarios export-ssp SCENARIO [--arm ARM] [--out FILE]   (scenarios.export_ssp)
+    python -m scenarios export-ssp SCENARIO [--arm ARM] [--out FILE]   (scenarios.ssp.export_ssp)
 
 ``run`` checks everything before it simulates and names every problem at once: the
 scenarios (each model compiled and checked to be a Cassie), the arguments, and the
-results folder (:mod:`scenarios.store`: results of this run's scenarios already in DIR
+results folder (:mod:`scenarios.results.store`: results of this run's scenarios already in DIR
 are refused unless ``--overwrite`` or ``--resume``; a second run on DIR is refused).
 It builds the FMU at ``dist/AdaptiveVelocityRegulator.fmu`` if it is missing or stale
 (fmu path), runs each scenario x arm (``--jobs N``: in N spawned processes, each with
 its own FMU copy under DIR's scratch folder), writes each scenario's
 ``DIR/<name>/{timeseries.csv,summary.json,*.png}`` (and with ``--render`` each arm's
-``<arm>.mp4`` and ``<arm>.gif``, :mod:`scenarios.render`) complete and then renames it into
+``<arm>.mp4`` and ``<arm>.gif``, :mod:`scenarios.results.render`) complete and then renames it into
 place, and prints one table row per scenario x arm. Ctrl-C stops the run between two
 steps: complete scenarios are kept, started ones are marked ``interrupted`` (or, where
 earlier results existed, left as they were), one line is printed.
@@ -36,11 +36,10 @@ import sys
 from pathlib import Path
 from typing import Sequence
 
-from fmu_src.avr_errors import AvrError
-from scenarios.errors import ScenarioError
-# load_build_module is re-exported: tests/conftest.py and the benchmarks import it from here
-from scenarios.fmus import (DEFAULT_FMU, REGULATOR_FMUS, REPO_ROOT, ensure_fmu, ensure_plant_fmu,  # noqa: F401
-                            fmu_role_problem, fmu_version_problem, load_build_module)
+from fmu_src.core.avr_errors import AvrError
+from scenarios.errors import USER_ERRORS, ScenarioError
+from scenarios.cosim.fmus import (REGULATOR_FMUS, REPO_ROOT, ensure_fmu, ensure_plant_fmu,
+                            fmu_role_problem, fmu_version_problem)
 
 DEFAULT_OUT = Path("runs")
 
@@ -49,7 +48,7 @@ log = logging.getLogger("scenarios")
 
 # --------------------------------------------------------------------------- commands
 def cmd_list(args) -> int:
-    from scenarios import spec
+    from scenarios.lang import spec
 
     problems = []
     rows = []
@@ -72,7 +71,7 @@ def cmd_list(args) -> int:
 
 
 def cmd_validate(args) -> int:
-    from scenarios import spec
+    from scenarios.lang import spec
 
     loaded, problems = [], []
     for f in args.files:
@@ -91,7 +90,7 @@ def cmd_validate(args) -> int:
 
 def _run_targets(args) -> tuple[list, list[str]]:
     """The validated scenarios of ``run`` (with --model/--duration) and every problem of them."""
-    from scenarios import spec
+    from scenarios.lang import spec
 
     try:
         scenarios = spec.resolve_targets(args.targets)
@@ -110,8 +109,8 @@ def _run_targets(args) -> tuple[list, list[str]]:
 
 def _run_problems(args, scenarios: list, mode: str) -> list[str]:
     """Everything ``run`` would fail on before simulating, beyond the scenarios themselves."""
-    from scenarios import store
-    from scenarios.plantio import plant_fmu_problems
+    from scenarios.results import store
+    from scenarios.cosim.plantio import plant_fmu_problems
 
     problems = []
     if args.jobs < 1:
@@ -140,11 +139,11 @@ def _run_problems(args, scenarios: list, mode: str) -> list[str]:
 def cmd_run(args) -> int:
     problems = []
     if args.render:  # before anything imports mujoco: it reads MUJOCO_GL once
-        from scenarios.render import choose_gl_backend
+        from scenarios.results.render import choose_gl_backend
 
         problems = choose_gl_backend()
-    from scenarios import store
-    from scenarios.run_session import RunSession
+    from scenarios.results import store
+    from scenarios.run.run_session import RunSession
 
     mode = "overwrite" if args.overwrite else "resume" if args.resume else "new"
     scenarios, target_problems = _run_targets(args)
@@ -164,7 +163,7 @@ def cmd_run(args) -> int:
                 return _fail(plan.problems, 2)
             session = RunSession(args, results_dir, plan, fmu_path)
             session.run()
-    except AvrError as exc:
+    except USER_ERRORS as exc:
         return _fail([str(exc)], 2)
     return session.report(scenarios, out_root)
 
@@ -196,7 +195,7 @@ def cmd_report(args) -> int:
 
     try:
         path, problems = write_report(Path(args.dir))
-    except AvrError as exc:
+    except USER_ERRORS as exc:
         print(str(exc), file=sys.stderr)
         return 2
     except OSError as exc:
@@ -261,7 +260,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_campaign_parser(sub)
 
-    from scenarios.export_ssp import add_parser as add_export_ssp_parser
+    from scenarios.ssp.export_ssp import add_parser as add_export_ssp_parser
 
     add_export_ssp_parser(sub)
 

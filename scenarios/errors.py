@@ -1,6 +1,8 @@
-"""The scenarios package's exceptions (both derive from :class:`fmu_src.avr_errors.AvrError`)."""
+"""The scenarios package's exceptions (both derive from :class:`fmu_src.core.avr_errors.AvrError`)
+and :data:`USER_ERRORS`, the errors a command reports as a message (bad input, a failed run)."""
 
-from fmu_src.avr_errors import AvrError
+from fmu_src.core.avr_errors import AvrError
+from plant.errors import PlantError
 
 
 class ScenarioError(AvrError, ValueError):
@@ -17,3 +19,7 @@ class ScenarioError(AvrError, ValueError):
 
 class CosimError(AvrError):
     """The co-simulation master got a non-OK status from an FMU (message has its log)."""
+
+
+#: What the command line reports as a message and an exit status, not a traceback.
+USER_ERRORS = (AvrError, PlantError)

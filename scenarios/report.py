@@ -6,7 +6,7 @@ and a pass/miss verdict per check with both sides' values. Nothing is hidden: a
 scenario of the suite without results is listed as "not run", a failed or interrupted
 run with why, an arm that fell with its fall time. Nothing is taken on trust either:
 each summary.json is checked against the format this package writes
-(:func:`scenarios.output.summary_problems`; one of another shape is listed as invalid,
+(:func:`scenarios.results.output.summary_problems`; one of another shape is listed as invalid,
 naming the file and what is wrong) and every verdict is recomputed from the arms, a
 pass only when every arm is complete.
 """
@@ -16,12 +16,12 @@ import logging
 from pathlib import Path
 from typing import Any
 
-from fmu_src.avr_errors import AvrError
+from fmu_src.core.avr_errors import AvrError
 from scenarios.errors import ScenarioError
-from scenarios.formatting import show
-from scenarios.metrics import CONVERGENCE_TOL_MPS, LEVEL_WINDOW_S, STEADY_WINDOW_S
-from scenarios.output import TABLE_COLUMNS, fmt, incomplete_arms, summary_commands, table_rows
-from scenarios.output import verdict as output_verdict
+from scenarios.lang.formatting import show
+from scenarios.results.metrics import CONVERGENCE_TOL_MPS, LEVEL_WINDOW_S, STEADY_WINDOW_S
+from scenarios.results.output import TABLE_COLUMNS, fmt, incomplete_arms, summary_commands, table_rows
+from scenarios.results.output import verdict as output_verdict
 
 log = logging.getLogger(__name__)
 #: Claim values in the report: 4 significant digits.
@@ -31,14 +31,14 @@ REPORT_FLOAT_FORMAT = ".4g"
 def collect(out_dir: Path) -> list[tuple[str, dict[str, Any] | None, str | None]]:
     """(name, summary or None, problem) for the suite's scenarios and every result folder
     (a summary.json that is not what this package writes is a problem, never rendered)."""
-    from scenarios import spec
-    from scenarios.store import read_summary
+    from scenarios.lang import spec
+    from scenarios.results.store import read_summary
 
     found: dict[str, dict[str, Any] | None] = {}
     problems: dict[str, str] = {}
     for f in sorted(Path(out_dir).glob("*/summary.json")):
         name = f.parent.name
-        if name.startswith("."):  # a run's scratch folder or lock (scenarios.store)
+        if name.startswith("."):  # a run's scratch folder or lock (scenarios.results.store)
             continue
         found[name], bad = read_summary(f)
         if bad:

@@ -25,7 +25,7 @@ from native_support import REGULATOR_FMUS
 @pytest.fixture(scope="session")
 def build_module():
     """build.py as a module (the CLI's loader: `import build` would clash with PyPA's build)."""
-    from scenarios.cli import load_build_module
+    from scenarios.cosim.fmus import load_build_module
 
     return load_build_module()
 

@@ -17,7 +17,9 @@ from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
-from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, Regulator, RegulatorInputs, RegulatorParams
+from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS
+from fmu_src.core.avr_core import Regulator
+from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams
 H = 0.005  # communication step, s
 OUTPUT_NAMES = [s.name for s in OUTPUT_SPECS]
 NATIVE_DIR = Path(__file__).parent / "native"
@@ -85,8 +87,8 @@ def _instantiate_logging(fmu, fmi3: bool, messages: list, number: int) -> None:
     """Instantiate ``fmu`` with the scenarios' process-wide logger routing its messages to
     ``messages``.  Never a logger of its own: fmpy's FMI 2.0 message formatter keeps one global
     pointer to the last logger registered, which would dangle once that logger is collected
-    (scenarios/fmi_api.py explains)."""
-    from scenarios import fmi_api
+    (scenarios/cosim/fmi_api.py explains)."""
+    from scenarios.cosim import fmi_api
 
     fmi_api.route_messages(fmu.instanceName, number, messages)
     fmi_api.FMI_APIS["3.0" if fmi3 else "2.0"].instantiate(fmu, number)

@@ -13,7 +13,7 @@ synapse=None)`` whose error Node replays the regulator's ``E = desired - actual`
 import nengo
 import numpy as np
 
-from fmu_src.avr_core import build_networks
+from fmu_src.core.avr_network import build_networks
 from reference_regulator import network_inputs
 
 

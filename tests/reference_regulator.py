@@ -2,14 +2,14 @@
 
 :func:`neuron_rates` evaluates one network's LIFRate rates in Hz exactly as nengo writes
 them, ``1 / (tau_ref + tau_rc log1p(1 / (J - 1)))`` per network, where the core
-(``fmu_src.avr_network.lif_rates_times_tau_rc``) evaluates all three networks at once
+(``fmu_src.core.avr_network.lif_rates_times_tau_rc``) evaluates all three networks at once
 with its fixed-series ``log1p`` and folds ``1 / tau_rc`` into scalars; :func:`network_inputs` gives each
 network's input as an array.  The tests compare the core against these.
 """
 import numpy as np
 
-from fmu_src.avr_network import TAU_RC, TAU_REF, NetworkSpec, scaled_inputs
-from fmu_src.avr_params import RegulatorInputs, RegulatorParams, validate_inputs
+from fmu_src.core.avr_network import TAU_RC, TAU_REF, NetworkSpec, scaled_inputs
+from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams, validate_inputs
 
 #: A tiny positive current for inactive neurons (keeps inf out of log1p), as in the core.
 _TINY_CURRENT = 1e-300

@@ -1,6 +1,6 @@
 """``python build.py`` on a machine without the cross compilers (MinGW-w64, aarch64 GCC).
 
-The build finds every compiler by name on PATH (fmu_src/avr_packaging/compiler.py).  Here it
+The build finds every compiler by name on PATH (fmu_src/packing/compiler.py).  Here it
 runs as a user runs it, in a process whose PATH holds every program of /usr/bin except the
 cross toolchains: it must build every FMU with the host's binaries, name each skipped
 platform and the Debian package that adds it, list only the platforms built in

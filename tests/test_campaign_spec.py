@@ -12,7 +12,6 @@
 """
 from __future__ import annotations
 
-import copy
 import subprocess
 import sys
 import tomllib
@@ -22,7 +21,7 @@ import numpy as np
 import pytest
 
 from scenarios.errors import ScenarioError
-from scenarios import spec as scenario_spec
+from scenarios.lang import spec as scenario_spec
 from scenarios.campaign import analysis, sampling, spec, tomlw
 from scenarios.campaign.store import CampaignDir, CampaignDirError, TIMING_COLUMNS
 

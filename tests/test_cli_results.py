@@ -166,7 +166,7 @@ def test_second_run_on_one_out_refused_and_a_killed_runs_lock_and_scratch_do_not
 
 
 def test_a_write_cut_short_changes_nothing_and_a_killed_swap_is_repaired(tmp_path):
-    from scenarios.store import REPLACED_TAG, ResultsDir
+    from scenarios.results.store import REPLACED_TAG, ResultsDir
 
     out = tmp_path / "out"
     (out / "kept").mkdir(parents=True)
@@ -377,7 +377,7 @@ def test_report_never_passes_a_run_with_missing_or_incomplete_arms(tmp_path, cap
 
 # --------------------------------------------------------------------------- defect 10: no FMU copies in the temp folder
 def test_an_fmu_that_cannot_load_leaves_no_copy_and_the_working_folder_as_it_was(tmp_path, broken_fmu):
-    from scenarios.master import FmuRegulator
+    from scenarios.cosim.regulators import FmuRegulator
 
     cwd = os.getcwd()
     reg = FmuRegulator(broken_fmu)

@@ -41,7 +41,7 @@ def fmi(request):
 @pytest.fixture(scope="module")
 def built(tmp_path_factory):
     """Both versions, built once (build.py's function) with :data:`ROWS` as their schedule."""
-    from scenarios.cli import load_build_module
+    from scenarios.cosim.fmus import load_build_module
 
     out = tmp_path_factory.mktemp("command_source")
     build = load_build_module()

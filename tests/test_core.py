@@ -1,4 +1,4 @@
-"""Unit and property tests of the numpy-only regulator core (fmu_src/avr_core.py).
+"""Unit and property tests of the numpy-only regulator core (fmu_src/core/avr_core.py).
 
 Most tests use small networks (n_neurons 40..200) to stay fast; what they check does
 not depend on the size.  Exact (==) comparisons are used wherever the core promises
@@ -16,15 +16,18 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fmu_src import avr_core as core
-from fmu_src import avr_statebytes
-from fmu_src.avr_core import (
-    INPUT_SPECS, OUTPUT_JOINTS, OUTPUT_SPECS, PARAM_SPECS, Regulator, RegulatorInputs,
-    RegulatorParams, RegulatorState, build_networks, initial_state, lif_gain_bias,
-    state_from_bytes, state_to_bytes, step, validate_inputs, validate_params,
-)
-from fmu_src.avr_errors import InputError, ParameterError, StateError
+from fmu_src.core import avr_statebytes
+from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_JOINTS, OUTPUT_SPECS, PARAM_SPECS
+from fmu_src.core.avr_core import Regulator
+from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams, validate_inputs, validate_params
+from fmu_src.core.avr_regulator import RegulatorState, initial_state, step
+from fmu_src.core.avr_network import build_networks, lif_gain_bias
+from fmu_src.core.avr_statebytes import state_from_bytes, state_to_bytes
+from fmu_src.core.avr_errors import InputError, ParameterError, StateError
 from reference_regulator import network_inputs, neuron_rates
+from fmu_src.core.avr_network import TAU_RC, TAU_REF
+from fmu_src.core.avr_params import network_key
+from fmu_src.core.avr_regulator import MAX_CALLS
 
 DT = 0.005
 HYP = settings(derandomize=True, deadline=None, max_examples=40,
@@ -319,7 +322,7 @@ def test_lif_gain_bias_analytic_curve():
     m, c = np.array([200.0, 333.0, 399.9]), np.array([-0.99, 0.0, 0.89])
     gain, bias = lif_gain_bias(m, c)
     j = gain * 1.0 + bias - 1.0
-    rate = 1.0 / (core.TAU_REF + core.TAU_RC * np.log1p(1.0 / j))
+    rate = 1.0 / (TAU_REF + TAU_RC * np.log1p(1.0 / j))
     np.testing.assert_allclose(rate, m, rtol=1e-12)  # a few ulps through log1p/expm1
     np.testing.assert_allclose(gain * c + bias, 1.0, rtol=1e-15, atol=1e-15)
     with pytest.raises(ValueError):
@@ -594,13 +597,13 @@ def test_state_round_trip_is_bit_exact_and_continues_identically():
 
 @HYP
 @given(w=st.lists(st.floats(-1e3, 1e3), min_size=4 * 7, max_size=4 * 7),
-       last=st.integers(0, 2**31 - 1), n_calls=st.integers(0, core.MAX_CALLS),
+       last=st.integers(0, 2**31 - 1), n_calls=st.integers(0, MAX_CALLS),
        scalars=st.lists(st.floats(-1e6, 1e6), min_size=5, max_size=5))
 def test_property_any_state_round_trips(w, last, n_calls, scalars):
     """Any state a run can reach (before the first call: last_step_index -1 and time 0)."""
     p = RegulatorParams(n_neurons=7, seed=123)
     s = RegulatorState(np.array(w).reshape(4, 7), last if n_calls else -1, *scalars[:4], n_calls,
-                       abs(scalars[4]) if n_calls else 0.0, core.network_key(p))
+                       abs(scalars[4]) if n_calls else 0.0, network_key(p))
     r = state_from_bytes(state_to_bytes(s), p)
     assert r == s and state_to_bytes(r) == state_to_bytes(s)
 

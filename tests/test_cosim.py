@@ -17,7 +17,10 @@ import pytest
 
 from scenarios.errors import CosimError, ScenarioError
 from plant.constants import OFFSET_NAMES
-from scenarios import master, spec
+from scenarios.cosim import master
+from scenarios.lang import spec
+from scenarios.cosim.regulators import FmuRegulator
+from scenarios.lang.scenario import CommandPoint, Push, Scenario
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -32,7 +35,7 @@ LOGGER_AFTER_MASTER = """
 import gc, sys
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
-from scenarios.master import FmuRegulator
+from scenarios.cosim.master import FmuRegulator
 path, unzip = sys.argv[1], sys.argv[2]  # unzip: a folder of the test's own (nothing in the system temp)
 for _ in range(2):  # masters come and go; their FMU messages must not leave a dangling logger
     reg = FmuRegulator(path)
@@ -57,7 +60,7 @@ def test_fmu_messages_after_a_master_has_gone_do_not_crash(fmu_path, tmp_path):
     assert proc.returncode == 0 and "refused" in proc.stdout, (proc.returncode, proc.stderr[-2000:])
 
 
-def short(name: str, duration_s: float, **changes) -> spec.Scenario:
+def short(name: str, duration_s: float, **changes) -> Scenario:
     s = spec.override(spec.resolve_targets([name])[0], duration_s=duration_s)
     return dataclasses.replace(s, **changes) if changes else s
 
@@ -84,8 +87,8 @@ def test_closed_loop_through_the_fmu(fmu_path):
 def test_fmu_and_inprocess_bit_identical(fmu_path):
     # a perturbed plant, a command change and a push: every branch of the loop
     s = short("compare_fixed_speed", 2.0,
-              commands=(spec.CommandPoint(0.0, 0.5, 0.0), spec.CommandPoint(1.0, 0.3, 0.1)),
-              pushes=(spec.Push(1.5, (20.0, -5.0, 0.0), 0.1),))
+              commands=(CommandPoint(0.0, 0.5, 0.0), CommandPoint(1.0, 0.3, 0.1)),
+              pushes=(Push(1.5, (20.0, -5.0, 0.0), 0.1),))
     (a,) = master.run_scenario(s, "fmu", fmu_path=fmu_path, arms=("adaptive",))
     (b,) = master.run_scenario(s, "inprocess", arms=("adaptive",))
     assert a.rows.dtype == b.rows.dtype
@@ -104,7 +107,7 @@ def test_pd_only_arm_differs_and_has_no_psi(fmu_path):
 
 
 def test_nan_input_raises_cosim_error_with_the_fmu_log(fmu_path):
-    reg = master.FmuRegulator(fmu_path)
+    reg = FmuRegulator(fmu_path)
     reg.start({"learning_rate": 0.0005}, 0.0, 1.0)
     good = {"vx": 0.1, "vy": 0.0, "vx_des": 0.5, "vy_des": 0.0, "pitch": 0.0, "roll": 0.0,
             "pitch_rate": 0.0, "roll_rate": 0.0, "step_index": 0}
@@ -123,7 +126,7 @@ def test_nan_input_raises_cosim_error_with_the_fmu_log(fmu_path):
 
 
 def test_out_of_range_parameter_raises_cosim_error(fmu_path):
-    reg = master.FmuRegulator(fmu_path)
+    reg = FmuRegulator(fmu_path)
     try:
         with pytest.raises(CosimError) as info:
             reg.start({"learning_rate": -1.0}, 0.0, 1.0)
@@ -131,7 +134,7 @@ def test_out_of_range_parameter_raises_cosim_error(fmu_path):
         reg.close()
     assert "learning_rate" in str(info.value)
     with pytest.raises(CosimError, match="no such variable"):
-        master.FmuRegulator(fmu_path).start({"not_a_parameter": 1.0}, 0.0, 1.0)
+        FmuRegulator(fmu_path).start({"not_a_parameter": 1.0}, 0.0, 1.0)
 
 
 def test_comm_step_must_be_whole_plant_steps():
@@ -208,7 +211,7 @@ def test_cli_rebuilds_a_default_fmu_older_than_its_sources(tmp_path, monkeypatch
     import os
     import zipfile
 
-    from scenarios import fmus
+    from scenarios.cosim import fmus
 
     stale = tmp_path / "AdaptiveVelocityRegulator.fmu"
     stale.write_bytes(b"an FMU built from older sources")

@@ -1,7 +1,7 @@
 """The wider walking envelope (issue 11): backward, fast, sideways and turning.
 
 Closed loop of the plant, the nominal controller and the regulator core in-process,
-called every 10 ms like the co-simulation (``plant.make_gaits.COMM_STEPS``); every run
+called every 10 ms like the co-simulation (``scenarios.gaits.make_gaits.COMM_STEPS``); every run
 starts from rest.  The default run has two short smoke walks and the library's own
 verification; the staircase, the lateral leg, the circle and the 20 kg torso runs are
 ``@pytest.mark.long`` (``pytest -m long tests/test_envelope.py``, ~4 min on one core).
@@ -11,12 +11,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fmu_src.avr_core import Regulator, RegulatorParams
+from fmu_src.core.avr_core import Regulator
+from fmu_src.core.avr_params import RegulatorParams
 from plant.gaits import GaitLibrary
-from plant import make_gaits
-from plant.make_gaits import COMM_STEPS, KEEP_TOL_MPS, PD_ONLY_PARAMS, VX_GRID, VY_GRID, simulate_walk
-from plant.model import Perturbation, load_model
-from plant.sim import CassieWalker, apply_regulator
+from scenarios.gaits import make_gaits
+from scenarios.gaits.make_gaits import COMM_STEPS, KEEP_TOL_MPS, PD_ONLY_PARAMS, VX_GRID, VY_GRID, simulate_walk
+from plant.perturbation import Perturbation
+from plant.model import load_model
+from plant.sim import CassieWalker
+from scenarios.cosim.inprocess import apply_regulator
 
 #: The envelope of issue 11 (m/s, m/s, rad/s).
 VX_RANGE, VY_MAX, YAW_RATE_MAX = (-0.5, 1.5), 0.3, 0.5

@@ -15,7 +15,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
 
 from native_support import DRIVERS, H
 

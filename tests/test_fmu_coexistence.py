@@ -3,7 +3,7 @@ call them: ``fmpy.simulate_fmu("X.fmu")``, which extracts the FMU into a new tem
 deletes it afterwards.
 
 pythonfmu imports an FMU's slave module by name and keeps it in ``sys.modules``; each build
-imports its code under names private to it (``fmu_src/avr_packaging/pack.py``).  Each host runs
+imports its code under names private to it (``fmu_src/packing/pack.py``).  Each host runs
 in a process of its own (a crash fails the test instead of ending pytest) with an empty TMPDIR
 that must stay empty.
 """
@@ -46,9 +46,9 @@ def builds(tmp_path_factory, build_module, built_fmu):
     """{"regulator": .fmu, "regulator_b": the same with Kp_x's default 0.5, "plant": .fmu,
     "plant_b": the same with joint_damping_scale's default 2.0}, each built by build.py."""
     regulator_b = build_edited(tmp_path_factory.mktemp("regulator_b"), "build_fmu", {
-        "fmu_src/avr_specs.py": (f'_param("Kp_x", {KP_X},', f'_param("Kp_x", {KP_X_B},')})
+        "fmu_src/core/avr_specs.py": (f'_param("Kp_x", {KP_X},', f'_param("Kp_x", {KP_X_B},')})
     plant_b = build_edited(tmp_path_factory.mktemp("plant_b"), "build_plant_fmu", {
-        "plant/fmu_core.py": (f'_p("joint_damping_scale", {DAMPING},', f'_p("joint_damping_scale", {DAMPING_B},')})
+        "fmu_src/plant_fmu/fmu_core.py": (f'_p("joint_damping_scale", {DAMPING},', f'_p("joint_damping_scale", {DAMPING_B},')})
     return {"regulator": built_fmu, "regulator_b": regulator_b,
             "plant": built_plant_fmu(tmp_path_factory, build_module), "plant_b": plant_b}
 

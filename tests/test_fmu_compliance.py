@@ -27,8 +27,8 @@ from fmpy.validation import validate_fmu
 import pythonfmu
 from pythonfmu.builder import FmuBuilder
 
-from fmu_src.avr_core import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
-from fmu_src.avr_packaging.archive import ZIP_EPOCH
+from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+from fmu_src.packing.archive import ZIP_EPOCH
 from native_support import DRIVERS, H, AnySlave, fmi2_only, input_sequence
 
 OK, ERROR = 0, 3

@@ -2,7 +2,7 @@
 the method, so the page and the document cannot drift; the renderer keeps what it is given."""
 import zipfile
 
-from fmu_src.avr_packaging import method_page
+from fmu_src.packing import method_page
 
 PAGE = "documentation/index.html"
 

@@ -23,9 +23,9 @@ import zlib
 import pytest
 from fmpy.fmi1 import FMICallException
 
-from fmu_src import avr_fmustate as fmustate
-from fmu_src.avr_regulator import MAX_CALLS
-from fmu_src.avr_slave import _ALL_SPECS, REFUSED_STATE, AdaptiveVelocityRegulator
+from fmu_src.fmi import avr_fmustate as fmustate
+from fmu_src.core.avr_regulator import MAX_CALLS
+from fmu_src.regulator_fmu.avr_slave import _ALL_SPECS, REFUSED_STATE, AdaptiveVelocityRegulator
 from test_fmu_slave_state import _slave as initialized_slave
 from native_support import input_sequence, logged_slave
 from plant_fmu_support import built_plant_fmu
@@ -82,7 +82,7 @@ def test_plant_refuses_walker_memory_no_run_reaches(plant_fmu_dir, raw_host):
 
 
 # ---- the regulator's counters -----------------------------------------------------------------
-#: The core blob's header (fmu_src/avr_statebytes.py): the byte offsets of the counters.
+#: The core blob's header (fmu_src/core/avr_statebytes.py): the byte offsets of the counters.
 _CORE_HEADER = struct.Struct("<8sHHII3dqq5dqq6d")
 _LAST, _N_CALLS, _TIME_S, _BOUNDARIES, _STRIDE_CALLS = 44, 52, 92, 100, 108
 

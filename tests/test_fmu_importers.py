@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from fmpy import simulate_fmu
 
-from fmu_src.avr_core import INPUT_SPECS
+from fmu_src.core.avr_specs import INPUT_SPECS
 from native_support import H, OUTPUT_NAMES, AnySlave, core_outputs, fmi2_only, input_sequence
 
 N_STEPS = 150

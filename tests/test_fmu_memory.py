@@ -3,7 +3,7 @@
 pythonfmu 0.7.0 re-ran the slave script at every fmi2Instantiate, creating a new slave class
 that its leaked MRO list kept alive, and added the resources folder to sys.path each time: the
 regulator grew ~26 kB, the plant ~20 kB per cycle.  The FMUs' entry modules
-(``fmu_src/avr_packaging/pack.py``) hand back one class and remove the sys.path entry; what is
+(``fmu_src/packing/pack.py``) hand back one class and remove the sys.path entry; what is
 left is pythonfmu's own per-instance leak in C (the MRO list, the reprs of its classes, the
 sys.path string: about 1-2 kB per cycle), which we cannot fix from Python.
 

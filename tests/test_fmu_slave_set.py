@@ -6,8 +6,8 @@ import math
 
 import pytest
 
-from fmu_src.avr_slave import AdaptiveVelocityRegulator, FmiCallError
-from fmu_src.avr_specs import INPUT_SPECS
+from fmu_src.regulator_fmu.avr_slave import AdaptiveVelocityRegulator, FmiCallError
+from fmu_src.core.avr_specs import INPUT_SPECS
 
 H = 0.005
 REAL_INPUTS = [spec for spec in INPUT_SPECS if spec.type == "Real"]

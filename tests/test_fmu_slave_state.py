@@ -14,9 +14,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fmu_src import avr_fmustate as fmustate
-from fmu_src.avr_errors import StateError
-from fmu_src.avr_slave import _ALL_SPECS, REFUSED_STATE, AdaptiveVelocityRegulator
+from fmu_src.fmi import avr_fmustate as fmustate
+from fmu_src.core.avr_errors import StateError
+from fmu_src.regulator_fmu.avr_slave import _ALL_SPECS, REFUSED_STATE, AdaptiveVelocityRegulator
 
 H = 0.005
 

@@ -4,7 +4,7 @@ The plant FMU runs 0.5 ms MuJoCo steps in a Python loop, 0.13 s of wall time per
 second on this project's machine; a doStep of 1e9 s would run for years and FMI 2.0 gives no
 way to interrupt it (calls on one instance are never concurrent, ``canRunAsynchronuously``
 is false).  So the plant has a documented maximum communication step
-(``plant.fmu_core.MAX_STEP_S``): a longer one is fmi2Error naming it, refused by the guard
+(``fmu_src.plant_fmu.fmu_core.MAX_STEP_S``): a longer one is fmi2Error naming it, refused by the guard
 before it reaches Python, and the instance stays where it was.  The regulator FMUs make one
 call per doStep whatever its length (no maximum); the native ones refuse a step whose end
 time overflows (as the pythonfmu FMU's guard does).
@@ -13,7 +13,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 
 from native_support import logged_slave
-from plant.fmu_core import MAX_STEP_S
+from fmu_src.plant_fmu.fmu_core import MAX_STEP_S
 from plant_fmu_support import built_plant_fmu
 
 OK, ERROR = 0, 3
@@ -40,7 +40,7 @@ def test_plant_refuses_a_step_beyond_its_maximum_at_once(plant_fmu_dir, raw_host
 
 def test_plant_slave_names_the_maximum_too():
     """Without the guard (the slave's own check) the same rule and message."""
-    from plant import fmu_core
+    from fmu_src.plant_fmu import fmu_core
 
     assert fmu_core.plant_steps(MAX_STEP_S) == round(MAX_STEP_S / fmu_core.PLANT_STEP_S)
     assert fmu_core.plant_steps(MAX_STEP_S + fmu_core.PLANT_STEP_S) is None

@@ -11,7 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from scenarios import master, metrics, spec
+from scenarios.cosim import master
+from scenarios.results import metrics
+from scenarios.lang import spec
 
 LONG_RUN = {
     "name": "long_20kg_speed_changes",

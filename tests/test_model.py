@@ -7,11 +7,10 @@ import pytest
 
 from plant import model as plant_model
 from plant.errors import ModelError, PerturbationError
-from plant.model import (
-    ACTUATOR_NAMES, HOME_KEY, JOINT_NAMES, PELVIS_BODY, TERRAIN_GEOM, Perturbation,
-    TerrainSpec, generate_terrain, load_model, menagerie_root, menagerie_xml_path, model_summary,
-    osu_model_path, terrain_height_at, terrain_max_slope_deg,
-)
+from plant.constants import ACTUATOR_NAMES, HOME_KEY, JOINT_NAMES, PELVIS_BODY
+from plant.terrain import TERRAIN_GEOM, TerrainSpec, generate_terrain, terrain_height_at, terrain_max_slope_deg
+from plant.perturbation import Perturbation
+from plant.model import load_model, menagerie_root, menagerie_xml_path, model_summary, osu_model_path
 
 SOURCES = ("menagerie", "osu")
 

@@ -17,10 +17,13 @@ import shutil
 import numpy as np
 import pytest
 
-from fmu_src import avr_core
-from fmu_src.avr_core import INPUT_SPECS, SplitMix64, build_networks
+from fmu_src.core import avr_core
+from fmu_src.core.avr_specs import INPUT_SPECS
+from fmu_src.core.avr_network import SplitMix64, build_networks
 from fmu_src.native.header import vars_header
 from native_support import CC, H, NATIVE_DIR, OUTPUT_NAMES, AnySlave, compile_c, core_outputs, input_sequence, require
+from fmu_src.core.avr_network import expm1_fixed, log1p_fixed
+from fmu_src.core.avr_params import RegulatorParams
 
 INPUT_NAMES = [s.name for s in INPUT_SPECS]
 #: the recorded run's regulator: adaptation on (default), one psi_gain at 0
@@ -66,7 +69,7 @@ def test_c_and_numpy_build_the_same_networks(c_core, n, seed):
     ptr = c_core.avr_networks_new(n, seed)
     c = ptr.contents
     try:
-        for k, net in enumerate(build_networks(avr_core.RegulatorParams(n_neurons=n, seed=seed))):
+        for k, net in enumerate(build_networks(RegulatorParams(n_neurons=n, seed=seed))):
             def arr(field, m):
                 return np.ctypeslib.as_array(getattr(c, field)[k], shape=(m,)).copy()
             assert np.array_equal(arr("encoders", n * net.dimensions).reshape(n, -1), net.encoders)
@@ -82,11 +85,12 @@ def test_c_and_numpy_build_the_same_networks(c_core, n, seed):
 def closed_loop_inputs():
     """The regulator inputs of 60 s of MuJoCo walking with the numpy core in the loop."""
     from plant.model import load_model
-    from plant.sim import CassieWalker, apply_regulator
+    from plant.sim import CassieWalker
+    from scenarios.cosim.inprocess import apply_regulator
 
     walker = CassieWalker(load_model("menagerie"))
     walker.set_command(0.5, 0.0)
-    regulator = avr_core.Regulator(avr_core.RegulatorParams(**LOOP_PARAMS))
+    regulator = avr_core.Regulator(RegulatorParams(**LOOP_PARAMS))
     recorded = []
 
     class Recorder:
@@ -145,7 +149,7 @@ def test_fixed_functions_agree_with_the_c_library(seed):
     rng = np.random.default_rng(seed)
 
     def log1p_pair(y):
-        return avr_core.log1p_fixed(y.copy()), np.array([math.log1p(v) for v in y])
+        return log1p_fixed(y.copy()), np.array([math.log1p(v) for v in y])
 
     # Each bound: the series' truncation (< 3e-17 relative) and ~6 roundings, plus the
     # rounding of u = 1 + y, an absolute error of up to 1.1e-16 in log u: relative
@@ -157,6 +161,6 @@ def test_fixed_functions_agree_with_the_c_library(seed):
     np.testing.assert_allclose(*log1p_pair(10.0 ** rng.uniform(-12, -2, 2000)), rtol=0, atol=4e-16)
     x = rng.uniform(0.0, 1.0, 2000)
     # 4 ulp: 20 Horner steps on terms below 1, truncation < 2e-20
-    np.testing.assert_allclose(avr_core.expm1_fixed(x), [math.expm1(v) for v in x], rtol=8.9e-16, atol=0)
+    np.testing.assert_allclose(expm1_fixed(x), [math.expm1(v) for v in x], rtol=8.9e-16, atol=0)
     with pytest.raises(ValueError, match="expm1_fixed"):
-        avr_core.expm1_fixed(np.array([1.5]))
+        expm1_fixed(np.array([1.5]))

@@ -12,9 +12,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios import master, spec
+from scenarios.cosim import master
+from scenarios.lang import spec
 from scenarios.errors import CosimError
-from scenarios.fmi_api import fmi3_step_problem
+from scenarios.cosim.fmi_api import fmi3_step_problem
+from scenarios.cosim.regulators import make_regulator
 
 REPO = Path(__file__).parents[1]
 H = 0.005
@@ -24,8 +26,8 @@ INPUTS = dict(vx=0.1, vy=0.0, vx_des=0.5, vy_des=0.0, pitch=0.01, roll=0.0, pitc
 
 def test_master_native_regulator_matches_the_core_in_process(native_fmus, tmp_path):
     s = spec.override(spec.resolve_targets(["mass_20kg"])[0], duration_s=3.0)
-    native = master.run_arm(s, "adaptive", master.make_regulator("native", native_fmus[2], unpack_dir=tmp_path))
-    core = master.run_arm(s, "adaptive", master.make_regulator("inprocess"))
+    native = master.run_arm(s, "adaptive", make_regulator("native", native_fmus[2], unpack_dir=tmp_path))
+    core = master.run_arm(s, "adaptive", make_regulator("inprocess"))
     assert len(native.rows) == len(core.rows) == 600 and not native.fell
     for name in native.rows.dtype.names:
         np.testing.assert_array_equal(native.rows[name], core.rows[name], err_msg=name)
@@ -36,9 +38,9 @@ def test_master_native_regulator_matches_the_core_in_process(native_fmus, tmp_pa
 @pytest.mark.parametrize("name, arm", [("nominal", "adaptive"), ("push_fwd_30n", "pd_only")])
 def test_master_native_fmi3_matches_fmi2_and_the_core(native_fmus, tmp_path, name, arm):
     s = spec.override(spec.resolve_targets([name])[0], duration_s=3.0)
-    fmi3 = master.run_arm(s, arm, master.make_regulator("native-fmi3", native_fmus[3], unpack_dir=tmp_path))
-    fmi2 = master.run_arm(s, arm, master.make_regulator("native", native_fmus[2], unpack_dir=tmp_path))
-    core = master.run_arm(s, arm, master.make_regulator("inprocess"))
+    fmi3 = master.run_arm(s, arm, make_regulator("native-fmi3", native_fmus[3], unpack_dir=tmp_path))
+    fmi2 = master.run_arm(s, arm, make_regulator("native", native_fmus[2], unpack_dir=tmp_path))
+    core = master.run_arm(s, arm, make_regulator("inprocess"))
     assert len(fmi3.rows) == len(core.rows) == 600 and not fmi3.fell
     assert list(tmp_path.iterdir()) == []  # every extracted FMU removed when its arm ended
     if name == "push_fwd_30n":
@@ -50,7 +52,7 @@ def test_master_native_fmi3_matches_fmi2_and_the_core(native_fmus, tmp_path, nam
 
 
 def test_native_fmi3_nan_input_is_a_cosim_error_with_the_fmu_log(native_fmus, tmp_path):
-    with master.make_regulator("native-fmi3", native_fmus[3], unpack_dir=tmp_path) as reg:
+    with make_regulator("native-fmi3", native_fmus[3], unpack_dir=tmp_path) as reg:
         reg.start({}, 0.0, 1.0)
         reg.step(0.0, H, INPUTS)
         with pytest.raises(CosimError) as err:
@@ -66,7 +68,7 @@ def test_native_fmi3_nan_input_is_a_cosim_error_with_the_fmu_log(native_fmus, tm
     ({"n_neurons": 0}, "fmi3SetInt32 (parameters)", "n_neurons = 0"),
 ])
 def test_native_fmi3_bad_parameter_is_a_cosim_error_with_the_fmu_log(native_fmus, tmp_path, params, call, said):
-    reg = master.make_regulator("native-fmi3", native_fmus[3], unpack_dir=tmp_path)
+    reg = make_regulator("native-fmi3", native_fmus[3], unpack_dir=tmp_path)
     try:
         with pytest.raises(CosimError) as err:
             reg.start(params, 0.0, 1.0)
@@ -78,9 +80,9 @@ def test_native_fmi3_bad_parameter_is_a_cosim_error_with_the_fmu_log(native_fmus
 
 def test_regulator_kind_and_fmi_version_must_match(native_fmus, tmp_path):
     with pytest.raises(CosimError, match="needs an FMI 3.0 co-simulation FMU"):
-        master.make_regulator("native-fmi3", native_fmus[2])
+        make_regulator("native-fmi3", native_fmus[2])
     with pytest.raises(CosimError, match="needs an FMI 2.0 co-simulation FMU"):
-        master.make_regulator("native", native_fmus[3])
+        make_regulator("native", native_fmus[3])
 
 
 def test_fmi3_step_outcomes_are_checked():

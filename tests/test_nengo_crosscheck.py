@@ -30,9 +30,9 @@ import pytest
 
 nengo = pytest.importorskip("nengo")
 
-from fmu_src.avr_core import (  # noqa: E402
-    Regulator, RegulatorInputs, RegulatorParams, build_networks,
-)
+from fmu_src.core.avr_core import Regulator
+from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams
+from fmu_src.core.avr_network import build_networks
 from nengo_reference import build_reference  # noqa: E402
 from reference_regulator import neuron_rates  # noqa: E402
 

@@ -7,15 +7,20 @@ import mujoco
 import numpy as np
 import pytest
 
-from fmu_src.avr_core import Regulator
+from fmu_src.core.avr_core import Regulator
 from plant.cassie import FALL_HEIGHT_M, FALL_TILT_RAD, CassiePhysics
 from plant.constants import MOTOR_JOINTS, SIDES
-from plant.controller import OFFSET_KEYS, ControllerParams, GaitParams, LegKinematics, bezier
+from plant.constants import OFFSET_NAMES
+from plant.controller_params import ControllerParams
+from plant.gaits import GaitParams
+from plant.kinematics import LegKinematics
+from plant.controller import bezier
 from plant.gaits import DEFAULT_LIBRARY_PATH, GaitLibrary
-from plant.make_gaits import PD_ONLY_PARAMS
+from scenarios.gaits.make_gaits import PD_ONLY_PARAMS
 from plant.errors import ModelError
 from plant.model import load_model, menagerie_xml_path
-from plant.sim import CassieWalker, apply_regulator
+from plant.sim import CassieWalker
+from scenarios.cosim.inprocess import apply_regulator
 
 REG_KEYS = {"vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index"}
 TEL_KEYS = {"t", "pelvis_x", "pelvis_y", "pelvis_z", "vx", "vy", "vx_step_avg", "vy_signal",
@@ -149,7 +154,7 @@ def test_interface_keys_and_bad_offsets(model):
     assert isinstance(w.regulator_inputs()["step_index"], int)
     assert set(w.telemetry()) == TEL_KEYS
     assert all(isinstance(v, float) for v in w.telemetry().values())
-    w.set_offsets({k: 0.0 for k in OFFSET_KEYS})
+    w.set_offsets({k: 0.0 for k in OFFSET_NAMES})
     with pytest.raises(KeyError, match="delta_swing_hip_yaw"):
         w.set_offsets({"delta_swing_hip_yaw": 0.1})
     with pytest.raises(ValueError):
@@ -190,7 +195,7 @@ def test_offset_mapping_signs(model):
     w = _walker_in_walk(model)
     c = w.controller
     st, sw = c.stance, c.swing
-    c.set_offsets({k: 0.0 for k in OFFSET_KEYS})
+    c.set_offsets({k: 0.0 for k in OFFSET_NAMES})
     c.update()
     base = dict(c.targets.q)
     d = 0.05
@@ -203,7 +208,7 @@ def test_offset_mapping_signs(model):
         "delta_stance_knee": (st, "knee", +1),
     }
     for key, (leg, joint, sign) in expect.items():
-        c.set_offsets({k: (d if k == key else 0.0) for k in OFFSET_KEYS})
+        c.set_offsets({k: (d if k == key else 0.0) for k in OFFSET_NAMES})
         c.update()
         diff = c.targets.q[leg, joint] - base[leg, joint]
         assert sign * diff > 0.2 * d, (key, diff)
@@ -251,7 +256,7 @@ def test_gait_library_interpolation(tmp_path):
 
 
 def test_committed_gait_library_loads():
-    assert DEFAULT_LIBRARY_PATH.exists(), "run python -m plant.make_gaits"
+    assert DEFAULT_LIBRARY_PATH.exists(), "run python -m scenarios.gaits.make_gaits"
     lib = GaitLibrary.load(DEFAULT_LIBRARY_PATH)
     assert 0.0 in lib.vx_grid and 1.0 in lib.vx_grid and -0.2 in lib.vy_grid and 0.2 in lib.vy_grid
 
@@ -286,7 +291,8 @@ def test_state_machine_phase_and_steps(model):
 
 
 def test_ground_height_on_terrain_matches_model_module():
-    from plant.model import Perturbation, TerrainSpec, terrain_height_at
+    from plant.perturbation import Perturbation
+    from plant.terrain import TerrainSpec, terrain_height_at
 
     m = load_model("menagerie", Perturbation(terrain=TerrainSpec(max_height_m=0.05, max_slope_deg=10.0,
                                                                  seed=3, size_m=5.0)))

@@ -19,7 +19,8 @@ import pytest
 from fmpy import simulate_fmu
 from fmpy.validation import validate_fmu
 
-from plant.model import Perturbation, TerrainSpec
+from plant.perturbation import Perturbation
+from plant.terrain import TerrainSpec
 from plant_fmu_support import Plant, built_plant_fmu, status_of
 
 DRIVER = Path(__file__).parent / "fmi" / "driver.py"
@@ -102,7 +103,7 @@ def test_vendored_plant_imports_only_inside_its_package(plant_fmu):
         sources = {n: z.read(n).decode() for n in z.namelist()
                    if n.startswith("resources/cassie_plant_lib/") and n.endswith(".py")}
         assert re.fullmatch(r"cassie_plant_slave_[0-9a-f]{16}", z.read("resources/slavemodule.txt").decode())
-    assert any(n.endswith("plant/fmu_core.py") for n in sources)
+    assert any(n.endswith("fmu_src/plant_fmu/fmu_core.py") for n in sources)
     for name, text in sources.items():
         for node in ast.walk(ast.parse(text)):
             if isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
@@ -299,8 +300,8 @@ import sys
 from pathlib import Path
 import numpy as np
 import plant.sim                                     # the host's own plant package, imported first
-from plant.fmu_core import INPUT_NAMES, advance, start
-from fmu_src.avr_core import Regulator, RegulatorInputs, RegulatorParams
+from fmu_src.plant_fmu.fmu_core import INPUT_NAMES, advance, start
+from fmu_src.core.avr_core import Regulator, RegulatorInputs, RegulatorParams
 sys.path.insert(0, {tests!r})
 from plant_fmu_support import Plant
 from fmpy import read_model_description

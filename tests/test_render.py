@@ -1,4 +1,4 @@
-"""``run --render``: each arm's MP4 and GIF from the tracking camera, headless (scenarios.render)."""
+"""``run --render``: each arm's MP4 and GIF from the tracking camera, headless (scenarios.results.render)."""
 from __future__ import annotations
 
 import json
@@ -12,7 +12,8 @@ import imageio.v2 as imageio
 import imageio_ffmpeg
 import numpy as np
 
-from scenarios import cli, output, render
+from scenarios import cli
+from scenarios.results import output, render
 
 REPO = Path(__file__).resolve().parents[1]
 

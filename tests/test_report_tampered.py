@@ -16,7 +16,8 @@ from pathlib import Path
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from scenarios import output, report
+from scenarios import report
+from scenarios.results import output
 from scenarios.cli import main as cli_main
 
 REPO_ROOT = Path(__file__).resolve().parents[1]

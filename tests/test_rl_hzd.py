@@ -5,11 +5,13 @@ import numpy as np
 import pytest
 
 from plant.constants import OFFSET_NAMES
-from scenarios import master, output, spec
-from scenarios.metrics import level_errors_vx
+from scenarios.cosim import master
+from scenarios.results import output
+from scenarios.lang import spec
+from scenarios.results.metrics import level_errors_vx
 from scenarios.rl_hzd import policy as P
 from scenarios.rl_hzd import train as T
-from fmu_src.avr_core import RegulatorInputs
+from fmu_src.core.avr_params import RegulatorInputs
 
 
 def test_committed_policy_loads_with_its_training_settings():

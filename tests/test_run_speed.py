@@ -22,12 +22,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios import master, output, runner, spec
+from scenarios.cosim import master
+from scenarios.results import output
+from scenarios.run import runner
+from scenarios.lang import spec
 from scenarios.cli import main as cli_main
-from scenarios.plantio import load_plant_model
+from scenarios.cosim.plantio import load_plant_model
+from scenarios.cosim.regulators import InProcessRegulator
+from scenarios.lang.scenario import CommandPoint, Push, Scenario
 
 
-def suite(name: str, duration_s: float | None = None) -> spec.Scenario:
+def suite(name: str, duration_s: float | None = None) -> Scenario:
     s = spec.resolve_targets([name])[0]
     return s if duration_s is None else spec.override(s, duration_s=duration_s)
 
@@ -138,8 +143,8 @@ def savetxt_writer(path: Path, results) -> None:
 
 def test_timeseries_csv_bytes_equal_the_previous_writer_on_a_real_run(tmp_path):
     s = dataclasses.replace(suite("compare_fixed_speed", 1.0),
-                            commands=(spec.CommandPoint(0.0, 0.5, 0.0), spec.CommandPoint(0.5, 0.3, 0.1)),
-                            pushes=(spec.Push(0.6, (20.0, -5.0, 0.0), 0.1),))
+                            commands=(CommandPoint(0.0, 0.5, 0.0), CommandPoint(0.5, 0.3, 0.1)),
+                            pushes=(Push(0.6, (20.0, -5.0, 0.0), 0.1),))
     results = master.run_scenario(s, "inprocess")
     odd = results[1].rows.copy()  # the awkward doubles, in columns of few and of many distinct values
     odd["push_fx"][:3] = -0.0  # -0.0 among 0.0: told apart by bits
@@ -169,8 +174,8 @@ def test_each_distinct_plant_is_compiled_once_per_process_and_runs_the_same():
     assert c is not a and sc["pelvis_mass_kg"] == pytest.approx(sa["pelvis_mass_kg"] + 5.0)
     fresh, fresh_summary = load_plant_model(heavy)
     assert fresh is not c and fresh_summary == sc
-    shared_run = master.run_arm(heavy, "adaptive", master.InProcessRegulator(), model=c, model_summary=sc)
-    fresh_run = master.run_arm(heavy, "adaptive", master.InProcessRegulator(), model=fresh,
+    shared_run = master.run_arm(heavy, "adaptive", InProcessRegulator(), model=c, model_summary=sc)
+    fresh_run = master.run_arm(heavy, "adaptive", InProcessRegulator(), model=fresh,
                                model_summary=fresh_summary)
     assert shared_run.rows.tobytes() == fresh_run.rows.tobytes()
     again, _ = load_plant_model(heavy, shared=True)

@@ -19,9 +19,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fmu_src import avr_core
 from scenarios.errors import ScenarioError
-from scenarios import metrics, output, report, spec
+from scenarios import report
+from scenarios.lang import spec
+from scenarios.results import metrics, output
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 
@@ -37,7 +38,7 @@ vx_des = 0.5
 """
 
 
-def parse(text: str, **kw) -> spec.Scenario:
+def parse(text: str, **kw) -> Scenario:
     return spec.parse_scenario(tomllib.loads(text), source="test.toml", **kw)
 
 
@@ -91,7 +92,7 @@ def test_good_file_and_schedule():
     assert s.command_at_step(0) == (0.5, 0.0, 0.0) and s.command_at_step(199) == (0.5, 0.0, 0.0)
     assert s.command_at_step(200) == (0.2, 0.1, 0.0)  # yaw_rate_des defaults to 0
     assert s.command_at_step(299) == (0.2, 0.1, 0.0) and s.command_at_step(300) == (0.3, 0.0, -0.25)
-    assert s.commands[2] == spec.CommandPoint(1.5, 0.3, 0.0, -0.25)
+    assert s.commands[2] == CommandPoint(1.5, 0.3, 0.0, -0.25)
     assert s.push_force_at_step(99) == (0.0, 0.0, 0.0)
     assert s.push_force_at_step(100) == (10.0, 0.0, 0.0) and s.push_force_at_step(119) == (10.0, 0.0, 0.0)
     assert s.push_force_at_step(120) == (0.0, 0.0, 0.0)
@@ -155,7 +156,7 @@ def test_comm_step_must_be_whole_plant_steps():
 
 
 def test_override_out_of_range_and_wrong_type():
-    spec_by = {s.name: s for s in avr_core.PARAM_SPECS}
+    spec_by = {s.name: s for s in PARAM_SPECS}
     lr = spec_by["learning_rate"]
     too_big = (lr.max if lr.max is not None else 1e6) * 10 + 1
     probs = problems_of(GOOD + f"[regulator]\nlearning_rate = {too_big}\nn_neurons = 2.5\nadaptation_enabled = 1\n")
@@ -433,6 +434,8 @@ def test_cli_run_rejects_bad_file_before_running(tmp_path):
 # --------------------------------------------------------------------------- properties
 from hypothesis import given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
+from fmu_src.core.avr_specs import PARAM_SPECS
+from scenarios.lang.scenario import CommandPoint, Scenario
 
 
 @settings(max_examples=60, deadline=None)

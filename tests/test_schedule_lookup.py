@@ -7,7 +7,7 @@ import time
 
 from hypothesis import given, settings, strategies as st
 
-from scenarios.scenario import Arm, CommandPoint, Push, Scenario, to_step
+from scenarios.lang.scenario import Arm, CommandPoint, Push, Scenario, to_step
 
 H = 0.005
 

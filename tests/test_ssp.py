@@ -5,7 +5,7 @@ with the plant as an FMU; scenarios exported as SSPs (python -m scenarios export
 The main case is ``mass_20kg``'s adaptive arm, 30 s: a 20 kg torso (nominal 10.33 kg),
 0.5 m/s, the adaptive regulator at its defaults but the suite's seed (1).  Criterion in every master: no fall and a
 step-averaged speed error of at most 0.03 m/s over the last 5 s (the suite's metric,
-``scenarios.metrics.steady_state_error``).
+``scenarios.results.metrics.steady_state_error``).
 
 What differs between the masters, and why:
 * libcosim, Ecos and fmpy exchange Jacobi-style (every FMU steps with the inputs of the
@@ -42,10 +42,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scenarios import master, spec, system, system_run
-from scenarios.metrics import steady_state_error
-from scenarios.plant_fmu import plant_factory
+from scenarios.cosim import master
+from scenarios.lang import spec
+from scenarios.ssp import system
+from scenarios.ssp import system_run
+from scenarios.results.metrics import steady_state_error
+from scenarios.cosim.plant_fmu import plant_factory
 from plant_fmu_support import built_plant_fmu, built_system
+from scenarios.lang.scenario import CommandPoint, Push
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 DURATION_S = 30.0
@@ -85,7 +89,7 @@ def heavy_scenario():
 @pytest.fixture(scope="module")
 def heavy_ssp(heavy_scenario, system_dir, built_fmu, plant_fmu, tmp_path_factory):
     """mass_20kg's adaptive arm as ``python -m scenarios export-ssp`` writes it."""
-    from scenarios.export_ssp import export_ssp
+    from scenarios.ssp.export_ssp import export_ssp
 
     return export_ssp(heavy_scenario, "adaptive", tmp_path_factory.mktemp("heavy") / "mass_20kg_adaptive.ssp",
                       plant_fmu=plant_fmu, regulator_fmu=built_fmu, command_fmu=system_dir / "CommandSource_fmi2.fmu")
@@ -194,7 +198,7 @@ def test_every_component_binds_the_one_nominal_parameter_set(ssp):
 @pytest.fixture(scope="module")
 def master_runs(ssp, tmp_path_factory):
     """The nominal SSP, 4 s, in each master with its own documented call (see
-    scenarios.system_run), the system temp folder pointed at a fresh folder meanwhile."""
+    scenarios.ssp.system_run), the system temp folder pointed at a fresh folder meanwhile."""
     import tempfile
 
     tmp = tmp_path_factory.mktemp("masters_tmp")
@@ -339,7 +343,7 @@ def test_the_readme_lines_run_the_ssp_in_libcosim_and_plot(ssp, tmp_path):
 def test_a_fall_is_reported_the_same_with_the_plant_fmu(built_fmu, plant_fmu):
     """A 4000 N sideways push topples Cassie: the same fall time and reason with either plant."""
     base = spec.override(spec.resolve_targets(["nominal"])[0], duration_s=3.0)
-    s = dataclasses.replace(base, pushes=(spec.Push(1.0, (0.0, 4000.0, 0.0), 0.1),))
+    s = dataclasses.replace(base, pushes=(Push(1.0, (0.0, 4000.0, 0.0), 0.1),))
     (with_fmu,) = master.run_scenario(s, "fmu", fmu_path=built_fmu, arms=("adaptive",), plant=plant_factory(plant_fmu))
     (in_process,) = master.run_scenario(s, "fmu", fmu_path=built_fmu, arms=("adaptive",))
     assert in_process.fell and with_fmu.fell
@@ -354,15 +358,15 @@ def scripted():
     30 N push along x at 1.0 s for 0.1 s."""
     base = spec.resolve_targets(["nominal"])[0]
     return dataclasses.replace(base, duration_s=2.0,
-                               commands=(spec.CommandPoint(0.0, 0.5, 0.0), spec.CommandPoint(1.5, 0.3, 0.0, 0.2)),
-                               pushes=(spec.Push(1.0, (30.0, 0.0, 0.0), 0.1),))
+                               commands=(CommandPoint(0.0, 0.5, 0.0), CommandPoint(1.5, 0.3, 0.0, 0.2)),
+                               pushes=(Push(1.0, (30.0, 0.0, 0.0), 0.1),))
 
 
 def test_exported_ssp_plays_the_scenarios_schedule_at_our_masters_instants(scripted, system_dir, ssp, built_fmu,
                                                                           plant_fmu, tmp_path):
     """libcosim and Ecos run the exported SSP with their plain calls; the command source's
     outputs at every communication point are what our master applies over the next step."""
-    from scenarios.export_ssp import export_ssp
+    from scenarios.ssp.export_ssp import export_ssp
 
     path = export_ssp(scripted, "adaptive", tmp_path / "scripted.ssp", plant_fmu=plant_fmu, regulator_fmu=built_fmu,
                       command_fmu=system_dir / "CommandSource_fmi2.fmu")
@@ -387,7 +391,7 @@ def test_export_ssp_refuses_the_rl_hzd_arm_naming_why(tmp_path):
 def _exported_runs(scenario, arm: str, folder: Path, plant_fmu, regulator_fmu, command_fmu, *, ecos: bool) -> dict:
     """``scenario``'s arm exported as export-ssp writes it and run in libcosim (and Ecos) with
     their plain calls, and in our master in Jacobi order (the plant as an FMU)."""
-    from scenarios.export_ssp import export_ssp
+    from scenarios.ssp.export_ssp import export_ssp
 
     folder.mkdir(parents=True, exist_ok=True)
     path = export_ssp(scenario, arm, folder / f"{scenario.name}_{arm}.ssp", plant_fmu=plant_fmu,
@@ -412,7 +416,8 @@ def _ssp_rows_are_our_masters(result, rows) -> None:
 
 def _our_verdict(scenario, results) -> dict:
     """The claim verdict of our master's arms, as summary.json computes it."""
-    from scenarios import metrics, output
+    from scenarios.results import metrics
+    from scenarios.results import output
 
     arms = {r.arm: metrics.summarize_arm(r.rows, fell=r.fell, t_fall_s=r.t_fall_s,
                                          perturbation_t_s=scenario.perturbation_t_s) for r in results}
@@ -524,8 +529,8 @@ def test_every_exportable_suite_scenario_is_our_masters_run_and_verdict(name, sy
     verdict in either order.  libcosim's clock matters on uneven terrain: its step sizes,
     ulps away from 0.005 s, enter the regulator's learning rule, and the contacts amplify
     that to 1.9 (terrain_mass_com) and 3.2 (terrain_uneven) in some column over 40 s."""
-    from scenarios.export_ssp import problems
-    from scenarios.regulators import arm_regulator
+    from scenarios.ssp.export_ssp import problems
+    from scenarios.cosim.regulators import arm_regulator
 
     (scenario,) = spec.resolve_targets([name])
     arms = [a.name for a in scenario.arms if not problems(scenario, a.name)]

@@ -1,4 +1,4 @@
-"""The SSP rules an XML schema cannot state (scenarios/ssp_check.py), on the CassieAVR.ssp
+"""The SSP rules an XML schema cannot state (scenarios/ssp/ssp_check.py), on the CassieAVR.ssp
 build.py writes and on broken copies of it, one rule broken at a time.
 
 The built SSP must pass every rule.  Its parameter sets still bind the FMU inputs
@@ -22,7 +22,7 @@ import pytest
 from lxml import etree
 
 from plant_fmu_support import built_system
-from scenarios.ssp_check import NS, check_ssp
+from scenarios.ssp.ssp_check import NS, check_ssp
 
 REPO_ROOT = Path(__file__).resolve().parents[1]
 SSD = "SystemStructure.ssd"
@@ -229,7 +229,7 @@ def test_the_command_line_lists_every_problem_and_exits_1(ssp, entries, tmp_path
     clean = _copy(ssp, tmp_path / "clean.ssp", dict.fromkeys(ssvs, _without_input_bindings))
     broken = _copy(clean, tmp_path / "broken.ssp", {entries["plant_ssv"]: _bind("torso_mass", "Real", "12"),
                                                     SSD: _connect("plant", "yaw", "avr", "psi_x")})
-    run = [sys.executable, "-m", "scenarios.ssp_check"]
+    run = [sys.executable, "-m", "scenarios.ssp.ssp_check"]
     ok = subprocess.run([*run, str(clean)], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)
     assert (ok.returncode, ok.stdout) == (0, f"{clean}: 0 problem(s)\n"), ok.stderr
     bad = subprocess.run([*run, str(broken)], cwd=REPO_ROOT, capture_output=True, text=True, timeout=120)

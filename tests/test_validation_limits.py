@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from scenarios import spec
+from scenarios.lang import spec
 from scenarios.campaign import spec as campaign_spec
 from scenarios.cli import main as cli_main
 from scenarios.errors import ScenarioError
@@ -106,7 +106,7 @@ def test_campaign_base_that_is_a_folder_or_a_fifo_is_refused_without_hanging(tmp
 
 
 def test_a_file_beyond_the_size_limit_is_refused_unread(tmp_path, capsys):
-    from scenarios.tomlfile import MAX_FILE_BYTES
+    from scenarios.lang.tomlfile import MAX_FILE_BYTES
 
     f = tmp_path / "big.toml"
     with open(f, "w") as fh:
@@ -134,7 +134,7 @@ weights = [1, {big}]
 
 
 def test_a_name_too_long_for_a_folder_is_refused_by_validate(tmp_path, capsys):
-    from scenarios.fields import MAX_NAME_CHARS
+    from scenarios.lang.fields import MAX_NAME_CHARS
 
     long = "a" * 300
     f = tmp_path / "long.toml"
@@ -164,7 +164,7 @@ def test_duration_flag_of_zero_steps_is_refused_before_running(tmp_path, capsys)
 
 
 def test_schedules_beyond_the_size_limit_are_one_problem():
-    from scenarios.sections import MAX_SCHEDULE_POINTS
+    from scenarios.lang.sections import MAX_SCHEDULE_POINTS
 
     doc = tomllib.loads(GOOD)
     doc["push"] = [{"t_s": 0.5, "force_n": [1.0, 0.0, 0.0], "duration_s": 0.1}] * (MAX_SCHEDULE_POINTS + 1)
@@ -178,7 +178,7 @@ TERRAIN = "[terrain]\nmax_height_m = 0.1\nmax_slope_deg = 10.0\nseed = {seed}\n"
 
 
 def test_terrain_seed_beyond_the_plant_fmu_parameter_is_refused():
-    from plant.fmu_core import PARAM_SPECS
+    from fmu_src.plant_fmu.fmu_core import PARAM_SPECS
 
     top = next(s for s in PARAM_SPECS if s.name == "terrain_seed").max
     one_with(problems_of(GOOD + TERRAIN.format(seed=2**63 - 1)), "terrain.seed = 9223372036854775807",
@@ -187,7 +187,7 @@ def test_terrain_seed_beyond_the_plant_fmu_parameter_is_refused():
 
 
 def test_pushes_that_sum_beyond_the_plant_input_are_refused():
-    from plant.fmu_core import INPUT_SPECS
+    from fmu_src.plant_fmu.fmu_core import INPUT_SPECS
 
     top = next(s for s in INPUT_SPECS if s.name == "push_fy").max
     each = 2000.0  # the most one push may have; three together pass the plant's input range

@@ -1,8 +1,8 @@
 """Closed-loop walking of the Cassie plant with the nominal controller.
 
-The regulator is the project's core ``fmu_src.avr_core.Regulator`` in-process
+The regulator is the project's core ``fmu_src.core.avr_core.Regulator`` in-process
 with adaptation off (the paper-form PD, default gains:
-``plant.make_gaits.PD_ONLY_PARAMS``) called every 10 ms like the
+``scenarios.gaits.make_gaits.PD_ONLY_PARAMS``) called every 10 ms like the
 co-simulation's communication step.  Every run starts from rest in the ``home``
 pose (stand, weight shift, walk; no velocity kick).  Default runs are short (~10 s wall in
 all); the 60 s matrix, perturbations and pushes are ``@pytest.mark.long``: run
@@ -14,10 +14,11 @@ from __future__ import annotations
 
 import pytest
 
-from fmu_src.avr_core import Regulator
-from plant.controller import OFFSET_KEYS
-from plant.make_gaits import PD_ONLY_PARAMS, simulate_walk
-from plant.model import Perturbation, load_model
+from fmu_src.core.avr_core import Regulator
+from plant.constants import OFFSET_NAMES
+from scenarios.gaits.make_gaits import PD_ONLY_PARAMS, simulate_walk
+from plant.perturbation import Perturbation
+from plant.model import load_model
 
 
 class FixedOffsets:
@@ -30,7 +31,7 @@ class FixedOffsets:
 
     def step(self, inputs, dt_s):
         out = self.core.step(inputs, dt_s)
-        return {k: out[k] + self.extra.get(k, 0.0) for k in OFFSET_KEYS}
+        return {k: out[k] + self.extra.get(k, 0.0) for k in OFFSET_NAMES}
 
 
 @pytest.fixture(scope="module")
@@ -109,7 +110,8 @@ def _terrain_walk(seed: int, duration_s: float):
     """The terrain_mass_com plant (+5 kg, COM +0.1 m, slopes <= 20 deg, heights <= 0.4 m)
     on terrain ``seed``, 0.5 m/s from rest with the adaptive core every 5 ms."""
     from plant.constants import NOMINAL_PELVIS_MASS_KG
-    from plant.sim import CassieWalker, apply_regulator
+    from plant.sim import CassieWalker
+    from scenarios.cosim.inprocess import apply_regulator
     from plant.terrain import TerrainSpec
 
     terrain = TerrainSpec(max_height_m=0.4, max_slope_deg=20.0, seed=seed, size_m=45.0)

@@ -21,7 +21,7 @@ from xml_schemas import (LS_REF_IMPORT_FIX, LS_REF_XSD, kind_of, ls_ref_parser, 
                          problems, xml_documents)
 
 LS_REF_MANIFEST = "extra/org.fmi-standard.fmi-ls-ref/fmi-ls-manifest.xml"
-#: The FMUs of the FMI cross-check tree (fmu_src/avr_packaging/crosscheck.py).
+#: The FMUs of the FMI cross-check tree (fmu_src/packing/crosscheck.py).
 CROSS_CHECK_FMUS = tuple(f"cross-check/fmus/2.0/cs/{platform}/cassie-avr/0.1.0/AdaptiveVelocityRegulatorNative/"
                          "AdaptiveVelocityRegulatorNative.fmu" for platform in ("linux64", "win64"))
 #: Every FMU with a reference experiment (crosscheck.EXPERIMENTS), wherever the build puts it: each carries its

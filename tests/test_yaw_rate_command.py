@@ -17,10 +17,14 @@ import numpy as np
 import pytest
 
 from plant_fmu_support import built_plant_fmu
-from scenarios import master, metrics, output, report, spec, store
+from scenarios import report
+from scenarios.cosim import master
+from scenarios.lang import spec
+from scenarios.results import metrics, output, store
 from scenarios.campaign.factors import FACTORS
 from scenarios.errors import ScenarioError
-from scenarios.plant_fmu import plant_factory
+from scenarios.cosim.plant_fmu import plant_factory
+from scenarios.lang.scenario import CommandPoint, Scenario
 
 H = 0.005
 TURN = """
@@ -42,7 +46,7 @@ YAW_RATE_TOL = 0.05
 LAST_S = 3.0
 
 
-def parse(text: str) -> spec.Scenario:
+def parse(text: str) -> Scenario:
     return spec.parse_scenario(tomllib.loads(text), source="test.toml")
 
 
@@ -56,7 +60,7 @@ def mean_yaw_rate(rows: np.ndarray, last_s: float) -> float:
 # ---- the scenario file ----------------------------------------------------------------------
 def test_yaw_rate_des_is_read_and_defaults_to_zero():
     s = parse(TURN + "[[command]]\nt_s = 4.0\nvx_des = 0.4\n")
-    assert s.commands == (spec.CommandPoint(0.0, 0.5, 0.0, YAW_RATE), spec.CommandPoint(4.0, 0.4, 0.0, 0.0))
+    assert s.commands == (CommandPoint(0.0, 0.5, 0.0, YAW_RATE), CommandPoint(4.0, 0.4, 0.0, 0.0))
     assert s.command_at_step(0) == (0.5, 0.0, YAW_RATE) and s.command_at_step(799) == (0.5, 0.0, YAW_RATE)
     assert s.command_at_step(800) == (0.4, 0.0, 0.0)
 

@@ -24,9 +24,9 @@ import xml.etree.ElementTree as ET
 from pathlib import Path
 from typing import Iterable, Mapping
 
-from ..avr_packaging import compiler
-from ..avr_packaging.archive import PLACEHOLDER_GUID, content_guid, read_entries, write_zip
-from ..native import build_native
+from fmu_src.packing import compiler
+from fmu_src.packing.archive import PLACEHOLDER_GUID, content_guid, read_entries, write_zip
+from fmu_src.native import build_native
 
 SRC = Path(__file__).resolve().parent
 MODEL_IDENTIFIER = "CommandSource"

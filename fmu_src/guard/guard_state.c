@@ -13,7 +13,7 @@
  *       60      4  u32 n_fixed, the number of fixed parameters (AVR_N_FIXED)
  *       64  12 n_fixed  per fixed parameter: u32 valueReference, f64 value
  *        h      8  u64 n, length of the slave's blob
- *      h+8      n  the slave's blob (fmu_src/avr_fmustate.py)
+ *      h+8      n  the slave's blob (fmu_src/fmi/avr_fmustate.py)
  *    h+8+n      8  u64 CRC-64/XZ of every byte before it
  *
  * A state is accepted only if the size, magic, version, lengths and checksum are right,
@@ -41,7 +41,7 @@
 #define HEAD_FIXED_OFFSET 64u
 #define HEAD_BYTES (HEAD_FIXED_OFFSET + FIXED_ENTRY * AVR_N_FIXED + 8u)
 #define CRC_BYTES 8u
-/* The slave's blob: AVR_SLAVE_* generated from fmu_src/avr_fmustate.py (build_guard.py), and
+/* The slave's blob: AVR_SLAVE_* generated from fmu_src/fmi/avr_fmustate.py (build_guard.py), and
  * AVR_SLAVE_REFUSED, what the slave's deserializer yields for a blob it refuses, then the reason. */
 #include "avr_slave_blob.h"
 #define SLAVE_VERSION_AT AVR_SLAVE_MAGIC_BYTES

@@ -1,6 +1,6 @@
 /*
  * The regulator's numerics in C: the same method, operation for operation, as
- * fmu_src/avr_core.py (networks from SplitMix64 streams, LIF-rate hidden layers, PES
+ * fmu_src/core/avr_core.py (networks from SplitMix64 streams, LIF-rate hidden layers, PES
  * learning with anti-windup, PD terms held per step_index).  No FMI here: the instance
  * layer (avr_instance.c) owns the FMI behaviour and calls avr_step.
  *

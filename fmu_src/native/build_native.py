@@ -12,9 +12,9 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from ..avr_packaging import compiler
-from ..avr_packaging.archive import PLACEHOLDER_GUID, content_guid
-from . import describe, header
+from fmu_src.packing import compiler
+from fmu_src.packing.archive import PLACEHOLDER_GUID, content_guid
+from fmu_src.native import describe, header
 
 NATIVE_SRC = Path(__file__).resolve().parent
 MODEL_IDENTIFIER = "AdaptiveVelocityRegulatorNative"

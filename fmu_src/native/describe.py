@@ -12,9 +12,9 @@ from __future__ import annotations
 import html
 import xml.etree.ElementTree as ET
 
-from ..avr_packaging.describe import xml_value
-from ..avr_packaging.method_page import method_html
-from .header import LOG_CATEGORIES, all_specs
+from fmu_src.packing.describe import xml_value
+from fmu_src.packing.method_page import method_html
+from fmu_src.native.header import LOG_CATEGORIES, all_specs
 
 AUTHOR = "cassie-avr project"
 VERSION = "0.1.0"

@@ -14,7 +14,7 @@ import sys
 from pathlib import Path
 
 from scenarios.errors import ScenarioError
-from scenarios.fmus import REGULATOR_FMUS
+from scenarios.cosim.fmus import REGULATOR_FMUS
 
 log = logging.getLogger("scenarios.campaign")
 
@@ -55,7 +55,7 @@ def _check_args(args) -> list[str]:
     if args.fmu is not None and not Path(args.fmu).is_file():
         problems.append(f"--fmu {args.fmu}: no such file")
     elif args.fmu is not None and args.regulator in REGULATOR_FMUS:
-        from scenarios.fmus import fmu_role_problem, fmu_version_problem
+        from scenarios.cosim.fmus import fmu_role_problem, fmu_version_problem
 
         problems += filter(None, [fmu_version_problem(args.regulator, Path(args.fmu))
                                   or fmu_role_problem("--fmu", Path(args.fmu), "regulator")])
@@ -133,7 +133,7 @@ def _fmu(args):
     """The regulator's FMU path (built when missing/stale), None in-process, False on error."""
     if args.regulator == "inprocess":
         return None
-    from scenarios.fmus import ensure_fmu
+    from scenarios.cosim.fmus import ensure_fmu
 
     try:
         return str(Path(ensure_fmu(args.fmu, rebuild=args.rebuild_fmu, regulator=args.regulator)).resolve())

@@ -1,6 +1,6 @@
 """The factors a campaign may vary: each maps a drawn value onto a scenario document.
 
-A scenario document is the parsed TOML of a scenario file (see :mod:`scenarios.spec`).
+A scenario document is the parsed TOML of a scenario file (see :mod:`scenarios.lang.spec`).
 Every factor names the scenario key it sets; ``apply`` edits a deep copy of the base
 document and returns ``None``, or the reason the factor cannot apply to that base
 (checked once per campaign on the base, not per sample).
@@ -131,7 +131,7 @@ def lookup(name: str) -> FactorKind | None:
     if name in FACTORS:
         return FACTORS[name]
     if name.startswith(REGULATOR_PREFIX):
-        from scenarios.sections import regulator_param_specs
+        from scenarios.lang.sections import regulator_param_specs
 
         spec = regulator_param_specs().get(name[len(REGULATOR_PREFIX):])
         if spec is None:
@@ -143,7 +143,7 @@ def lookup(name: str) -> FactorKind | None:
 
 
 def known_names() -> list[str]:
-    from scenarios.sections import regulator_param_specs
+    from scenarios.lang.sections import regulator_param_specs
 
     return list(FACTORS) + [REGULATOR_PREFIX + p for p in regulator_param_specs()]
 

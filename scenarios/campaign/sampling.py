@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 
 from scenarios.errors import ScenarioError
-from scenarios import spec as scenario_spec
+from scenarios.lang import spec as scenario_spec
 from scenarios.campaign import factors as fx
 from scenarios.campaign import tomlw
 from scenarios.campaign.spec import Campaign, Factor

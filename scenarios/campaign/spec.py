@@ -35,13 +35,13 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from scenarios.errors import ScenarioError
-from scenarios import spec as scenario_spec
+from scenarios.lang import spec as scenario_spec
 from scenarios.campaign import factors as fx
-from scenarios.fields import Problems, as_finite, did_you_mean, integer, name as name_field, number, string, unknown_keys
-from scenarios.formatting import show
-from scenarios.scenario import BUILTIN_MODELS, DEFAULT_COMM_STEP_S
-from scenarios.sections import resolve_model
-from scenarios.tomlfile import depth_problem, read_toml
+from scenarios.lang.fields import Problems, as_finite, did_you_mean, integer, name as name_field, number, string, unknown_keys
+from scenarios.lang.formatting import show
+from scenarios.lang.scenario import BUILTIN_MODELS, DEFAULT_COMM_STEP_S
+from scenarios.lang.sections import resolve_model
+from scenarios.lang.tomlfile import depth_problem, read_toml
 
 CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
 TOP_KEYS = ("name", "description", "base", "duration_s", "compare", "samples", "seed",

@@ -23,7 +23,7 @@ import shutil
 from pathlib import Path
 from typing import Any, Iterable, Sequence
 
-from fmu_src.avr_errors import AvrError
+from fmu_src.core.avr_errors import AvrError
 from scenarios.campaign.task import COMPLETE, METRICS
 
 log = logging.getLogger(__name__)

@@ -73,7 +73,7 @@ def _walker(model_source: str):
 
 def episode_return(weights: np.ndarray, seed_words, model_source: str = "menagerie") -> float:
     """Mean reward per communication step of one episode (0 for steps after a fall)."""
-    from fmu_src.avr_core import RegulatorInputs
+    from fmu_src.core.avr_params import RegulatorInputs
 
     walker, policy = _walker(model_source), HzdPolicy(weights)
     commands = _commands(seed_words)

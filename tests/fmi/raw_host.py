@@ -389,7 +389,7 @@ def case_forged_agreement(fmu, _args):
 
 
 def _walker_edit(edit):
-    """An edit_core for forge(): the CassiePlant walker state (plant/fmu_core.py: "CPWS", u32 version,
+    """An edit_core for forge(): the CassiePlant walker state (fmu_src/plant_fmu/fmu_core.py: "CPWS", u32 version,
     u32 JSON length, JSON) with ``edit`` applied to its JSON."""
     def apply(core: bytes) -> bytes:
         magic, version, n = struct.unpack_from("<4sII", core)

@@ -1,0 +1,1 @@
+"""The regulator's pure core: numpy and the standard library only (it travels inside the FMUs)."""

@@ -1,0 +1,1 @@
+"""The AdaptiveVelocityRegulator pythonfmu slave, thin over ``fmu_src.core``."""

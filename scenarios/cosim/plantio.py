@@ -1,0 +1,215 @@
+"""The scenario -> plant mapping: the plant's Perturbation and the compiled model.
+
+Pushes are not part of the plant's ``Perturbation``: the master switches them on and
+off itself (``CassieWalker.set_pelvis_force``) on communication-step boundaries.
+"""
+from __future__ import annotations
+
+import dataclasses
+import functools
+import logging
+import os
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # pragma: no cover
+    import mujoco
+
+    from plant.perturbation import Perturbation
+    from scenarios.lang.scenario import Scenario
+
+log = logging.getLogger(__name__)
+
+
+def build_perturbation(scenario: "Scenario", nominal_torso_mass_kg: float | None) -> "Perturbation | None":
+    """The plant Perturbation of ``scenario`` (None when the plant is nominal).
+
+    ``torso_added_mass_kg`` needs the model's own torso mass (``nominal_torso_mass_kg``);
+    when that is None (validation before loading) the plant's nominal pelvis mass is used.
+    """
+    t = scenario.terrain
+    terrain = None if t is None else dataclasses.asdict(t)  # Terrain's fields are TerrainSpec's
+    pert = _perturbation(scenario.torso_mass_kg, scenario.torso_added_mass_kg, scenario.torso_com_offset_m,
+                         scenario.joint_damping_scale, terrain, nominal_torso_mass_kg)
+    return None if pert.is_nominal else pert
+
+
+def perturbation_problems(torso_mass_kg: float | None, torso_added_mass_kg: float | None,
+                          torso_com_offset_m, joint_damping_scale: float,
+                          terrain: dict[str, Any] | None) -> list[str]:
+    """The plant's own problems with these perturbation values (``terrain``: the
+    TerrainSpec's fields), on the plant's nominal pelvis mass."""
+    return _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale,
+                         terrain, None).problems()
+
+
+def _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale, terrain,
+                  nominal_torso_mass_kg) -> "Perturbation":
+    """The one place that builds the plant's Perturbation (and TerrainSpec) from scenario values."""
+    from plant.constants import NOMINAL_PELVIS_MASS_KG
+    from plant.perturbation import Perturbation
+    from plant.terrain import TerrainSpec
+
+    mass = torso_mass_kg
+    if torso_added_mass_kg is not None:
+        base = NOMINAL_PELVIS_MASS_KG if nominal_torso_mass_kg is None else nominal_torso_mass_kg
+        mass = base + torso_added_mass_kg
+    return Perturbation(
+        torso_mass_kg=mass,
+        torso_com_offset_m=tuple(torso_com_offset_m),
+        joint_damping_scale=joint_damping_scale,
+        terrain=None if terrain is None else TerrainSpec(**terrain),
+    )
+
+
+def check_plant(scenario: "Scenario") -> list[tuple[str, str]]:
+    """``(field, problem)`` for everything loading the plant of ``scenario`` would fail on:
+    the model must parse safely, compile and be a Cassie (:func:`plant.model.load_model`),
+    and the perturbation must be valid on that model (its own pelvis mass for
+    ``torso_added_mass_kg``). The compiled model is cached per process."""
+    mass, problem = _base_model_check(scenario.model, _file_stamp(scenario.model))
+    if problem is not None:
+        return [("model", problem)]
+    pert = build_perturbation(scenario, mass)
+    return [("perturbation", p) for p in (pert.problems() if pert is not None else [])]
+
+
+def _file_stamp(model: str) -> tuple | None:
+    """What the cached check of ``model`` depends on besides its name: the file's mtime and
+    size (the OSU file's for ``osu``), or the Menagerie folder the loader uses."""
+    from plant.model import menagerie_root, osu_model_path
+
+    if model == "menagerie":
+        root = menagerie_root()
+        return ("menagerie", None if root is None else str(root))
+    try:
+        st = os.stat(osu_model_path() if model == "osu" else model)
+    except OSError:
+        return None
+    return st.st_mtime_ns, st.st_size
+
+
+@functools.lru_cache(maxsize=16)
+def _base_model_check(model: str, stamp: tuple | None) -> tuple[float | None, str | None]:
+    """(pelvis mass, None) when ``model`` loads as a Cassie, else (None, the reason)."""
+    from plant.errors import ModelError
+    from plant.model import load_model, model_summary
+
+    try:
+        return model_summary(load_model(model))["pelvis_mass_kg"], None
+    except ModelError as exc:
+        return None, str(exc)
+
+
+def load_plant_model(scenario: "Scenario", *, shared: bool = False) -> tuple["mujoco.MjModel", dict]:
+    """Compile the scenario's model with its perturbation; return it and its summary.
+
+    ``shared``: compiled once per process for each distinct plant (model and
+    perturbation) and then shared by every caller, who must only read it (a walker
+    works on its own copy): the arms of a run's scenarios on one plant compile it once.
+    """
+    from plant.model import load_model, model_summary
+
+    if shared:
+        stamp = _file_stamp(scenario.model)
+        nominal_mass, problem = _base_model_check(scenario.model, stamp)
+        if problem is None:  # else compile below, which raises the model's error
+            model, summary = _shared_model(scenario.model, stamp, build_perturbation(scenario, nominal_mass))
+            return model, dict(summary)
+    nominal_mass = None
+    if scenario.torso_added_mass_kg is not None:
+        nominal_mass = model_summary(load_model(scenario.model))["pelvis_mass_kg"]
+    pert = build_perturbation(scenario, nominal_mass)
+    model = load_model(scenario.model, pert)
+    summary = model_summary(model)
+    log.info("scenario %s: model %s, perturbation %s", scenario.name, scenario.model, pert)
+    return model, summary
+
+
+@functools.lru_cache(maxsize=8)
+def _shared_model(model: str, stamp: tuple | None, pert: "Perturbation | None") -> tuple["mujoco.MjModel", dict]:
+    from plant.model import load_model, model_summary
+
+    compiled = load_model(model, pert)
+    log.info("model %s, perturbation %s: compiled (shared in this process)", model, pert)
+    return compiled, model_summary(compiled)
+
+
+# --------------------------------------------------------------------------- the plant FMU's ranges
+#: The scenario field each CassiePlant FMU parameter carries (named in problems).
+FMU_FIELDS = {"torso_mass_kg": "torso_mass_kg", "joint_damping_scale": "joint_damping_scale",
+              **{f"torso_com_offset_{a}_m": f"torso_com_offset_m[{a}]" for a in "xyz"},
+              **{f"terrain_{k}": f"terrain.{k}" for k in ("max_height_m", "max_slope_deg", "seed", "size_m")},
+}
+
+
+def _outside(spec, value) -> bool:
+    return (spec.min is not None and value < spec.min) or (spec.max is not None and value > spec.max)
+
+
+def _range(spec) -> str:
+    return f"[{spec.min:g}, {spec.max:g}]" if isinstance(spec.min, float) else f"[{spec.min}, {spec.max}]"
+
+
+def plant_parameter_problems(torso_mass_kg: float | None, torso_added_mass_kg: float | None,
+                             torso_com_offset_m, joint_damping_scale: float,
+                             terrain: dict[str, Any] | None) -> list[tuple[str, Any, str]]:
+    """``(field, value, why)`` for every perturbation value outside the range the
+    CassiePlant FMU declares for its parameter (``fmu_src.plant_fmu.fmu_core.PARAM_SPECS``, the one
+    source of those ranges; on the plant's nominal pelvis mass). For values the plant's
+    own checks (:func:`perturbation_problems`) accept: a scenario valid here runs on
+    either plant."""
+    from fmu_src.plant_fmu import fmu_core
+
+    pert = _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale, terrain,
+                         None)
+    values = fmu_core.values_from_perturbation("menagerie", None if pert.is_nominal else pert)
+    out: list[tuple[str, Any, str]] = []
+    for spec in fmu_core.PARAM_SPECS:
+        value = values.get(spec.name)
+        if spec.min is not None and value is not None and _outside(spec, value):
+            out.append((FMU_FIELDS.get(spec.name, spec.name), value,
+                        f"must be in {_range(spec)} (the plant's parameter {spec.name})"))
+    return out
+
+
+def plant_input_problems(scenario: "Scenario") -> list[tuple[str, Any, str]]:
+    """``(field, value, why)`` for every command value, and every sum of the pushes in force
+    together, outside the range the CassiePlant FMU declares for that input
+    (``fmu_src.plant_fmu.fmu_core.INPUT_SPECS``)."""
+    from fmu_src.plant_fmu import fmu_core
+
+    inputs = {s.name: s for s in fmu_core.INPUT_SPECS}
+    out: list[tuple[str, Any, str]] = []
+    for i, point in enumerate(scenario.commands):
+        for name in ("vx_des", "vy_des", "yaw_rate_des"):
+            spec = inputs.get(name)
+            if spec is not None and _outside(spec, getattr(point, name)):
+                out.append((f"command[{i}].{name}", getattr(point, name),
+                            f"must be in {_range(spec)} (the plant's input {name})"))
+    for k in scenario.push_switch_steps:
+        for axis, f in zip("xyz", scenario.push_force_at_step(k)):
+            spec = inputs.get(f"push_f{axis}")
+            if spec is not None and _outside(spec, f):
+                out.append((f"push (sum along {axis} at t = {k * scenario.comm_step_s:g} s)", f,
+                            f"the pushes in force together must be in {_range(spec)} N (the plant's input "
+                            f"push_f{axis})"))
+    return out
+
+
+def plant_fmu_problems(scenario: "Scenario") -> list[str]:
+    """Why ``scenario``'s plant cannot be the CassiePlant FMU (``--plant fmu``): a model
+    the FMU does not hold, or a value the FMU has no parameter for (it would silently run
+    another plant). Its ranges are checked on every scenario (:func:`plant_parameter_problems`,
+    :func:`plant_input_problems`)."""
+    from fmu_src.plant_fmu import fmu_core
+
+    if scenario.model not in fmu_core.MODEL_FILES:
+        return [f"model = {scenario.model!r}: the CassiePlant FMU holds {', '.join(fmu_core.MODEL_FILES)} only; "
+                "an MJCF path needs --plant inprocess"]
+    pert = build_perturbation(scenario, None)
+    if pert is None or pert.terrain is None:
+        return []
+    carried = fmu_core.perturbation_from_values(fmu_core.values_from_perturbation(scenario.model, pert)).terrain
+    return [f"terrain.{f.name} = {getattr(pert.terrain, f.name)!r}: the CassiePlant FMU has no parameter for it "
+            f"(it uses {getattr(carried, f.name)!r}); --plant inprocess runs it"
+            for f in dataclasses.fields(pert.terrain) if getattr(pert.terrain, f.name) != getattr(carried, f.name)]

@@ -1,0 +1,1 @@
+"""The scenario file language: TOML scenario files -> validated frozen dataclasses (every problem at once)."""

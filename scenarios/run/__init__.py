@@ -1,0 +1,1 @@
+"""Running scenarios: one session of ``python -m scenarios run`` (arms, jobs, resume) over the master."""
