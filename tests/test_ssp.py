@@ -326,9 +326,9 @@ def test_the_system_structure_is_read_from_the_fmus(ssp, tmp_path):
         assert system.ssp_entries(*fmus)["SystemStructure.ssd"] == z.read("SystemStructure.ssd")
 
 
-def test_the_readme_lines_run_the_ssp_in_libcosim_and_plot(ssp, tmp_path):
-    """The README's libcosimpy example, as printed there, on a built SSP (40 steps instead of 6000)."""
-    text = (REPO_ROOT / "README.md").read_text()
+def test_the_ssp_page_lines_run_the_ssp_in_libcosim_and_plot(ssp, tmp_path):
+    """docs/ssp.md's libcosimpy example, as printed there, on a built SSP (40 steps instead of 6000)."""
+    text = (REPO_ROOT / "docs" / "ssp.md").read_text()
     block = text.split("<!-- ssp-libcosim-example -->", 1)[1].split("```python\n", 1)[1].split("```", 1)[0]
     line = 'SSP, STEPS, PLOT = "dist/CassieAVR.ssp", 6000, "docs/cassie_avr_ssp_libcosim.png"'
     assert line in block
