@@ -19,7 +19,8 @@ from pathlib import Path
 
 import pytest
 
-from native_support import REGULATOR_FMUS
+from support.native_support import REGULATOR_FMUS
+from support.paths import SUPPORT_DIR
 
 
 @pytest.fixture(scope="session")
@@ -104,7 +105,7 @@ def venv_tool():
     return find
 
 
-RAW_HOST = Path(__file__).parent / "fmi" / "raw_host.py"
+RAW_HOST = SUPPORT_DIR / "fmi" / "raw_host.py"
 
 
 @pytest.fixture(scope="session")

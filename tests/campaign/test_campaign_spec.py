@@ -1,0 +1,388 @@
+"""Campaign files, sampling, the campaign folder and the statistics, without simulation (fast).
+
+- the built-in campaigns validate; a bad campaign lists every problem at once, each
+  naming its field; a factor range the scenario format does not allow is reported once
+  against the factor (the base probed at the extremes);
+- draws: same seed -> same samples; Latin hypercube strata; grid x draws; randint
+  bounds; step snapping; per-factor streams (adding a factor leaves the others alone);
+- every sample's TOML reads back to the same document and loads as a scenario;
+- the folder refuses another campaign, this one without --resume, a foreign folder, a
+  second writer; resume keeps only complete samples; a line cut short is dropped;
+- Wilson interval, quantiles, paired comparison on hand-made rows.
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scenarios.errors import ScenarioError
+from scenarios.lang import spec as scenario_spec
+from scenarios.campaign import analysis, sampling, spec, tomlw
+from scenarios.campaign.store import CampaignDir, CampaignDirError, TIMING_COLUMNS
+from support.paths import REPO_ROOT
+
+BASE = """
+name = "c"
+samples = 8
+seed = 11
+base = "nominal"
+duration_s = 2.0
+compare = ["adaptive", "pd_only"]
+"""
+
+
+def campaign(text: str, base_dir: Path | None = None) -> spec.Campaign:
+    return spec.parse_campaign(tomllib.loads(text), source="test.toml", base_dir=base_dir or REPO_ROOT)
+
+
+def problems_of(text: str) -> list[str]:
+    with pytest.raises(ScenarioError) as info:
+        campaign(text)
+    return info.value.problems
+
+
+# --------------------------------------------------------------------------- validation
+@pytest.mark.parametrize("name", ["robustness", "smoke"])
+def test_builtin_campaigns_validate_and_their_samples_load(name, tmp_path):
+    c = spec.load_campaign(spec.resolve_campaign(name))
+    texts = sampling.build_samples(c)
+    assert len(texts) == c.n_samples
+    for sid in list(texts)[:5]:  # the loader itself, from a file, as `scenarios run` reads it
+        (tmp_path / f"{sid}.toml").write_text(texts[sid])
+        s = scenario_spec.load_scenario(tmp_path / f"{sid}.toml")
+        assert s.name == sid and [a.name for a in s.arms] == ["adaptive", "pd_only"]
+
+
+def test_robustness_matches_the_issue():
+    c = spec.load_campaign(spec.resolve_campaign("robustness"))
+    f = {x.name: x for x in c.factors}
+    assert c.n_samples == 60 and c.base_doc["duration_s"] == 30.0
+    assert (f["torso_mass_kg"].low, f["torso_mass_kg"].high) == (10.33, 25.0)
+    assert (f["torso_com_offset_x_m"].low, f["torso_com_offset_x_m"].high) == (-0.1, 0.1)
+    assert (f["joint_damping_scale"].low, f["joint_damping_scale"].high) == (1.0, 10.0)
+    assert (f["vx_des"].low, f["vx_des"].high) == (0.2, 1.0)
+    assert f["seed"].dist == "randint"
+
+
+def test_bad_campaign_lists_every_problem_naming_fields():
+    probs = problems_of("""
+name = "Bad Name"
+samples = 0
+seed = -1
+retries = 11
+base = "nominall"
+bogus = 1
+[factors.torso_mass]
+dist = "uniform"
+[factors.joint_damping_scale]
+dist = "normal"
+[factors.vx_des]
+dist = "uniform"
+low = 0.5
+high = 0.2
+[factors.seed]
+dist = "uniform"
+low = 1
+high = 3
+[factors.terrain]
+dist = "choice"
+values = ["flat", 3]
+weights = [1.0]
+""")
+    text = "\n".join(probs)
+    for needle in ("name = 'Bad Name'", "samples = 0", "seed = -1", "retries = 11", "base = 'nominall'",
+                   "did you mean 'nominal'", "bogus: unknown key", "factors.torso_mass: unknown factor",
+                   "did you mean 'torso_mass_kg'", "factors.joint_damping_scale.dist = 'normal'",
+                   "factors.vx_des.high = 0.2: must be > low = 0.5",
+                   "factors.seed.dist = 'uniform': an integer factor takes randint",
+                   "factors.terrain.values[1] = 3", "factors.terrain.weights"):
+        assert needle in text, (needle, probs)
+
+
+def test_factor_range_checked_by_the_scenario_rules_once():
+    probs = problems_of(BASE + """
+[factors.joint_damping_scale]
+dist = "uniform"
+low = 1.0
+high = 12.0
+[factors.regulator.learning_rate]
+dist = "choice"
+values = [0.0001, 0.5]
+[factors.push_t_s]
+dist = "uniform"
+low = 0.5
+high = 1.0
+""")
+    assert len(probs) == 3, probs
+    assert probs[0] == ("factors.joint_damping_scale = 12: gives an invalid scenario: perturbation: "
+                        "joint_damping_scale=12.0 is out of range [0, 10]")  # the plant's range
+    assert "factors.regulator.learning_rate = 0.5" in probs[1] and "must be a finite number in [" in probs[1]
+    assert "factors.push_t_s: needs a base with a [[push]]" in probs[2]
+
+
+def test_base_inline_and_file_and_problems_of_the_base(tmp_path):
+    inline = campaign("""
+name = "c"
+samples = 2
+seed = 1
+[base]
+duration_s = 1.0
+seed = 4
+[[base.command]]
+t_s = 0.0
+vx_des = 0.4
+[factors.vx_des]
+dist = "grid"
+values = [0.3, 0.6]
+""")
+    assert inline.base_ref == "inline" and inline.n_samples == 4 and inline.arm_names() == ["adaptive"]
+    (tmp_path / "b.toml").write_text((scenario_spec.SUITE_DIR / "push_fwd_30n.toml").read_text())
+    from_file = campaign(BASE.replace('"nominal"', '"b.toml"').replace("duration_s = 2.0", "duration_s = 4.0") + """
+[factors.push_force_x_n]
+dist = "uniform"
+low = 10.0
+high = 40.0
+""", base_dir=tmp_path)
+    assert from_file.base_ref == str(tmp_path / "b.toml") and "claim" not in from_file.base_doc
+    probs = problems_of(BASE.replace('duration_s = 2.0', 'duration_s = 2.001') + """
+[factors.seed]
+dist = "randint"
+low = 1
+high = 2
+""")
+    assert probs == ["base: duration_s = 2.001: must be a whole number of communication steps (0.005 s)"]
+
+
+# --------------------------------------------------------------------------- sampling
+FACTORS = """
+[factors.torso_mass_kg]
+dist = "lhs"
+low = 10.33
+high = 25.0
+[factors.torso_com_offset_x_m]
+dist = "lhs"
+low = -0.1
+high = 0.1
+[factors.joint_damping_scale]
+dist = "uniform"
+low = 1.0
+high = 10.0
+step = 0.5
+[factors.seed]
+dist = "randint"
+low = 1
+high = 3
+[factors.terrain]
+dist = "choice"
+values = ["flat", {max_height_m = 0.05, max_slope_deg = 5.0, seed = 2}]
+weights = [3.0, 1.0]
+"""
+
+
+def test_same_seed_same_samples_other_seed_others():
+    a, b = sampling.draw(campaign(BASE + FACTORS)), sampling.draw(campaign(BASE + FACTORS))
+    assert a == b
+    c = sampling.draw(campaign(BASE.replace("seed = 11", "seed = 12") + FACTORS))
+    assert [s.values for s in a] != [s.values for s in c]
+
+
+def test_latin_hypercube_one_sample_per_stratum_and_bounds():
+    samples = sampling.draw(campaign(BASE + FACTORS))
+    n = len(samples)
+    for name, (lo, hi) in {"torso_mass_kg": (10.33, 25.0), "torso_com_offset_x_m": (-0.1, 0.1)}.items():
+        v = np.array([s.values[name] for s in samples])
+        strata = np.floor((v - lo) / (hi - lo) * n).astype(int)
+        assert sorted(strata) == list(range(n)), name
+    for s in samples:
+        assert 1 <= s.values["seed"] <= 3 and isinstance(s.values["seed"], int)
+        d = s.values["joint_damping_scale"]
+        assert 1.0 <= d <= 10.0 and abs((d - 1.0) / 0.5 - round((d - 1.0) / 0.5)) < 1e-9
+
+
+def test_randint_reaches_both_ends_and_choice_follows_weights():
+    c = campaign(BASE.replace("samples = 8", "samples = 400") + FACTORS)
+    samples = sampling.draw(c)
+    seeds = {s.values["seed"] for s in samples}
+    assert seeds == {1, 2, 3}
+    flat = sum(s.values["terrain"] == "flat" for s in samples) / len(samples)
+    assert abs(flat - 0.75) < 0.07  # 400 draws of p = 0.75: 3 standard deviations = 0.065
+
+
+def test_each_factor_has_its_own_stream():
+    a = sampling.draw(campaign(BASE + FACTORS))
+    b = sampling.draw(campaign(BASE + FACTORS + """
+[factors.vy_des]
+dist = "uniform"
+low = -0.1
+high = 0.1
+"""))
+    for sa, sb in zip(a, b):
+        assert {k: v for k, v in sb.values.items() if k != "vy_des"} == sa.values
+
+
+def test_grid_crosses_every_cell_with_the_same_draws():
+    c = campaign(BASE.replace("samples = 8", "samples = 3") + """
+[factors.torso_mass_kg]
+dist = "uniform"
+low = 11.0
+high = 20.0
+[factors.vx_des]
+dist = "grid"
+values = [0.3, 0.6]
+[factors.regulator.adaptation_enabled]
+dist = "grid"
+values = [true, false]
+""")
+    samples = sampling.draw(c)
+    assert c.n_samples == len(samples) == 12
+    assert [s.id for s in samples] == [f"s{i:04d}" for i in range(12)]
+    cells = [(s.values["vx_des"], s.values["regulator.adaptation_enabled"]) for s in samples]
+    assert cells[::3] == [(0.3, True), (0.3, False), (0.6, True), (0.6, False)]
+    masses = [s.values["torso_mass_kg"] for s in samples]
+    assert masses[0:3] == masses[3:6] == masses[9:12]
+
+
+def test_sample_documents_apply_every_factor_and_round_trip():
+    c = campaign(BASE.replace('"nominal"', '"push_fwd_30n"').replace("duration_s = 2.0", "duration_s = 4.0") + """
+[factors.torso_com_offset_x_m]
+dist = "uniform"
+low = -0.05
+high = 0.05
+[factors.vx_des]
+dist = "uniform"
+low = 0.2
+high = 0.8
+[factors.push_t_s]
+dist = "uniform"
+low = 1.0
+high = 1.5
+[factors.push_force_y_n]
+dist = "choice"
+values = [-20.0, 20.0]
+[factors.regulator.learning_rate]
+dist = "uniform"
+low = 0.00001
+high = 0.0001
+""")
+    for sample in sampling.draw(c):
+        text = sampling.sample_text(c, sample)
+        doc = tomllib.loads(text)
+        s = scenario_spec.parse_scenario(doc)
+        v = sample.values
+        assert s.torso_com_offset_m[0] == v["torso_com_offset_x_m"]
+        assert s.commands[0].vx_des == v["vx_des"]
+        assert s.pushes[0].t_s == v["push_t_s"] == s.perturbation_t_s and abs(v["push_t_s"] / 0.005 - round(v["push_t_s"] / 0.005)) < 1e-9
+        assert s.pushes[0].force_n == (30.0, v["push_force_y_n"], 0.0)
+        assert s.arm("adaptive").overrides_dict()["learning_rate"] == v["regulator.learning_rate"]
+        assert s.arm("pd_only").overrides_dict()["adaptation_enabled"] is False
+        assert s.claim is None and s.name == sample.id and "campaign" in s.tags
+
+
+def test_toml_writer_round_trips_awkward_values():
+    doc = {"name": "x", "description": 'quote " and \\ and \u00e9\nnewline', "f": 1e-05, "big": 1.5e300,
+           "neg": -0.0, "b": False, "l": [1, 2.5, True], "t": {"a key": 1, "k": [0.1]},
+           "arr": [{"x": 1, "inl": {"p": 0.5}}, {"x": 2}]}
+    assert tomllib.loads(tomlw.dumps(doc, header="line 1\nline 2")) == doc
+    with pytest.raises(ValueError, match="non-finite"):
+        tomlw.dumps({"x": float("nan")})
+
+
+# --------------------------------------------------------------------------- the folder
+def _dir(root: Path, texts=None) -> CampaignDir:
+    texts = texts or {"s0000": "a", "s0001": "b"}
+    return CampaignDir(root, "c", texts, ["adaptive", "pd_only"], ["torso_mass_kg"])
+
+
+def _row(sample, arm, status="complete", wall=1.0):
+    return {"sample": sample, "arm": arm, "torso_mass_kg": 12.0, "status": status, "fell": False,
+            "steady_state_error_vx": 0.01, "wall_s": wall}
+
+
+def test_folder_refuses_other_campaign_rerun_without_resume_foreign_and_second_writer(tmp_path):
+    d = _dir(tmp_path / "out")
+    d.open(resume=False, campaign_file=None)
+    with pytest.raises(CampaignDirError, match="another campaign process"):
+        _dir(tmp_path / "out").open(resume=True, campaign_file=None)
+    d.finish()
+    d.close()
+    with pytest.raises(CampaignDirError, match="already holds this campaign.*--resume"):
+        _dir(tmp_path / "out").open(resume=False, campaign_file=None)
+    for resume in (False, True):
+        with pytest.raises(CampaignDirError, match="holds a different campaign"):
+            _dir(tmp_path / "out", {"s0000": "a", "s0001": "changed"}).open(resume=resume, campaign_file=None)
+    (tmp_path / "foreign").mkdir()
+    (tmp_path / "foreign" / "notes.txt").write_text("mine")
+    with pytest.raises(CampaignDirError, match="not empty and holds no campaign"):
+        _dir(tmp_path / "foreign").open(resume=True, campaign_file=None)
+    assert (tmp_path / "foreign" / "notes.txt").read_text() == "mine"
+
+
+def test_resume_keeps_complete_samples_drops_the_rest_and_torn_lines(tmp_path):
+    d = _dir(tmp_path)
+    d.open(resume=False, campaign_file=None)
+    d.append([_row("s0001", "adaptive"), _row("s0001", "pd_only")])
+    d.append([_row("s0000", "adaptive"), _row("s0000", "pd_only", status="failed")])
+    d.close()
+    with open(d.csv_path, "a") as fh:
+        fh.write("s0000,adaptive,12.0,compl")  # a crash in the middle of a line
+    again = _dir(tmp_path)
+    again.open(resume=True, campaign_file=None)
+    assert again.complete_samples() == {"s0001"}
+    assert [(r["sample"], r["arm"]) for r in again.rows()] == [("s0001", "adaptive"), ("s0001", "pd_only")]
+    again.append([_row("s0000", "pd_only", wall=2.0), _row("s0000", "adaptive", wall=2.0)])
+    again.finish()  # sorted by sample, then arm order
+    assert [(r["sample"], r["arm"]) for r in again.rows()] == [
+        ("s0000", "adaptive"), ("s0000", "pd_only"), ("s0001", "adaptive"), ("s0001", "pd_only")]
+    assert set(TIMING_COLUMNS) <= set(again.cols)
+
+
+def test_cli_refuses_invalid_campaign_and_foreign_folder(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text(BASE + "[factors.joint_damping_scale]\ndist = \"uniform\"\nlow = 0.5\nhigh = 20.0\n")
+    cmd = [sys.executable, "-m", "scenarios", "campaign"]
+    r = subprocess.run(cmd + [str(bad), "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "factors.joint_damping_scale = 20" in r.stderr and not (tmp_path / "o").exists()
+    (tmp_path / "taken").mkdir()
+    (tmp_path / "taken" / "x").write_text("")
+    r = subprocess.run(cmd + ["smoke", "--out", str(tmp_path / "taken")], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "holds no campaign" in r.stderr
+    r = subprocess.run(cmd + ["smoke", "--dry-run"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and len(r.stdout.splitlines()) == 5
+
+
+# --------------------------------------------------------------------------- statistics
+def test_wilson_interval_and_quantile():
+    lo, hi = analysis.wilson(0, 10)
+    assert lo == 0.0 and abs(hi - 0.2775) < 1e-3  # the textbook value for 0/10
+    lo, hi = analysis.wilson(5, 10)
+    assert abs(lo - 0.2366) < 1e-3 and abs(hi - 0.7634) < 1e-3
+    assert analysis.wilson(0, 0) is None
+    vals = [3.0, 1.0, 4.0, 1.0, 5.0]
+    for q in (0.0, 0.5, 0.9, 1.0):
+        assert analysis.quantile(vals, q) == pytest.approx(float(np.quantile(vals, q)))
+
+
+def test_arm_stats_and_paired_comparison():
+    def r(sample, arm, fell, sse, status="complete"):
+        return {"sample": sample, "arm": arm, "status": status, "fell": fell, "t_fall_s": 3.0 if fell else None,
+                "steady_state_error_vx": None if fell else sse, "steady_state_error_vy": None if fell else 0.01,
+                "convergence_time_s": 2.0 if sse is not None and sse < 0.05 else None}
+    rows = [r("a", "adaptive", False, 0.02), r("a", "pd_only", False, 0.05),
+            r("b", "adaptive", True, None), r("b", "pd_only", False, 0.04),
+            r("c", "adaptive", False, 0.03), r("c", "pd_only", True, None),
+            r("d", "adaptive", False, 0.06), r("d", "pd_only", False, 0.01),
+            r("e", "adaptive", None, None, status="failed"), r("e", "pd_only", False, 0.02)]
+    s = analysis.arm_stats(rows, "adaptive")
+    assert (s["complete"], s["failed"], s["fell"], s["walked"]) == (4, 1, 1, 3)
+    assert s["fall_rate"] == 0.25 and s["steady_state_error_vx"]["p50"] == 0.03
+    assert s["converged"] == 2
+    p = analysis.paired(rows, "adaptive", "pd_only")
+    assert p["n"] == 4 and p["only_a_fell"] == ["b"] and p["only_b_fell"] == ["c"]
+    assert p["both_walked"] == 2 and p["a_lower_vx"] == 1 and p["a_lower_vy"] == 0 and p["median_diff_vy"] == 0.0
+    assert [x[0] for x in p["not_better"]] == ["b", "d"]
+    assert [w["sample"] for w in analysis.worst(rows, "adaptive", 2)] == ["b", "d"]

@@ -1,0 +1,184 @@
+"""Random FMI call sequences, legal and illegal, against each real regulator FMU in a subprocess.
+
+An independent model of the FMI 2.0 co-simulation state machine (section 4.2.4; for FMI 3.0
+the same phases without SetupExperiment), of the FMU's variable table and of its FMU-state
+rule (a state is restored only into an instance whose fixed parameters have the values it
+was saved with) says which calls are legal.  Property: the process never dies, every legal
+call returns OK and no illegal call returns OK.
+"""
+import json
+import math
+import subprocess
+import sys
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+
+from support.native_support import DRIVERS, H
+
+SPECS = {s.name: s for s in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)}
+LIVE = {"instantiated", "initializationMode", "stepComplete", "stepFailed", "terminated"}
+FIXED_DEFAULTS = {s.name: s.default for s in PARAM_SPECS if s.variability == "fixed"}
+
+
+class FmiModel:
+    """What the FMI 2.0 standard and the model description allow, call by call."""
+
+    def __init__(self):
+        self.phase = None  # not instantiated
+        self.time = 0.0
+        self.fixed = dict(FIXED_DEFAULTS)  # current values of the fixed parameters
+        self.states = []  # (phase, time, fixed) per FMUstate index
+        self.blobs = []
+
+    def legal(self, op, *args):  # noqa: C901 - one branch per FMI function, as in the standard's table
+        p = self.phase
+        if op == "instantiate":
+            return p is None
+        if p is None:
+            return None  # not sent: no instance
+        if op == "setup":
+            return p == "instantiated" and math.isfinite(args[0])
+        if op == "enter":
+            return p == "instantiated"
+        if op == "exit":
+            return p == "initializationMode"
+        if op == "step":
+            t, h = args
+            return (p == "stepComplete" and math.isfinite(h) and h > 0
+                    and abs(t - self.time) <= 1e-9 * max(1.0, abs(self.time)))
+        if op == "set":
+            name, value = args
+            spec = SPECS[name]
+            if p not in ("instantiated", "initializationMode", "stepComplete") or spec.causality == "output":
+                return False
+            if p == "stepComplete" and spec.causality == "parameter" and spec.variability == "fixed":
+                return False
+            if isinstance(value, float) and not math.isfinite(value):
+                return False
+            return not ((spec.min is not None and value < spec.min) or (spec.max is not None and value > spec.max))
+        if op == "get":
+            return p in ("initializationMode", "stepComplete", "stepFailed", "terminated")
+        if op == "terminate":
+            return p in ("stepComplete", "stepFailed")
+        if op in ("reset", "get_state", "free"):
+            return p in LIVE
+        if op == "serialize":  # an index the driver has no FMUstate for is not sent
+            return (p in LIVE) if 0 <= args[0] < len(self.states) else None
+        if op == "set_state":
+            if not 0 <= args[0] < len(self.states):
+                return None
+            return p in LIVE and self.states[args[0]][2] == self.fixed
+        if op == "deserialize":  # index -1: garbage bytes, which must be refused
+            if args[0] >= len(self.blobs):
+                return None
+            return p in LIVE and args[0] >= 0 and self.blobs[args[0]][2] == self.fixed
+        raise ValueError(op)
+
+    def apply(self, op, *args):
+        """Update the model after a call that succeeded."""
+        if op == "instantiate":
+            self.phase, self.time, self.states, self.blobs = "instantiated", 0.0, [], []
+            self.fixed = dict(FIXED_DEFAULTS)
+        elif op == "set" and args[0] in self.fixed:
+            self.fixed[args[0]] = args[1]
+        elif op == "setup":
+            self.time = args[0]
+        elif op == "enter":
+            self.phase = "initializationMode"
+        elif op == "exit":
+            self.phase = "stepComplete"
+        elif op == "step":
+            self.time = args[0] + args[1]
+        elif op == "terminate":
+            self.phase = "terminated"
+        elif op == "reset":
+            self.phase, self.time, self.fixed = "instantiated", 0.0, dict(FIXED_DEFAULTS)
+        elif op == "get_state":
+            self.states.append((self.phase, self.time, dict(self.fixed)))
+        elif op == "set_state":
+            self.phase, self.time, _ = self.states[args[0]]
+        elif op == "serialize":
+            self.blobs.append(self.states[args[0]])
+        elif op == "deserialize":
+            self.states.append(self.blobs[args[0]])
+        elif op == "free":
+            self.phase = None
+
+
+class Fmi3Model(FmiModel):
+    """FMI 3.0 co-simulation without event mode: no SetupExperiment (the start time goes with
+    EnterInitializationMode); otherwise the same phases and rules."""
+
+    def legal(self, op, *args):
+        if op == "setup":
+            return None  # not an FMI 3.0 call: not sent
+        return super().legal(op, *args)
+
+
+MODELS = {2: FmiModel, 3: Fmi3Model}
+NAMES = sorted(SPECS)
+values = st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64), st.integers(-5, 5000),
+                   st.sampled_from([0.0, 0.25, 1e-6, 1.0, -1.0]))
+calls = st.one_of(
+    st.tuples(st.sampled_from(["enter", "exit", "terminate", "reset", "get_state", "free"])),
+    st.tuples(st.just("setup"), st.sampled_from([0.0, 0.0, 1.5, math.inf, math.nan])),
+    st.tuples(st.just("step"), st.sampled_from([0.0, H, 2 * H, 3 * H, -H]), st.sampled_from([H, 0.0, -H, 0.01])),
+    st.tuples(st.just("set"), st.sampled_from(NAMES), values),
+    st.tuples(st.just("get"), st.sampled_from(NAMES)),
+    st.tuples(st.sampled_from(["set_state", "serialize", "deserialize"]), st.integers(-1, 2)),
+)
+
+
+def _coerce(call):
+    """Values of the right FMI type for the variable (an int for Integer, a bool for Boolean)."""
+    if call[0] != "set":
+        return call
+    name, value = call[1], call[2]
+    kind = SPECS[name].type
+    if kind == "Integer":
+        return ("set", name, int(value) if isinstance(value, int) else 3)
+    if kind == "Boolean":
+        return ("set", name, bool(value == value and value))
+    return ("set", name, float(value))
+
+
+@pytest.fixture(scope="module")
+def driver(regulator_fmu):
+    """(FMI version, the driver process) on the extracted regulator FMU."""
+    proc = subprocess.Popen([sys.executable, str(DRIVERS[regulator_fmu.fmi]), regulator_fmu.dir],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, bufsize=1)
+    yield regulator_fmu.fmi, proc
+    proc.stdin.close()
+    assert proc.wait(timeout=60) == 0, proc.stderr.read()[-2000:]
+
+
+def _send(proc, call):
+    proc.stdin.write(json.dumps(list(call)) + "\n")
+    line = proc.stdout.readline()
+    while line and not line.startswith("{"):  # FMU log lines printed by fmpy's default logger
+        line = proc.stdout.readline()
+    assert line, f"the FMU process died on {call}: exit {proc.poll()}, {proc.stderr.read()[-2000:]}"
+    return json.loads(line)
+
+
+@settings(max_examples=150, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(sequence=st.lists(calls, min_size=1, max_size=25))
+def test_random_call_sequences_never_crash_and_illegal_calls_are_refused(driver, sequence):
+    fmi, proc = driver
+    model = MODELS[fmi]()
+    for call in [("instantiate",)] + [_coerce(c) for c in sequence] + [("free",)]:
+        legal = model.legal(*call)
+        if legal is None:
+            continue
+        answer = _send(proc, call)
+        if legal:
+            assert answer["status"] == 0, f"FMI {fmi}: legal call {call} answered {answer} in phase {model.phase}"
+            model.apply(*call)
+        else:
+            assert answer["status"] != 0, f"FMI {fmi}: illegal call {call} answered OK in phase {model.phase}"
+    assert proc.poll() is None

@@ -1,0 +1,1 @@
+"""What the tests share: built FMUs, FMI drivers and C hosts, reference models, paths."""
