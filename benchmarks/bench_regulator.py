@@ -17,7 +17,7 @@ k]``); if the stepper has a ``close()`` attribute it is called at the end.
   fourteen outputs (what a co-simulation master does each communication step); the FMU is
   built by ``build.py`` into a temporary folder first,
 * ``setup_native_fmu``: the same calls on the native FMI 2.0 FMU (C, ``fmu_src/native``),
-* ``measure_c_host``: the native FMU in a plain C host (``tests/native/fmi2_host.c``), the
+* ``measure_c_host``: the native FMU in a plain C host (``tests/support/native/fmi2_host.c``), the
   same set+doStep+get per step timed in C; run after the interleaved paths,
 * ``setup_nengo``: ``nengo.Simulator.step()`` of three LIFRate ensembles (2-, 2- and
   4-dimensional, n_neurons each) with the core's encoders/gains/biases, input and error
@@ -194,7 +194,7 @@ def setup_native_fmu(inputs, dt, n_neurons):
 
 def measure_c_host(inputs, dt, n_neurons, repeats: int = 5) -> float | None:
     """Median µs of one set+doStep+get of the native FMI 2.0 FMU in a plain C host
-    (tests/native/fmi2_host.c, -O2), over ``repeats`` passes of the timed inputs; None
+    (tests/support/native/fmi2_host.c, -O2), over ``repeats`` passes of the timed inputs; None
     without a C compiler."""
     import shutil
     import subprocess

@@ -6,7 +6,7 @@ pytest's ``tmp_path``/``tmp_path_factory``, and tools are found beside the runni
 interpreter (``venv_tool``), never through ``PATH``.
 
 ``AVR_TEST_FMU=/path/to/AdaptiveVelocityRegulator.fmu`` makes the FMU tests use that FMU
-instead of building one (the sanitizer run, tests/test_fmu_sanitize.py, points it at a
+instead of building one (the sanitizer run, tests/fmu/test_fmu_sanitize.py, points it at a
 guard built with AddressSanitizer); the tests parametrized over every regulator FMU
 (``regulator_fmu``) then run on that one only.
 """
@@ -110,7 +110,7 @@ RAW_HOST = SUPPORT_DIR / "fmi" / "raw_host.py"
 
 @pytest.fixture(scope="session")
 def raw_host():
-    """``raw_host(fmu_dir, case, args)``: run a case of tests/fmi/raw_host.py (direct ctypes calls
+    """``raw_host(fmu_dir, case, args)``: run a case of tests/support/fmi/raw_host.py (direct ctypes calls
     with hostile arguments) in a process of its own; the process must not die."""
     def run(fmu_dir, case, args=None, timeout=600):
         proc = subprocess.run([sys.executable, str(RAW_HOST), str(fmu_dir), case], input=json.dumps(args),

@@ -71,7 +71,7 @@ CROSS_CHECK_DIR = "cross-check"
 CROSS_CHECK_PLATFORMS = {"AdaptiveVelocityRegulatorNative": ("linux64", "win64")}
 #: The band an importer's result is compared with (``RelTol`` of ``_ref.opt``).  The FMUs are
 #: fixed-step and deterministic and every input value is given at every communication point,
-#: so FMPy on linux64 reproduces the reference bit for bit (tests/test_cross_check.py); the band
+#: so FMPy on linux64 reproduces the reference bit for bit (tests/fmu/test_cross_check.py); the band
 #: leaves room for another platform's libm (exp, log1p) differing in the last bit.
 REL_TOL = 1e-6
 REPO_ROOT = Path(__file__).resolve().parents[2]

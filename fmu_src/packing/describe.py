@@ -17,7 +17,7 @@ UNITS = {  # name -> SI base-unit exponents
 DEFAULT_EXPERIMENT = {"startTime": "0", "stopTime": "10", "stepSize": "0.005"}
 #: The CassiePlant outputs its initialization computes (the robot placed on the terrain in the
 #: home pose), with the knowns each depends on; every other plant output keeps its start value
-#: until the first doStep.  tests/test_fmu_model_structure.py measures both on the built FMU.
+#: until the first doStep.  tests/fmu/test_fmu_model_structure.py measures both on the built FMU.
 PLANT_INITIAL_UNKNOWNS = {
     "pelvis_z": (),  # the home pose's height, whichever model and terrain
     # The contact forces carrying the robot: its model and mass distribution, whether the floor is

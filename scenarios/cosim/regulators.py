@@ -9,7 +9,7 @@
 
 The pythonfmu FMU and the core in-process give bit-identical trajectories for the same
 scenario and seed; the native FMUs (C) agree with them to rounding (see
-tests/test_native_master.py).
+tests/support/native/test_native_master.py).
 """
 from __future__ import annotations
 

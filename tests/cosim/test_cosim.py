@@ -1,7 +1,7 @@
 """Closed-loop co-simulation through the REAL built FMU (fmpy) and the in-process core.
 
 Short runs by default (a few simulated seconds each); the whole paper suite is behind
-``@pytest.mark.long`` (``pytest -m slow tests/test_cosim.py``).
+``@pytest.mark.long`` (``pytest -m slow tests/cosim/test_cosim.py``).
 """
 from __future__ import annotations
 

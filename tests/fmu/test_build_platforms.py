@@ -5,7 +5,7 @@ runs as a user runs it, in a process whose PATH holds every program of /usr/bin 
 cross toolchains: it must build every FMU with the host's binaries, name each skipped
 platform and the Debian package that adds it, list only the platforms built in
 ``fmus.json`` and the FMUs' documentation, and exit 0.  (With the cross compilers installed,
-as in CI, every platform is built and checked: tests/test_native_fmu.py, test_native_aarch64.py.)
+as in CI, every platform is built and checked: tests/support/native/test_native_fmu.py, test_native_aarch64.py.)
 """
 import json
 import os

@@ -1,5 +1,5 @@
 """The CommandSource FMU (fmu_src/command_source/): FMI 2.0 and FMI 3.0 from one C source,
-built as build.py builds them, driven by fmpy in a subprocess (tests/command_source_driver.py).
+built as build.py builds them, driven by fmpy in a subprocess (tests/support/command_source_driver.py).
 
 * Both versions play a schedule the same way: at a communication point t the outputs hold
   the last row with time <= t, whether t is k * h or computed from integer nanoseconds.

@@ -1,4 +1,4 @@
-"""A plain C host (tests/native/fmi2_host.c, no Python of its own) runs each FMI 2.0
+"""A plain C host (tests/support/native/fmi2_host.c, no Python of its own) runs each FMI 2.0
 regulator FMU, as a non-Python importer would, and matches the numpy core.
 
 * The native FMU needs nothing: the host runs with an empty environment.
@@ -24,7 +24,7 @@ PARAMS = {"n_neurons": 300, "seed": 5, "learning_rate": 1e-4}
 #: %.17g round-trips a double exactly; the native core differs from numpy by summation order
 #: (~1e-16): 1e-12 is far above that and far below any real bug.
 TOL = dict(rtol=1e-12, atol=1e-12)
-#: fmi2Instantiate returned NULL (tests/native/fmi2_host.c's exit status)
+#: fmi2Instantiate returned NULL (tests/support/native/fmi2_host.c's exit status)
 HOST_INSTANTIATE_FAILED = 4
 
 pytestmark = pytest.mark.skipif(not sys.platform.startswith("linux"), reason="a Linux C host")

@@ -18,16 +18,16 @@ from plant.model import menagerie_root
 from support.paths import REPO_ROOT
 
 SUBSET = [
-    "tests/test_fmu_compliance.py::test_fmpy_validation_finds_no_problems",
-    "tests/test_fmu_compliance.py::test_fmutool_check_passes",
-    "tests/test_fmu_compliance.py::test_legal_sequence_all_ok",
-    "tests/test_fmu_compliance.py::test_state_round_trips_are_bit_exact",
-    "tests/test_fmu_compliance.py::test_two_different_fmus_in_one_process",
-    "tests/test_fmu_compliance.py::test_wrong_guid_is_refused",
-    "tests/test_fmu_importers.py",
-    "tests/test_fmu_c_host.py",
-    "tests/test_fmu_host_inputs.py::test_set_debug_logging_refuses_null_non_utf8_and_unknown_categories",
-    "tests/test_fmu_state_integrity.py::test_after_a_fatal_error_nothing_reaches_pythonfmu_and_free_is_safe",
+    "tests/fmu/test_fmu_compliance.py::test_fmpy_validation_finds_no_problems",
+    "tests/fmu/test_fmu_compliance.py::test_fmutool_check_passes",
+    "tests/fmu/test_fmu_compliance.py::test_legal_sequence_all_ok",
+    "tests/fmu/test_fmu_compliance.py::test_state_round_trips_are_bit_exact",
+    "tests/fmu/test_fmu_compliance.py::test_two_different_fmus_in_one_process",
+    "tests/fmu/test_fmu_compliance.py::test_wrong_guid_is_refused",
+    "tests/fmu/test_fmu_importers.py",
+    "tests/fmu/test_fmu_c_host.py",
+    "tests/fmu/test_fmu_host_inputs.py::test_set_debug_logging_refuses_null_non_utf8_and_unknown_categories",
+    "tests/fmu/test_fmu_state_integrity.py::test_after_a_fatal_error_nothing_reaches_pythonfmu_and_free_is_safe",
 ]
 
 

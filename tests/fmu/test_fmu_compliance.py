@@ -2,7 +2,7 @@
 the pythonfmu FMU (FMI 2.0) and the native FMUs (FMI 2.0 and FMI 3.0), each rule written
 once and run on each FMU (``regulator_fmu``), plus the checks only one implementation needs.
 
-Calls that could crash run in a subprocess (tests/fmi/driver.py, tests/native/driver3.py),
+Calls that could crash run in a subprocess (tests/support/fmi/driver.py, tests/support/native/driver3.py),
 so a crash shows as a failed test, not a dead pytest.  FMUs are extracted under tmp_path,
 tools are found beside the running interpreter (``venv_tool``).
 """
@@ -129,7 +129,7 @@ def test_native_fmu_ships_binaries_and_sources(native_fmus, fmi):
 
 def test_module_names_are_unique_to_this_fmu(built_fmu):
     """pythonfmu issue #228: two FMUs whose slave modules share a name collide in one process.  The
-    entry module's name carries the hash of the code (tests/test_fmu_coexistence.py loads builds)."""
+    entry module's name carries the hash of the code (tests/fmu/test_fmu_coexistence.py loads builds)."""
     with zipfile.ZipFile(built_fmu) as z:
         assert re.fullmatch(r"avr_slave_[0-9a-f]{16}", z.read("resources/slavemodule.txt").decode())
 

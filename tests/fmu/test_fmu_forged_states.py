@@ -12,7 +12,7 @@ A restored state is checked for meaning, not only for integrity, on all four FMU
 * the regulator's counters (n_calls, stride_calls, last_step_index, time_s) within what a
   run can reach, in the numpy core's blob and in the native blob (there a counter at
   INT64_MAX made the next doStep a signed overflow; the sanitizer run replays these with
-  UBSan: tests/native/sanitize_run.py takes tests/test_native_state.py's corruptions).
+  UBSan: tests/support/native/sanitize_run.py takes tests/support/native/test_native_state.py's corruptions).
 
 Each answers fmi2Error naming the field (never OK then Fatal); the instance is unchanged
 and goes on.

@@ -2,7 +2,7 @@
 categories and strings, including NULL and non-UTF-8 bytes.
 
 Every call goes through ctypes to the real built guard library in a process of its own
-(tests/fmi/raw_host.py), so a crash is a failed test.  The legal URI forms of FMI 2.0
+(tests/support/fmi/raw_host.py), so a crash is a failed test.  The legal URI forms of FMI 2.0
 (file:///p, file:/p, file://localhost/p, percent-escapes) must instantiate a working
 FMU; everything else must give NULL with a logged reason.
 """

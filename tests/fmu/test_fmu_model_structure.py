@@ -1,6 +1,6 @@
 """Every FMU's ModelStructure says what the FMU does, measured on the built FMU through fmpy.
 
-For each FMU build.py lists in fmus.json (tests/test_native_fmu.py pins that list: the
+For each FMU build.py lists in fmus.json (tests/support/native/test_native_fmu.py pins that list: the
 pythonfmu regulator, the native FMI 2.0 and FMI 3.0 regulators, the CassiePlant FMU):
 
 * Outputs (FMI 2.0 ``<Outputs><Unknown dependencies>``, FMI 3.0 ``<Output dependencies>``):

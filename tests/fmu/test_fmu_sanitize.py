@@ -1,6 +1,6 @@
 """The FMI tests under AddressSanitizer + UndefinedBehaviorSanitizer, and the fatal path under valgrind.
 
-    pytest -m sanitize tests/test_fmu_sanitize.py -s     (a few minutes on 2 cores)
+    pytest -m sanitize tests/fmu/test_fmu_sanitize.py -s     (a few minutes on 2 cores)
 
 ``build.py --sanitize`` compiles the guard with ``-fsanitize=address,undefined
 -fno-sanitize-recover=all``; the FMU tests (state machine, state integrity with the
@@ -23,7 +23,7 @@ FMU in a pytest subprocess.  How the Python host is set up, and why:
 * ``log_path``: each report goes to a file in a folder the test counts: a finding is a
   report file, and the run must leave none.
 
-Valgrind (memcheck) then runs the fatal-error cycles (tests/fmi/raw_host.py
+Valgrind (memcheck) then runs the fatal-error cycles (tests/support/fmi/raw_host.py
 ``fatal_cycles``) against the normal build: pythonfmu's double free after a Python
 exception would show as "Invalid read/free" there.
 """
@@ -39,8 +39,8 @@ from support.paths import REPO_ROOT, SUPPORT_DIR
 pytestmark = pytest.mark.sanitize
 
 UNDER_SANITIZERS = [
-    "tests/test_fmu_compliance.py", "tests/test_fmu_call_sequences.py", "tests/test_fmu_state_integrity.py",
-    "tests/test_fmu_host_inputs.py", "tests/test_fmu_c_host.py", "tests/test_fmu_forged_states.py",
+    "tests/fmu/test_fmu_compliance.py", "tests/fmu/test_fmu_call_sequences.py", "tests/fmu/test_fmu_state_integrity.py",
+    "tests/fmu/test_fmu_host_inputs.py", "tests/fmu/test_fmu_c_host.py", "tests/fmu/test_fmu_forged_states.py",
 ]
 
 
@@ -70,7 +70,7 @@ def test_fmi_tests_and_fuzz_pass_under_asan_and_ubsan_with_zero_findings(asan_fm
                ASAN_OPTIONS=f"detect_leaks=0:halt_on_error=1:log_path={reports}/asan",
                UBSAN_OPTIONS=f"print_stacktrace=1:halt_on_error=1:log_path={reports}/ubsan")
     # the sha256 test builds a normal FMU to compare with: not meaningful against this one; the native
-    # FMUs' own sanitizer run is tests/test_native_hosts.py
+    # FMUs' own sanitizer run is tests/support/native/test_native_hosts.py
     cmd = [sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider", f"--basetemp={tmp_path / 'bt'}",
            "-k", "not two_builds_have_the_same_sha256 and not native-fmi", *UNDER_SANITIZERS]
     proc = subprocess.run(cmd, cwd=REPO_ROOT, env=env, capture_output=True, text=True, timeout=3600)

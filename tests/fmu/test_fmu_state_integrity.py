@@ -1,7 +1,7 @@
 """FMU states the FMU must never take, and what happens after a fatal error.
 
 Everything runs through ctypes against the real built guard library, in a process of its
-own per case (tests/fmi/raw_host.py), so a crash is a failed test.  A refused state must
+own per case (tests/support/fmi/raw_host.py), so a crash is a failed test.  A refused state must
 answer fmi2Error naming why (never fmi2OK, never fmi2Fatal) and leave the instance
 unchanged and usable.
 """

@@ -1,6 +1,6 @@
 """The CassiePlant FMU on its own, exactly as build.py builds it.
 
-Calls that could crash run in a subprocess (tests/fmi/driver.py, the regulator's driver:
+Calls that could crash run in a subprocess (tests/support/fmi/driver.py, the regulator's driver:
 it reports each call's FMI status), so a crash fails a test instead of killing pytest.
 """
 import ast

@@ -1,6 +1,6 @@
 """Every XML document ``python build.py`` writes, validated against its official schema
 (FMI 2.0, FMI 3.0, SSP 1.0, OSP, fmi-ls-ref: where each schema comes from is in
-tests/xml_schemas.py).
+tests/support/xml_schemas.py).
 
 The documents are found by walking the build's output folder (with the OSP folder and the
 cross-check tree), into the FMU and SSP archives (and the FMUs inside the SSP): a document
@@ -8,7 +8,7 @@ of a new kind, or one missing, fails ``test_the_build_writes_exactly_these_xml_d
 until it is listed here with its schema.  Each schema is shown to reject a broken copy of the document it checks.
 
 Beyond the schemas (which cannot compare attributes): every FMU's start values lie within
-their variables' ``min``/``max``.  The SSP's own rules are tests/test_ssp_rules.py's.
+their variables' ``min``/``max``.  The SSP's own rules are tests/ssp/test_ssp_rules.py's.
 """
 from __future__ import annotations
 

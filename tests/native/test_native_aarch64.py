@@ -23,7 +23,7 @@ X86_64_LIBRARY = "binaries/x86_64-linux/AdaptiveVelocityRegulatorNative.so"
 
 
 def test_fmi3_fmu_carries_an_aarch64_linux_library(native_fmus, tmp_path):
-    require(AARCH64_CC)  # build.py skips the platform without it (tests/test_build_platforms.py)
+    require(AARCH64_CC)  # build.py skips the platform without it (tests/fmu/test_build_platforms.py)
     with zipfile.ZipFile(native_fmus[3]) as z:
         assert AARCH64_LIBRARY in z.namelist()
         library = tmp_path / "aarch64.so"

@@ -8,7 +8,7 @@
   FMU3Slave): every output is the same double, bit for bit (the issue asked for 1e-9).
 * The fixed elementary functions agree with the C library's to a few ulp.
 * delta_limit_rad binds in C as in the core.  (The importers run every regulator FMU:
-  tests/test_fmu_importers.py.)
+  tests/fmu/test_fmu_importers.py.)
 """
 import ctypes
 import math

@@ -1,7 +1,7 @@
 """What only the native FMUs promise: no Python in any binary, and build.py's fmus.json.
 
 The compliance rules every regulator FMU keeps (validation, state machine, refusals, state
-round trips, instances, reproducible build) are in tests/test_fmu_compliance.py, run on the
+round trips, instances, reproducible build) are in tests/fmu/test_fmu_compliance.py, run on the
 pythonfmu FMU and on both native FMUs.
 """
 import hashlib

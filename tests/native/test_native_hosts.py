@@ -1,7 +1,7 @@
 """The native FMUs outside Python: a plain C host, the shipped sources, Windows under Wine,
 and the FMU built with AddressSanitizer + UndefinedBehaviorSanitizer.
 
-* (tests/test_fmu_c_host.py: tests/native/fmi2_host.c loads the FMI 2.0 FMU's linux64
+* (tests/fmu/test_fmu_c_host.py: tests/support/native/fmi2_host.c loads the FMI 2.0 FMU's linux64
   library with an empty environment and matches the numpy core.)
 * The FMU's ``sources/`` compile with ``cc`` alone in a clean folder; the library built
   from them gives the same outputs as the shipped one (FMI 2.0 and 3.0).
@@ -60,7 +60,7 @@ def test_sources_in_the_fmu_compile_with_cc_alone_and_match(native_fmus, sequenc
     if fmi == 3:  # the build description names the same files
         text = (clean / "buildDescription.xml").read_text()
         assert all(f'name="{name}"' in text for name in sources)
-    # no floating-point option: the sources state their contract (tests/test_native_same_bits.py)
+    # no floating-point option: the sources state their contract (tests/support/native/test_native_same_bits.py)
     lib = compile_c(require(CC), sources, clean / "AdaptiveVelocityRegulatorNative.so", "-std=c99", "-O2",
                     "-shared", "-fPIC", "-I.", "-lm", cwd=clean)
     shipped = AnySlave(native_fmus[fmi], unzip=str(unzipped)).init(**PARAMS)

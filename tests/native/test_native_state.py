@@ -1,7 +1,7 @@
 """Native FMUs: their serialized FMU state refuses every corruption of its own format, and
 FMI 3.0's independent variable.  (Round trips, instances, reset, fixed parameters and the
-random call sequences run on every regulator FMU: tests/test_fmu_compliance.py and
-tests/test_fmu_call_sequences.py; the pythonfmu FMU's blob format: tests/test_fmu_state_integrity.py.)
+random call sequences run on every regulator FMU: tests/fmu/test_fmu_compliance.py and
+tests/fmu/test_fmu_call_sequences.py; the pythonfmu FMU's blob format: tests/fmu/test_fmu_state_integrity.py.)
 """
 import math
 import struct
@@ -46,7 +46,7 @@ def _corruptions(blob: bytes, other_blob: bytes):
     yield "stride boundaries beyond 4, valid checksum", patched(144, "<q", 5)
     yield "negative stride calls, valid checksum", patched(152, "<q", -1)
     yield "NaN stride mean, valid checksum", patched(184, "<d", math.nan)
-    # counters no run reaches: the next doStep would overflow them (UBSan: tests/native/sanitize_run.py)
+    # counters no run reaches: the next doStep would overflow them (UBSan: tests/support/native/sanitize_run.py)
     yield "n_calls = INT64_MAX, valid checksum", patched(96, "<q", 2**63 - 1)
     yield "stride_calls = INT64_MAX, valid checksum", patched(152, "<q", 2**63 - 1)
 

@@ -4,7 +4,7 @@ Closed loop of the plant, the nominal controller and the regulator core in-proce
 called every 10 ms like the co-simulation (``scenarios.gaits.make_gaits.COMM_STEPS``); every run
 starts from rest.  The default run has two short smoke walks and the library's own
 verification; the staircase, the lateral leg, the circle and the 20 kg torso runs are
-``@pytest.mark.long`` (``pytest -m long tests/test_envelope.py``, ~4 min on one core).
+``@pytest.mark.long`` (``pytest -m long tests/plant/test_envelope.py``, ~4 min on one core).
 """
 from __future__ import annotations
 

@@ -6,7 +6,7 @@ with adaptation off (the paper-form PD, default gains:
 co-simulation's communication step.  Every run starts from rest in the ``home``
 pose (stand, weight shift, walk; no velocity kick).  Default runs are short (~10 s wall in
 all); the 60 s matrix, perturbations and pushes are ``@pytest.mark.long``: run
-them with ``pytest -m long tests/test_walking.py`` (not ``slow``: nengo's pytest
+them with ``pytest -m long tests/plant/test_walking.py`` (not ``slow``: nengo's pytest
 plugin claims that marker and skips it unless ``--slow`` is given);
 ~5 min on one core.
 """

@@ -32,7 +32,7 @@ FMI2_REGULATOR_FMUS = REGULATOR_FMUS[:2]
 fmi2_only = pytest.mark.parametrize("regulator_fmu", FMI2_REGULATOR_FMUS, indirect=True)
 #: The subprocess drivers (one FMU process per test: a crash fails the test, not pytest), by FMI version.
 DRIVERS = {2: Path(__file__).parent / "fmi" / "driver.py", 3: NATIVE_DIR / "driver3.py"}
-#: The plain C FMI 2.0 host (tests/native/fmi2_host.c) and the FMI 2.0 headers it is compiled with.
+#: The plain C FMI 2.0 host (tests/support/native/fmi2_host.c) and the FMI 2.0 headers it is compiled with.
 C_HOST = NATIVE_DIR / "fmi2_host.c"
 FMI2_INCLUDE = REPO_ROOT / "fmu_src" / "native" / "third_party" / "fmi2"
 #: System compilers and Wine are Debian packages (.ci/run installs them), not Python tools.
@@ -46,7 +46,7 @@ MINGW_OBJDUMP = Path("/usr/bin/x86_64-w64-mingw32-objdump")
 AARCH64_CC = Path("/usr/bin/aarch64-linux-gnu-gcc")
 AARCH64_SYSROOT = Path("/usr/aarch64-linux-gnu")
 QEMU_AARCH64 = Path("/usr/bin/qemu-aarch64")
-#: The plain C FMI 3.0 host (tests/native/fmi3_host.c, the same scripts as fmi2_host.c) and its headers.
+#: The plain C FMI 3.0 host (tests/support/native/fmi3_host.c, the same scripts as fmi2_host.c) and its headers.
 C_HOST3 = NATIVE_DIR / "fmi3_host.c"
 FMI3_INCLUDE = FMI2_INCLUDE.parent / "fmi3"
 
@@ -187,7 +187,7 @@ def fmutool() -> Path:
 
 
 def c_host_script(fmu, params, sequence) -> str:
-    """The script tests/native/fmi2_host.c runs: ``params``, then ``sequence`` (dicts of inputs)."""
+    """The script tests/support/native/fmi2_host.c runs: ``params``, then ``sequence`` (dicts of inputs)."""
     md = read_model_description(str(fmu))
     vars_ = {v.name: v for v in md.modelVariables}
     lines = [f"P {vars_[k].valueReference} {vars_[k].type[0]} {float(v)!r}" for k, v in params.items()]
@@ -198,7 +198,7 @@ def c_host_script(fmu, params, sequence) -> str:
 
 
 def c_host_outputs(stdout: str) -> np.ndarray:
-    """The outputs tests/native/fmi2_host.c printed (rows: steps)."""
+    """The outputs tests/support/native/fmi2_host.c printed (rows: steps)."""
     return np.array([[float(x) for x in line.split()] for line in stdout.splitlines()])
 
 

@@ -1,5 +1,5 @@
 """The regulator's three PES networks as a nengo 4.1 model: the reference that
-``tests/test_nengo_crosscheck.py`` compares the core against and that
+``tests/core/test_nengo_crosscheck.py`` compares the core against and that
 ``benchmarks/bench_regulator.py`` times.  Test/benchmark code only (nengo is a test
 dependency; ``fmu_src`` stays numpy-only).
 

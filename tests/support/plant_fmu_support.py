@@ -1,4 +1,4 @@
-"""Shared by tests/test_plant_fmu.py and tests/test_ssp.py: the CassiePlant FMU and the
+"""Shared by tests/fmu/test_plant_fmu.py and tests/ssp/test_ssp.py: the CassiePlant FMU and the
 CassieAVR system exactly as build.py builds them, built once per session into pytest's
 temporary folder, and a small fmpy helper that reports statuses instead of raising."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Shared by tests/test_fmu_coexistence.py and tests/test_fmu_memory.py: builds of the two pythonfmu
+"""Shared by tests/fmu/test_fmu_coexistence.py and tests/fmu/test_fmu_memory.py: builds of the two pythonfmu
 FMUs from edited copies of the sources (build.py's own functions, run on the copy), and a host
 process that calls fmpy on given .fmu files with its own empty TMPDIR."""
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""tests/fmi/driver.py for FMI 3.0 FMUs: the same call vocabulary and JSON protocol.
+"""tests/support/fmi/driver.py for FMI 3.0 FMUs: the same call vocabulary and JSON protocol.
 
     python driver3.py FMU_PATH            # JSON lines on stdin -> JSON lines on stdout
     python driver3.py FMU_PATH CALLS_JSON # one sequence, prints one JSON list
@@ -13,7 +13,7 @@ from pathlib import Path
 from fmpy.fmi3 import FMU3Slave
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "fmi"))
-from driver import Driver, main  # noqa: E402  (tests/fmi/driver.py)
+from driver import Driver, main  # noqa: E402  (tests/support/fmi/driver.py)
 
 #: The FMU state methods the FMI 2.0 driver calls, spelled as FMI 3.0 spells them.
 FMU_STATE_NAMES = {"getFMUstate": "getFMUState", "setFMUstate": "setFMUState",

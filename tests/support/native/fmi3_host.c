@@ -4,7 +4,7 @@
  *
  *   fmi3_host LIBRARY INSTANTIATION_TOKEN SCRIPT
  *
- * SCRIPT has the lines of tests/native/fmi2_host.c's scripts:
+ * SCRIPT has the lines of tests/support/native/fmi2_host.c's scripts:
  *   P vr F|R|I|B value    set a parameter before initialization (Float64, Int32, Boolean)
  *   I vr1 .. vr8 vr9      value references of the 8 Float64 inputs and the Int32 step_index
  *   O n vr1 .. vrn        value references of the Float64 outputs to print

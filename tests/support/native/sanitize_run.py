@@ -1,5 +1,5 @@
-"""In-process work for the sanitizer test (tests/test_native_hosts.py): state round trips,
-every corrupted blob of tests/test_native_state.py, and 20 instances, on the FMU given.
+"""In-process work for the sanitizer test (tests/support/native/test_native_hosts.py): state round trips,
+every corrupted blob of tests/support/native/test_native_state.py, and 20 instances, on the FMU given.
 
     python sanitize_run.py FMU OTHER_FMU     (exit 0 when every check held)
 """
