@@ -119,8 +119,7 @@ def setup_pd_only(inputs, dt, n_neurons):
 def setup_nengo(inputs, dt, n_neurons):
     import nengo  # test/benchmark dependency only
 
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-    from nengo_reference import build_reference  # the model the cross-check test uses
+    from fmu_src.core.reference.nengo_model import build_reference  # the model the cross-check test uses
 
     model, _ = build_reference(_params(n_neurons), inputs, dt)
     sim = nengo.Simulator(model, dt=dt, progress_bar=False, optimize=True)
@@ -218,7 +217,7 @@ def measure_c_host(inputs, dt, n_neurons, repeats: int = 5) -> float | None:
         lib.write_bytes(zipfile.ZipFile(fmu).read("binaries/linux64/AdaptiveVelocityRegulatorNative.so"))
         host = tmp / "fmi2_host"
         subprocess.run([cc, "-std=c99", "-O2", f"-I{root / 'fmu_src' / 'native' / 'third_party' / 'fmi2'}",
-                        str(root / "tests" / "native" / "fmi2_host.c"), "-o", str(host), "-ldl"], check=True)
+                        str(root / "tests" / "support" / "native" / "fmi2_host.c"), "-o", str(host), "-ldl"], check=True)
         lines = [f"P {vr['n_neurons']} I {n_neurons}",
                  "I " + " ".join(str(vr[s.name]) for s in INPUT_SPECS),
                  f"O {len(OUTPUT_SPECS)} " + " ".join(str(vr[s.name]) for s in OUTPUT_SPECS)]

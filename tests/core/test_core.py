@@ -24,7 +24,7 @@ from fmu_src.core.avr_regulator import RegulatorState, initial_state, step
 from fmu_src.core.avr_network import build_networks, lif_gain_bias
 from fmu_src.core.avr_statebytes import state_from_bytes, state_to_bytes
 from fmu_src.core.avr_errors import InputError, ParameterError, StateError
-from support.reference_regulator import network_inputs, neuron_rates
+from fmu_src.core.reference.rates import network_inputs, neuron_rates
 from fmu_src.core.avr_network import TAU_RC, TAU_REF
 from fmu_src.core.avr_params import network_key
 from fmu_src.core.avr_regulator import MAX_CALLS

@@ -33,8 +33,8 @@ nengo = pytest.importorskip("nengo")
 from fmu_src.core.avr_core import Regulator
 from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams
 from fmu_src.core.avr_network import build_networks
-from support.nengo_reference import build_reference  # noqa: E402
-from support.reference_regulator import neuron_rates  # noqa: E402
+from fmu_src.core.reference.nengo_model import build_reference  # noqa: E402
+from fmu_src.core.reference.rates import neuron_rates  # noqa: E402
 
 RTOL, ATOL = 1e-9, 1e-10
 

@@ -1,4 +1,4 @@
-"""The slow, operation-by-operation reference path of the regulator's networks (tests only).
+"""The slow, operation-by-operation reference path of the regulator's networks (tests only; never inside an FMU).
 
 :func:`neuron_rates` evaluates one network's LIFRate rates in Hz exactly as nengo writes
 them, ``1 / (tau_ref + tau_rc log1p(1 / (J - 1)))`` per network, where the core

@@ -1,7 +1,7 @@
 """The regulator's three PES networks as a nengo 4.1 model: the reference that
 ``tests/core/test_nengo_crosscheck.py`` compares the core against and that
 ``benchmarks/bench_regulator.py`` times.  Test/benchmark code only (nengo is a test
-dependency; ``fmu_src`` stays numpy-only).
+dependency; no FMU carries this module).
 
 Each network is an ``Ensemble`` with the core's *explicit* encoders, gains and biases
 (``normalize_encoders=False``: they are unit already, re-normalising moves ulps) and
@@ -14,7 +14,7 @@ import nengo
 import numpy as np
 
 from fmu_src.core.avr_network import build_networks
-from support.reference_regulator import network_inputs
+from fmu_src.core.reference.rates import network_inputs
 
 
 def build_reference(params, inputs, dt):
