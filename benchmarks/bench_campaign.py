@@ -51,8 +51,8 @@ sys.path.insert(0, str(REPO_ROOT))
 
 SMOKE = REPO_ROOT / "scenarios" / "campaigns" / "smoke.toml"
 #: (file, function) under cProfile -> the part of a task it measures
-PARTS = {("scenarios/cosim/plantio.py", "check_plant"): "model check before the run, a compile (overhead)",
-         ("scenarios/cosim/plantio.py", "load_plant_model"): "plant model compilation (overhead)",
+PARTS = {("scenarios/lang/plantio.py", "check_plant"): "model check before the run, a compile (overhead)",
+         ("scenarios/lang/plantio.py", "load_plant_model"): "plant model compilation (overhead)",
          ("scenarios/results/plots.py", "write_plots"): "plots, matplotlib (overhead)",
          ("scenarios/results/output.py", "write_timeseries"): "time series CSV (overhead)",
          ("scenarios/cosim/master.py", "run_arm"): "arms: co-simulation incl. FMU start (work)",

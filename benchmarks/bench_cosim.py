@@ -94,7 +94,7 @@ def bare_mj_step(seconds: float, model=None) -> dict[str, float]:
 
 def closed_loop_all(scenario: Scenario, makers: dict[str, Any], repeat: int) -> dict[str, dict[str, float]]:
     """Best of ``repeat`` runs per regulator path, the paths interleaved (fair under load)."""
-    from scenarios.cosim.plantio import load_plant_model
+    from scenarios.lang.plantio import load_plant_model
 
     model, summary = load_plant_model(scenario)
     best: dict[str, dict[str, float]] = {}
@@ -251,7 +251,7 @@ def system_loop(scenario: Scenario, fmu: Path, plant_fmu: Path, ssp: Path, repea
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
 
     from scenarios.cosim.plant_fmu import plant_factory
-    from scenarios.cosim.plantio import load_plant_model
+    from scenarios.lang.plantio import load_plant_model
 
     log_output_level(CosimLogLevel.ERROR)
     model, summary = load_plant_model(scenario)

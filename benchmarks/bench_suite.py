@@ -48,7 +48,7 @@ sys.path.insert(0, str(REPO_ROOT))
 
 import bench_cosim  # noqa: E402
 from scenarios.lang import spec  # noqa: E402
-from scenarios.cosim.plantio import load_plant_model  # noqa: E402
+from scenarios.lang.plantio import load_plant_model  # noqa: E402
 from scenarios.cosim.regulators import FmuRegulator
 from scenarios.lang.scenario import Scenario
 

@@ -110,7 +110,7 @@ def _run_targets(args) -> tuple[list, list[str]]:
 def _run_problems(args, scenarios: list, mode: str) -> list[str]:
     """Everything ``run`` would fail on before simulating, beyond the scenarios themselves."""
     from scenarios.results import store
-    from scenarios.cosim.plantio import plant_fmu_problems
+    from scenarios.lang.plantio import plant_fmu_problems
 
     problems = []
     if args.jobs < 1:

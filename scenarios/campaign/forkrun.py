@@ -36,7 +36,7 @@ from scenarios.campaign.task import die_with_parent
 #: What the server imports before its first fork (what a run imports, matplotlib aside).
 PRELOAD = ("numpy", "mujoco", "fmpy", "fmpy.fmi2", "fmpy.fmi3", "tqdm", "plant.model", "plant.sim",
            "scenarios.cli", "scenarios.run.run_session", "scenarios.run.runner", "scenarios.cosim.master", "scenarios.results.output",
-           "scenarios.results.store", "scenarios.lang.spec", "scenarios.cosim.plantio", "scenarios.cosim.regulators")
+           "scenarios.results.store", "scenarios.lang.spec", "scenarios.lang.plantio", "scenarios.cosim.regulators")
 SERVER_START_S = 120.0  # a server must be ready within this time
 
 
@@ -89,7 +89,7 @@ def serve(warm_models: list[str]) -> int:
 
     for name in PRELOAD:
         importlib.import_module(name)
-    from scenarios.cosim import plantio
+    from scenarios.lang import plantio
 
     for model in warm_models:  # the run's check compiles the base model: once here, not in every run
         try:

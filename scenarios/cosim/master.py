@@ -165,7 +165,7 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     """
     from plant.sim import CassieWalker
 
-    from scenarios.cosim.plantio import load_plant_model
+    from scenarios.lang.plantio import load_plant_model
 
     if exchange not in EXCHANGES:
         raise ValueError(f"exchange = {exchange!r}: must be one of {', '.join(EXCHANGES)}")
@@ -280,7 +280,7 @@ def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | 
                  plant: Callable[[Scenario, Any], Any] | None = None,
                  exchange: str = "gauss-seidel") -> list[ArmResult]:
     """Every arm of ``scenario`` (or those named in ``arms``), each on a fresh plant and regulator."""
-    from scenarios.cosim.plantio import load_plant_model
+    from scenarios.lang.plantio import load_plant_model
 
     model, summary = load_plant_model(scenario)
     results = []

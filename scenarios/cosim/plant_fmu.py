@@ -30,7 +30,7 @@ REGULATOR_NAMES = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step
 
 def fmu_parameters(scenario, nominal_torso_mass_kg: float | None = None) -> dict:
     """The CassiePlant parameters of ``scenario`` (its model and perturbation)."""
-    from scenarios.cosim.plantio import build_perturbation
+    from scenarios.lang.plantio import build_perturbation
 
     if scenario.model not in MODEL_FILES:
         raise CosimError(f"model = {scenario.model!r}: the CassiePlant FMU holds {', '.join(MODEL_FILES)} only "

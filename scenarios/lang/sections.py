@@ -5,7 +5,7 @@ perturbation and terrain, regulator overrides and arms, claim), records every pr
 it finds and returns what it could read. Rules live where they belong: regulator
 parameter names, types and ranges in the regulator core
 (:func:`fmu_src.core.avr_core.params_from_overrides`); perturbation and terrain ranges in
-the plant (``Perturbation.problems``, via :mod:`scenarios.cosim.plantio`). This module keeps
+the plant (``Perturbation.problems``, via :mod:`scenarios.lang.plantio`). This module keeps
 only what the scenario alone knows: the time grid, the schedule's order, which keys go
 together, arm names and claim checks.
 """
@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any, Mapping
 
 from fmu_src.core.avr_errors import ParameterError
-from scenarios.cosim import plantio
+from scenarios.lang import plantio
 from scenarios.lang.fields import (Problems, did_you_mean, integer, name, number, on_grid, string, table,
                               table_list, unknown_keys, vec3)
 from scenarios.lang.formatting import is_number, show
@@ -196,7 +196,7 @@ def pushes(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> tuple[Push, .
 def perturbation(doc: Mapping[str, Any], probs: Problems) -> dict[str, Any]:
     """Torso mass (absolute or added), COM offset, joint damping and terrain; their ranges
     are the plant's (checked here on the plant's nominal pelvis mass, and again on the
-    model's own by :func:`scenarios.cosim.plantio.check_plant`)."""
+    model's own by :func:`scenarios.lang.plantio.check_plant`)."""
     out = {
         "torso_mass_kg": number(doc, "torso_mass_kg", "torso_mass_kg", probs),
         "torso_added_mass_kg": number(doc, "torso_added_mass_kg", "torso_added_mass_kg", probs),

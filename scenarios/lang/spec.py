@@ -80,7 +80,7 @@ import dataclasses
 from pathlib import Path
 from typing import Any, Mapping
 
-from scenarios.cosim import plantio
+from scenarios.lang import plantio
 from scenarios.lang import sections
 from scenarios.errors import ScenarioError
 from scenarios.lang.fields import Problems, did_you_mean, number
@@ -100,7 +100,7 @@ def parse_scenario(doc: Mapping[str, Any], source: str | None = None, *, base_di
     ``base_dir`` resolves a relative model path (the scenario file's folder).
     ``check_plant`` also checks what loading the plant would fail on (needs mujoco): the
     model parses safely, compiles and is a Cassie, and the perturbation is valid on it
-    (:func:`scenarios.cosim.plantio.check_plant`).
+    (:func:`scenarios.lang.plantio.check_plant`).
     """
     too_deep = depth_problem(doc)  # before any reader walks the values
     if too_deep:
@@ -125,7 +125,7 @@ def parse_scenario(doc: Mapping[str, Any], source: str | None = None, *, base_di
 
 def _check_plant(scenario: Scenario, probs: Problems) -> None:
     """What loading the plant would fail on (the model compiles and is a Cassie, the
-    perturbation is valid on it): :func:`scenarios.cosim.plantio.check_plant`."""
+    perturbation is valid on it): :func:`scenarios.lang.plantio.check_plant`."""
     for field, problem in plantio.check_plant(scenario):
         probs.note(field, problem)
 

@@ -196,7 +196,7 @@ def write_arm_video(dest: Path, arm: str, model: Any, track: StateTrack) -> list
 def write_videos(dest: Path, scenario: Any, results: Sequence[Any]) -> tuple[list[str], float]:
     """The videos of every result with a state track into ``dest``; their file names and
     the seconds it took."""
-    from scenarios.cosim.plantio import load_plant_model
+    from scenarios.lang.plantio import load_plant_model
 
     lap = time.perf_counter()
     tracked = [r for r in results if getattr(r, "track", None) is not None and len(r.track.t)]

@@ -87,7 +87,7 @@ def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
     the result carries the states to render (:class:`scenarios.results.render.StateRecorder`)."""
     from scenarios.cosim.regulators import arm_regulator
     from scenarios.cosim.master import run_arm
-    from scenarios.cosim.plantio import load_plant_model
+    from scenarios.lang.plantio import load_plant_model
 
     if stop():
         return ArmOutcome(arm, "interrupted", started=False)

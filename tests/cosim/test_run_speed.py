@@ -27,7 +27,7 @@ from scenarios.results import output
 from scenarios.run import runner
 from scenarios.lang import spec
 from scenarios.cli import main as cli_main
-from scenarios.cosim.plantio import load_plant_model
+from scenarios.lang.plantio import load_plant_model
 from scenarios.cosim.regulators import InProcessRegulator
 from scenarios.lang.scenario import CommandPoint, Push, Scenario
 
