@@ -21,30 +21,6 @@
 
 typedef char fmi3Boolean_is_one_byte[sizeof(fmi3Boolean) == 1 ? 1 : -1];
 
-/* ---- allowed phases per function (FMI 3.0 section 4.3, co-simulation without event mode) ------ */
-#define MASK_fmi3SetDebugLogging ANY
-#define MASK_fmi3EnterInitializationMode AVR_INSTANTIATED
-#define MASK_fmi3ExitInitializationMode AVR_INIT_MODE
-#define MASK_fmi3Terminate AVR_STEP_MODE
-#define MASK_fmi3Reset ANY
-#define MASK_fmi3GetFloat64 GET_PHASES
-#define MASK_fmi3GetInt32 GET_PHASES
-#define MASK_fmi3GetBoolean GET_PHASES
-#define MASK_fmi3SetFloat64 SET_PHASES
-#define MASK_fmi3SetInt32 SET_PHASES
-#define MASK_fmi3SetBoolean SET_PHASES
-#define MASK_fmi3GetFMUState ANY
-#define MASK_fmi3SetFMUState ANY
-#define MASK_fmi3FreeFMUState ANY
-#define MASK_fmi3SerializedFMUStateSize ANY
-#define MASK_fmi3SerializeFMUState ANY
-#define MASK_fmi3DeserializeFMUState ANY
-#define MASK_fmi3DoStep AVR_STEP_MODE
-/* fmi3_refused.c: getters and setters of types this FMU has no variables of (GET_PHASES, SET_PHASES),
- * and the functions not provided at all (event mode, clocks, configuration mode, ME, SE, derivatives:
- * refused in every phase). */
-
-static const char *const PHASE_NAMES[] = {"Instantiated", "InitializationMode", "StepMode", "Terminated"};
 
 typedef struct {
     fmi3InstanceEnvironment env;
@@ -80,7 +56,7 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
     else if (nRequiredIntermediateVariables > 0)
         avr_refuse(&probe, "fmi3InstantiateCoSimulation", "this FMU provides no intermediate variables");
     else
-        inst = avr_instantiate(instanceName, instantiationToken, cb, log_fmi3, loggingOn, PHASE_NAMES);
+        inst = avr_instantiate(instanceName, instantiationToken, cb, log_fmi3, loggingOn, FMI3_PHASE_NAMES);
     if (inst == NULL) free(cb);
     return inst;
 }

@@ -1,29 +1,18 @@
 /*
- * The FMI 3.0 functions this co-simulation FMU does not provide (variable types it has no
- * variables of, event mode, clocks, configuration mode, Model Exchange, Scheduled
+ * The FMI 3.0 functions no native FMU of this project provides (variable types neither model
+ * has variables of, event mode, clocks, configuration mode, Model Exchange, Scheduled
  * Execution, derivatives).  Each exists so that every host resolves every symbol; each
- * refuses with fmi3Error and a log message, through the same prologue as fmi3_api.c.
+ * refuses with fmi3Error and a log message, through the same prologue as the model's layer.
  */
-#include "avr_instance.h" /* first: see avr_types.h */
+#include "fmi_model.h" /* first: the model's own headers may set feature macros */
 
 #include "fmi3Functions.h"
 
 #define FMI_STATUS fmi3Status
 #define FMI_INSTANCE fmi3Instance
-#include "avr_fmi_api.h"
+#include "fmi_layer.h"
 
-/* Getters and setters of types without variables: nothing to get or set is fine, anything else refused. */
-#define NO_VARIABLES(fn, mask, ctype, type_name)                                                               \
-    fmi3Status fn(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,  \
-                  ctype values[], size_t nValues) {                                                            \
-        BEGIN_MASK(fn, mask)                                                                                   \
-        (void)valueReferences, (void)values, (void)nValues;                                                    \
-        if (nValueReferences == 0) return fmi3OK;                                                              \
-        return (fmi3Status)avr_refuse(inst, call, "this FMU has no %s variables", type_name);                 \
-    }
-#define NO_GET_SET(T)                                                             \
-    NO_VARIABLES(fmi3Get##T, GET_PHASES, fmi3##T, #T)                             \
-    NO_VARIABLES(fmi3Set##T, SET_PHASES, const fmi3##T, #T)
+/* Getters and setters of types without variables (NO_GET_SET, fmi_layer.h). */
 NO_GET_SET(Float32)
 NO_GET_SET(Int8)
 NO_GET_SET(UInt8)
@@ -36,19 +25,21 @@ NO_GET_SET(String)
 
 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                          size_t valueSizes[], fmi3Binary values[], size_t nValues) {
-    BEGIN_MASK(fmi3GetBinary, GET_PHASES)
+    BEGIN(fmi3GetBinary)
     (void)valueReferences, (void)valueSizes, (void)values, (void)nValues;
-    return nValueReferences == 0 ? fmi3OK : (fmi3Status)avr_refuse(inst, call, "this FMU has no Binary variables");
+    if (nValueReferences == 0) return fmi3OK;
+    REFUSE("this FMU has no Binary variables");
 }
 
 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                          const size_t valueSizes[], const fmi3Binary values[], size_t nValues) {
-    BEGIN_MASK(fmi3SetBinary, SET_PHASES)
+    BEGIN(fmi3SetBinary)
     (void)valueReferences, (void)valueSizes, (void)values, (void)nValues;
-    return nValueReferences == 0 ? fmi3OK : (fmi3Status)avr_refuse(inst, call, "this FMU has no Binary variables");
+    if (nValueReferences == 0) return fmi3OK;
+    REFUSE("this FMU has no Binary variables");
 }
 
-/* Not provided at all: refused in every phase (NOT_PROVIDED, avr_fmi_api.h). */
+/* Not provided at all: refused in every phase (NOT_PROVIDED, fmi_layer.h). */
 NOT_PROVIDED0(fmi3EnterEventMode)
 NOT_PROVIDED0(fmi3EnterConfigurationMode)
 NOT_PROVIDED0(fmi3ExitConfigurationMode)
