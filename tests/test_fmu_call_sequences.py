@@ -258,3 +258,46 @@ def test_every_function_in_every_state_follows_the_phase_rules(any_fmu):
             elif answer["phase"] and answer["status"] != ERROR:
                 wrong.append(f"{name} in {state}: refused for its state but answered {answer['status']}")
     assert not wrong, "\n".join(wrong)
+
+
+# ---- the pythonfmu slaves take their phases from the same table ----------------------------------
+SLAVE_CALLS = {"fmi2SetupExperiment": lambda s: s.setup_experiment(0.0),
+               "fmi2EnterInitializationMode": lambda s: s.enter_initialization_mode(),
+               "fmi2ExitInitializationMode": lambda s: s.exit_initialization_mode(),
+               "fmi2Terminate": lambda s: s.terminate(),
+               "fmi2DoStep": lambda s: s.do_step(s._time_s, H)}
+#: The calls that bring a fresh slave to each of its phases.
+SLAVE_ROUTES = {"instantiated": [], "initializationMode": ["fmi2SetupExperiment", "fmi2EnterInitializationMode"],
+                "stepComplete": ["fmi2SetupExperiment", "fmi2EnterInitializationMode", "fmi2ExitInitializationMode"],
+                "terminated": ["fmi2SetupExperiment", "fmi2EnterInitializationMode", "fmi2ExitInitializationMode",
+                               "fmi2Terminate"]}
+
+
+def _slave_refuses(call: str, phase: str) -> bool:
+    from fmu_src.avr_slave import AdaptiveVelocityRegulator, FmiCallError
+
+    slave = AdaptiveVelocityRegulator(instance_name="phases")
+    for step in SLAVE_ROUTES[phase]:
+        SLAVE_CALLS[step](slave)
+    try:
+        answer = SLAVE_CALLS[call](slave)
+    except FmiCallError as exc:
+        assert f"{call} is not allowed in state {phase}" in str(exc)
+        return True
+    return answer is False  # do_step answers False (and logs why) for a step it does not take
+
+
+@pytest.mark.parametrize("call", sorted(SLAVE_CALLS))
+def test_the_slave_refuses_a_call_exactly_where_the_table_says(call):
+    """The regulator slave in process (as on win64, without the C guard): each life-cycle call in
+    each of its phases is refused exactly where fmu_src/fmi/phase_rules.py says it is not allowed."""
+    for phase in SLAVE_ROUTES:
+        assert _slave_refuses(call, phase) == (phase not in phase_rules.FMI2_ALLOWED[call]), phase
+
+
+def test_the_slave_reads_the_table_not_a_copy(monkeypatch):
+    """Change the table and the slave follows: its phase rules are phase_rules.FMI2_ALLOWED itself."""
+    assert _slave_refuses("fmi2Terminate", "initializationMode")
+    monkeypatch.setitem(phase_rules.FMI2_ALLOWED, "fmi2Terminate",
+                        phase_rules.FMI2_ALLOWED["fmi2Terminate"] | {"initializationMode"})
+    assert not _slave_refuses("fmi2Terminate", "initializationMode")

@@ -51,7 +51,7 @@ UNITS = {"m/s": {"m": "1", "s": "-1"}, "rad/s": {"rad": "1", "s": "-1"}, "N": {"
 #: FMI 3.0's independent variable ``time`` has a unit, which the model description must define.
 TIME_UNIT = {"s": {"s": "1"}}
 CORE = ("cmdsrc.c",)
-API = {2: ("cmdsrc_fmi2.c", "fmi2_refused.c"), 3: ("cmdsrc_fmi3.c", "fmi3_refused.c")}
+API = {2: ("cmdsrc_fmi2.c", "fmi2_common.c"), 3: ("cmdsrc_fmi3.c", "fmi3_common.c")}
 HEADERS = ("cmdsrc.h", "fmi_model.h")
 GUID_HEADER = "cs_guid.h"
 PLATFORMS = build_native.PLATFORMS
@@ -193,10 +193,12 @@ def _text_entries(fmi_version: int, guid: str) -> dict[str, bytes]:
     return entries
 
 
-def _compile(src: Path, fmi_version: int, target: str, out: Path) -> Path:
-    """The library for ``target`` (a target of ``build_native.PLATFORMS``): the regulator's compilers and options."""
+def compile_library(src: Path, fmi_version: int, target: str, out: Path, extra_flags=()) -> Path:
+    """The library for ``target`` (a target of ``build_native.PLATFORMS``) from the FMU's sources in
+    ``src``: the regulator's compilers and options (``extra_flags`` after them, e.g. the tests'
+    sanitizers)."""
     name = out.name
-    cmd = build_native.compile_command(target, sources(fmi_version), name)
+    cmd = build_native.compile_command(target, sources(fmi_version), name, extra_flags)
     compiler.run(cmd, "the CommandSource FMU", cwd=src)
     shutil.move(str(src / name), out)
     return out
@@ -216,7 +218,7 @@ def fmu_entries(fmi_version: int, schedule: str | None = None) -> dict[str, byte
                 (src / name[len("sources/"):]).write_bytes(data)
         for platform, target in build_native.buildable_platforms(fmi_version, fmu_name(fmi_version)).items():
             suffix = build_native.LIBRARY_SUFFIX[target]
-            lib = _compile(src, fmi_version, target, Path(tmp) / f"{MODEL_IDENTIFIER}{suffix}")
+            lib = compile_library(src, fmi_version, target, Path(tmp) / f"{MODEL_IDENTIFIER}{suffix}")
             entries[f"binaries/{platform}/{lib.name}"] = lib.read_bytes()
     entries[SCHEDULE] = (schedule or schedule_csv(NOMINAL_ROWS)).encode()
     return entries

@@ -67,8 +67,11 @@ CsStatus cs_refuse(const CsInstance *inst, const char *call, const char *fmt, ..
 #endif
     ;
 CsStatus cs_allowed(const CsInstance *inst, const char *call, unsigned mask);
+/* fmi*SetDebugLogging's categories: CS_OK unless n > 0 and the array is NULL. */
+CsStatus cs_check_categories(const CsInstance *inst, const char *call, size_t n, const char *const categories[]);
 CsStatus cs_setup(CsInstance *inst, const char *call, double start_time, int stop_defined, double stop_time);
 CsStatus cs_enter_init(CsInstance *inst, const char *call);
+CsStatus cs_exit_init(CsInstance *inst, const char *call);
 void cs_reset(CsInstance *inst);
 CsStatus cs_check_get(const CsInstance *inst, const char *call, const unsigned vr[], size_t n);
 CsStatus cs_do_step(CsInstance *inst, const char *call, double t, double h);

@@ -2,7 +2,9 @@
  * FMI 2.0 co-simulation API of CommandSource over the version-independent instance
  * (cmdsrc.c).  Each function begins with the shared prologue BEGIN (fmu_src/fmi/fmi_layer.h),
  * which checks its allowed phases (FMI_MASK_<function>, generated from fmu_src/fmi/phase_rules.py);
- * a refused call logs why, returns fmi2Error and changes nothing.
+ * a refused call logs why, returns fmi2Error and changes nothing.  What every native FMU's FMI 2.0
+ * layer has the same (inquiry, callbacks, doStep and status, the functions none provides) is
+ * fmu_src/fmi/fmi2_common.c.
  */
 #include "cmdsrc.h"
 
@@ -14,24 +16,13 @@
 #define FMI_INSTANCE fmi2Component
 #include "fmi_layer.h"
 
-static void log_fmi2(const CsInstance *inst, CsStatus status, const char *category, const char *message) {
-    const fmi2CallbackFunctions *cb = (const fmi2CallbackFunctions *)inst->env;
-    if (cb != NULL && cb->logger != NULL)
-        cb->logger(cb->componentEnvironment, inst->name, (fmi2Status)status, category, "%s", message);
-}
-
-const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
-const char *fmi2GetVersion(void) { return fmi2Version; }
-
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
     (void)visible;
-    if (functions == NULL) return NULL;
-    fmi2CallbackFunctions *cb = malloc(sizeof *cb);
+    fmi2CallbackFunctions *cb = fmi2_callbacks(functions);
     if (cb == NULL) return NULL;
-    *cb = *functions;
-    CsInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = log_fmi2};
+    CsInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = fmi2_log};
     CsInstance *inst = NULL;
     char *resources = cs_path_from_uri(fmuResourceLocation);
     if (fmuType != fmi2CoSimulation)
@@ -40,7 +31,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         cs_refuse(&probe, "fmi2Instantiate", "fmuResourceLocation \"%s\" is not a file URI (the schedule is read "
                   "from resources/%s)", fmuResourceLocation ? fmuResourceLocation : "(NULL)", CS_SCHEDULE_FILE);
     else
-        inst = cs_instantiate(instanceName, fmuGUID, resources, cb, log_fmi2, loggingOn == fmi2True, FMI2_PHASE_NAMES);
+        inst = cs_instantiate(instanceName, fmuGUID, resources, cb, fmi2_log, loggingOn == fmi2True, FMI2_PHASE_NAMES);
     free(resources);
     if (inst == NULL) free(cb);
     return inst;
@@ -48,14 +39,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 
 FREE_INSTANCE(fmi2FreeInstance)
 
-fmi2Status fmi2SetDebugLogging(fmi2Component instance, fmi2Boolean loggingOn, size_t nCategories,
-                               const fmi2String categories[]) {
-    BEGIN(fmi2SetDebugLogging)
-    if (nCategories > 0 && categories == NULL)
-        return (fmi2Status)cs_refuse(inst, call, "categories is NULL with nCategories = %zu", nCategories);
-    inst->logging_on = loggingOn == fmi2True;
-    return fmi2OK;
-}
+SET_DEBUG_LOGGING(fmi2SetDebugLogging, fmi2Boolean, fmi2String)
 
 fmi2Status fmi2SetupExperiment(fmi2Component instance, fmi2Boolean toleranceDefined, fmi2Real tolerance, fmi2Real startTime,
                                fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
@@ -69,11 +53,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component instance) {
     return (fmi2Status)cs_enter_init(inst, call);
 }
 
-fmi2Status fmi2ExitInitializationMode(fmi2Component instance) {
-    BEGIN(fmi2ExitInitializationMode)
-    inst->phase = CS_STEP_MODE;
-    return fmi2OK;
-}
+EXIT_INITIALIZATION_MODE(fmi2ExitInitializationMode)
 
 TERMINATE(fmi2Terminate)
 
@@ -103,30 +83,8 @@ NONE(fmi2SetInteger, const fmi2Integer, "Integer variables")
 NONE(fmi2SetBoolean, const fmi2Boolean, "Boolean variables")
 NONE(fmi2SetString, const fmi2String, "String variables")
 
-fmi2Status fmi2DoStep(fmi2Component instance, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
-                      fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
-    BEGIN(fmi2DoStep)
-    (void)noSetFMUStatePriorToCurrentPoint;
-    return (fmi2Status)cs_do_step(inst, call, currentCommunicationPoint, communicationStepSize);
-}
-
-fmi2Status fmi2GetRealStatus(fmi2Component instance, const fmi2StatusKind s, fmi2Real *value) {
-    BEGIN(fmi2GetRealStatus)
-    if (s != fmi2LastSuccessfulTime || value == NULL)
-        return (fmi2Status)cs_refuse(inst, call, "only fmi2LastSuccessfulTime is provided");
-    *value = inst->time;
-    return fmi2OK;
-}
-
-fmi2Status fmi2GetBooleanStatus(fmi2Component instance, const fmi2StatusKind s, fmi2Boolean *value) {
-    BEGIN(fmi2GetBooleanStatus)
-    if (s != fmi2Terminated || value == NULL) return (fmi2Status)cs_refuse(inst, call, "only fmi2Terminated is provided");
-    *value = fmi2False;
-    return fmi2OK;
-}
-
 /* Not provided (canGetAndSetFMUstate = false): refused in every phase; the functions no native FMU
- * provides are in fmi2_refused.c. */
+ * provides are in fmi2_common.c. */
 NOT_PROVIDED(fmi2GetFMUstate, fmi2FMUstate *s)
 NOT_PROVIDED(fmi2SetFMUstate, fmi2FMUstate s)
 NOT_PROVIDED(fmi2FreeFMUstate, fmi2FMUstate *s)

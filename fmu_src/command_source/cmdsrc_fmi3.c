@@ -21,19 +21,6 @@
 
 #define TIME_VR ((fmi3ValueReference)CS_N_OUTPUTS)
 
-typedef struct {
-    fmi3InstanceEnvironment env;
-    fmi3LogMessageCallback log;
-} Callbacks;
-
-static void log_fmi3(const CsInstance *inst, CsStatus status, const char *category, const char *message) {
-    const Callbacks *cb = (const Callbacks *)inst->env;
-    if (cb != NULL && cb->log != NULL) cb->log(cb->env, (fmi3Status)status, category, message);
-}
-
-/* ---- inquiry, creation, life cycle ------------------------------------------------------------ */
-const char *fmi3GetVersion(void) { return fmi3Version; }
-
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                          fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
@@ -44,57 +31,26 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3IntermediateUpdateCallback intermediateUpdate) {
     (void)visible, (void)earlyReturnAllowed, (void)requiredIntermediateVariables;
     (void)intermediateUpdate; /* never called: no intermediate update */
-    Callbacks *cb = malloc(sizeof *cb);
+    FmiCallbacks3 *cb = fmi3_callbacks(instanceEnvironment, logMessage);
     if (cb == NULL) return NULL;
-    cb->env = instanceEnvironment;
-    cb->log = logMessage;
-    CsInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = log_fmi3};
+    CsInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = fmi3_log};
     CsInstance *inst = NULL;
     static const char call[] = "fmi3InstantiateCoSimulation";
-    if (eventModeUsed)
-        cs_refuse(&probe, call, "eventModeUsed: this FMU has no event mode");
-    else if (nRequiredIntermediateVariables > 0)
-        cs_refuse(&probe, call, "this FMU provides no intermediate variables");
+    const char *problem = fmi3_cosim_problem(eventModeUsed, nRequiredIntermediateVariables);
+    if (problem != NULL)
+        cs_refuse(&probe, call, "%s", problem);
     else if (resourcePath == NULL || resourcePath[0] == '\0')
         cs_refuse(&probe, call, "no resourcePath: the schedule is read from resources/%s", CS_SCHEDULE_FILE);
     else /* FMI 3.0: resourcePath is a native path (with a trailing separator), not a URI */
-        inst = cs_instantiate(instanceName, instantiationToken, resourcePath, cb, log_fmi3, loggingOn != fmi3False,
+        inst = cs_instantiate(instanceName, instantiationToken, resourcePath, cb, fmi3_log, loggingOn != fmi3False,
                               FMI3_PHASE_NAMES);
     if (inst == NULL) free(cb);
     return inst;
 }
 
-fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
-                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
-                                          fmi3InstanceEnvironment instanceEnvironment,
-                                          fmi3LogMessageCallback logMessage) {
-    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn;
-    if (logMessage != NULL)
-        logMessage(instanceEnvironment, fmi3Error, "logStatusError", "this FMU supports co-simulation only");
-    return NULL;
-}
-
-fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
-                                               fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
-                                               fmi3InstanceEnvironment instanceEnvironment,
-                                               fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
-                                               fmi3LockPreemptionCallback lockPreemption,
-                                               fmi3UnlockPreemptionCallback unlockPreemption) {
-    (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
-    return fmi3InstantiateModelExchange(instanceName, instantiationToken, resourcePath, visible, loggingOn,
-                                        instanceEnvironment, logMessage);
-}
-
 FREE_INSTANCE(fmi3FreeInstance)
 
-fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
-                               const fmi3String categories[]) {
-    BEGIN(fmi3SetDebugLogging)
-    if (nCategories > 0 && categories == NULL)
-        return (fmi3Status)cs_refuse(inst, call, "categories is NULL with nCategories = %zu", nCategories);
-    inst->logging_on = loggingOn != fmi3False;
-    return fmi3OK;
-}
+SET_DEBUG_LOGGING(fmi3SetDebugLogging, fmi3Boolean, fmi3String)
 
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
@@ -104,11 +60,7 @@ fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean tolera
     return (fmi3Status)cs_enter_init(inst, call);
 }
 
-fmi3Status fmi3ExitInitializationMode(fmi3Instance instance) {
-    BEGIN(fmi3ExitInitializationMode)
-    inst->phase = CS_STEP_MODE;
-    return fmi3OK;
-}
+EXIT_INITIALIZATION_MODE(fmi3ExitInitializationMode)
 
 TERMINATE(fmi3Terminate)
 
@@ -140,28 +92,12 @@ fmi3Status fmi3SetFloat64(fmi3Instance instance, const fmi3ValueReference valueR
                                  "resources/%s; time is the independent variable)", CS_SCHEDULE_FILE);
 }
 
-/* Types without variables (NO_GET_SET, fmi_layer.h; the types no native FMU has are in fmi3_refused.c). */
+/* Types without variables (NO_GET_SET, fmi_layer.h; the types no native FMU has are in fmi3_common.c). */
 NO_GET_SET(Int32)
 NO_GET_SET(Boolean)
 
-/* ---- stepping ------------------------------------------------------------------------------------ */
-fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
-                      fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
-                      fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
-    BEGIN(fmi3DoStep)
-    (void)noSetFMUStatePriorToCurrentPoint;
-    if (eventHandlingNeeded == NULL || terminateSimulation == NULL || earlyReturn == NULL || lastSuccessfulTime == NULL)
-        return (fmi3Status)cs_refuse(inst, call, "NULL output argument");
-    if (cs_do_step(inst, call, currentCommunicationPoint, communicationStepSize) != CS_OK) return fmi3Error;
-    *eventHandlingNeeded = fmi3False;
-    *terminateSimulation = fmi3False;
-    *earlyReturn = fmi3False;
-    *lastSuccessfulTime = inst->time;
-    return fmi3OK;
-}
-
 /* ---- not provided (canGetAndSetFMUState = false): refused in every phase; what no native FMU
- *      provides is in fmi3_refused.c -------------------------------------------------------------- */
+ *      provides is in fmi3_common.c -------------------------------------------------------------- */
 NOT_PROVIDED(fmi3GetFMUState, fmi3FMUState *state)
 NOT_PROVIDED(fmi3SetFMUState, fmi3FMUState state)
 NOT_PROVIDED(fmi3FreeFMUState, fmi3FMUState *state)

@@ -6,29 +6,24 @@
 #include <stdio.h>
 #include <string.h>
 
-uint32_t fmi_crc32(const unsigned char *p, size_t n) {
-    uint32_t table[256];
-    for (uint32_t i = 0; i < 256; ++i) {
-        uint32_t c = i;
-        for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-        table[i] = c;
-    }
-    uint32_t crc = 0xFFFFFFFFu;
-    for (size_t i = 0; i < n; ++i) crc = table[(crc ^ p[i]) & 0xFFu] ^ (crc >> 8);
-    return crc ^ 0xFFFFFFFFu;
-}
-
-uint64_t fmi_crc64(const unsigned char *p, size_t n) {
+/* A reflected CRC of `width` (32 or 64) bits with polynomial `poly`, all ones initially and xored
+ * with all ones at the end: CRC-32 (zlib) and CRC-64/XZ are two of them. */
+static uint64_t reflected_crc(const unsigned char *p, size_t n, uint64_t poly, unsigned width) {
+    const uint64_t ones = width == 64 ? ~0ull : (1ull << width) - 1u;
     uint64_t table[256];
     for (uint64_t i = 0; i < 256; ++i) {
         uint64_t c = i;
-        for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xC96C5795D7870F42ull ^ (c >> 1) : c >> 1;
+        for (int k = 0; k < 8; ++k) c = (c & 1u) ? poly ^ (c >> 1) : c >> 1;
         table[i] = c;
     }
-    uint64_t crc = ~0ull;
+    uint64_t crc = ones;
     for (size_t i = 0; i < n; ++i) crc = table[(crc ^ p[i]) & 0xFFu] ^ (crc >> 8);
-    return ~crc;
+    return crc ^ ones;
 }
+
+uint32_t fmi_crc32(const unsigned char *p, size_t n) { return (uint32_t)reflected_crc(p, n, 0xEDB88320u, 32); }
+
+uint64_t fmi_crc64(const unsigned char *p, size_t n) { return reflected_crc(p, n, 0xC96C5795D7870F42ull, 64); }
 
 /* The little-endian unsigned integer of `bytes` bytes at p. */
 static uint64_t get_le(const unsigned char *p, size_t bytes) {
@@ -77,8 +72,11 @@ const char *fmi_blob_problem(const FmiBlobFormat *f, const unsigned char *p, siz
     if (!same) {
         char theirs[128];
         guid_text(p + f->guid_at, f->guid_bytes, theirs, sizeof theirs);
-        snprintf(why, n, "the state was saved by another FMU or another build of this one (GUID %s; this FMU is %s)",
-                 theirs, f->guid);
+        if (strcmp(theirs, f->guid) == 0)
+            snprintf(why, n, "the state's GUID field holds bytes after the GUID (this FMU writes it NUL-padded)");
+        else
+            snprintf(why, n, "the state was saved by another FMU or another build of this one (GUID %s; this FMU "
+                     "is %s)", theirs, f->guid);
         return why;
     }
     return NULL;

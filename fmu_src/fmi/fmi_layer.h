@@ -1,19 +1,26 @@
 /*
  * The FMI layer the native FMUs share (the regulator's fmi2_api.c/fmi3_api.c, CommandSource's
- * cmdsrc_fmi2.c/cmdsrc_fmi3.c, and fmi2_refused.c/fmi3_refused.c beside this header), written
- * once for both models and both FMI versions.  A layer defines, before including this header:
+ * cmdsrc_fmi2.c/cmdsrc_fmi3.c, and fmi2_common.c/fmi3_common.c beside this header: what every
+ * native FMU's layer has the same), written once for both models and both FMI versions.  A layer defines, before including this header:
  *
  *   FMI_STATUS    its status type (fmi2Status, fmi3Status: both number OK..Fatal as 0..4)
  *   FMI_INSTANCE  its instance type (fmi2Component, fmi3Instance)
  *
  * and the model's fmi_model.h (found beside its sources) says what an instance is:
  *
- *   FmiModelInstance                           the model's instance type (phase, env, name, time)
+ *   FmiModelInstance                           the model's instance type (phase, env, name)
+ *   FmiModelStatus                             its status type (OK..Fatal as 0..4)
  *   fmi_model_allowed(inst, call, mask)        0 if inst is in one of the phases of mask, else
  *                                              the refusal (logged) as a nonzero status
  *   fmi_model_refuse(inst, call, fmt, ...)     logs "<call> refused: ..." and returns Error
  *   fmi_model_free(inst)                       frees the instance (not the FMI layer's callbacks)
+ *   fmi_model_exit_init(inst, call)            leaves Initialization Mode (status as 0..4)
+ *   fmi_model_do_step(inst, call, t, h)        one communication step (status as 0..4; inst->time
+ *                                              is then the end of the last successful step)
  *   fmi_model_reset(inst)                      back to Instantiated with the start values
+ *   fmi_model_check_categories(inst, call, n, categories)
+ *                                              0 if fmi*SetDebugLogging may take these log
+ *                                              categories, else the refusal as a nonzero status
  *
  * Every function begins with the one prologue BEGIN(<function>): it defines `inst` and `call`
  * and refuses the call (logged, Error, nothing changed) outside the phases of its
@@ -86,6 +93,19 @@
         fmi_model_free(inst);                                       \
         free(callbacks);                                            \
     }
+/* fmi*SetDebugLogging: the model checks the categories, the instance keeps loggingOn. */
+#define SET_DEBUG_LOGGING(fn, BOOLEAN, STRING)                                                            \
+    FMI_STATUS fn(FMI_INSTANCE instance, BOOLEAN loggingOn, size_t nCategories, const STRING categories[]) { \
+        BEGIN(fn)                                                                                         \
+        if (fmi_model_check_categories(inst, call, nCategories, categories) != 0) return FMI_ERROR;       \
+        inst->logging_on = loggingOn == 1;                                                                \
+        return FMI_OK;                                                                                    \
+    }
+#define EXIT_INITIALIZATION_MODE(fn)                                \
+    FMI_STATUS fn(FMI_INSTANCE instance) {                          \
+        BEGIN(fn)                                                   \
+        return (FMI_STATUS)fmi_model_exit_init(inst, call);         \
+    }
 #define TERMINATE(fn)                                               \
     FMI_STATUS fn(FMI_INSTANCE instance) {                          \
         BEGIN(fn)                                                   \
@@ -98,5 +118,27 @@
         fmi_model_reset(inst);                                      \
         return FMI_OK;                                              \
     }
+
+/* ---- fmi2_common.c / fmi3_common.c: the host's callbacks, kept as an instance's env ---------- */
+#ifdef fmi2Version
+/* A copy of the host's callbacks (malloc'd; NULL if functions is NULL or memory is out). */
+fmi2CallbackFunctions *fmi2_callbacks(const fmi2CallbackFunctions *functions);
+/* The model's logger for an instance whose env is an fmi2_callbacks copy. */
+void fmi2_log(const FmiModelInstance *inst, FmiModelStatus status, const char *category, const char *message);
+#endif
+#ifdef fmi3Version
+typedef struct {
+    fmi3InstanceEnvironment env;
+    fmi3LogMessageCallback log;
+} FmiCallbacks3;
+/* The host's environment and logger (malloc'd; NULL if memory is out). */
+FmiCallbacks3 *fmi3_callbacks(fmi3InstanceEnvironment env, fmi3LogMessageCallback log);
+/* The model's logger for an instance whose env is an fmi3_callbacks copy. */
+void fmi3_log(const FmiModelInstance *inst, FmiModelStatus status, const char *category, const char *message);
+/* Why fmi3InstantiateCoSimulation with these options cannot give an instance of a native FMU of
+ * this project (no event mode, no intermediate variables), or NULL. */
+const char *fmi3_cosim_problem(fmi3Boolean eventModeUsed, size_t nRequiredIntermediateVariables);
+#endif
+
 
 #endif

@@ -8,12 +8,6 @@
 
 #include "fmi_layer.h"
 
-#define EXIT_INITIALIZATION_MODE(fn)                                \
-    FMI_STATUS fn(FMI_INSTANCE instance) {                          \
-        BEGIN(fn)                                                   \
-        return (FMI_STATUS)avr_exit_init(inst, call);               \
-    }
-
 /* The six FMU-state functions over avr_state.c; STATE is the version's FMU-state type, BYTE
  * its byte type, and the names its spellings (FMI 2.0 "FMUstate", FMI 3.0 "FMUState"). */
 #define FMUSTATE_FUNCTIONS(STATE, BYTE, GET, SET, FREE, SIZE, SERIALIZE, DESERIALIZE)                         \

@@ -4,7 +4,7 @@
  * the one prologue BEGIN (fmu_src/fmi/fmi_layer.h), which refuses a call outside the phases
  * of its FMI_MASK_<function> (fmi_phase_rules.h, generated from fmu_src/fmi/phase_rules.py);
  * the shapes both FMI versions share are written once in avr_fmi_api.h and fmi_layer.h, the
- * functions no native FMU provides in fmi2_refused.c.
+ * functions no native FMU provides in fmi2_common.c.
  */
 #include "avr_instance.h" /* first: see avr_types.h */
 
@@ -17,46 +17,28 @@
 #define FMI_INSTANCE fmi2Component
 #include "avr_fmi_api.h"
 
-
-static void log_fmi2(const AvrInstance *inst, AvrStatus status, const char *category, const char *message) {
-    const fmi2CallbackFunctions *cb = (const fmi2CallbackFunctions *)inst->env;
-    /* the message goes as an argument, never as the format string */
-    if (cb != NULL && cb->logger != NULL)
-        cb->logger(cb->componentEnvironment, inst->name, (fmi2Status)status, category, "%s", message);
-}
-
-/* ---- inquiry, creation, life cycle ---------------------------------------------------------- */
-const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
-const char *fmi2GetVersion(void) { return fmi2Version; }
+/* ---- creation, life cycle (the inquiry functions: fmi2_common.c) ------------------------------ */
 
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
     (void)fmuResourceLocation; /* the FMU needs no resources */
     (void)visible;
-    if (functions == NULL) return NULL;
-    fmi2CallbackFunctions *cb = malloc(sizeof *cb);
+    fmi2CallbackFunctions *cb = fmi2_callbacks(functions);
     if (cb == NULL) return NULL;
-    *cb = *functions;
-    AvrInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = log_fmi2};
+    AvrInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = fmi2_log};
     AvrInstance *inst = NULL;
     if (fmuType != fmi2CoSimulation)
         avr_refuse(&probe, "fmi2Instantiate", "this FMU supports co-simulation only");
     else
-        inst = avr_instantiate(instanceName, fmuGUID, cb, log_fmi2, loggingOn == fmi2True, FMI2_PHASE_NAMES);
+        inst = avr_instantiate(instanceName, fmuGUID, cb, fmi2_log, loggingOn == fmi2True, FMI2_PHASE_NAMES);
     if (inst == NULL) free(cb);
     return inst;
 }
 
 FREE_INSTANCE(fmi2FreeInstance)
 
-fmi2Status fmi2SetDebugLogging(fmi2Component instance, fmi2Boolean loggingOn, size_t nCategories,
-                               const fmi2String categories[]) {
-    BEGIN(fmi2SetDebugLogging)
-    if (avr_check_categories(inst, call, nCategories, categories) != AVR_OK) return fmi2Error;
-    inst->logging_on = loggingOn == fmi2True;
-    return fmi2OK;
-}
+SET_DEBUG_LOGGING(fmi2SetDebugLogging, fmi2Boolean, fmi2String)
 
 fmi2Status fmi2SetupExperiment(fmi2Component instance, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
@@ -121,26 +103,3 @@ fmi2Status fmi2SetString(fmi2Component instance, const fmi2ValueReference vr[], 
 /* ---- FMU state (avr_state.c) --------------------------------------------------------------------- */
 FMUSTATE_FUNCTIONS(fmi2FMUstate, fmi2Byte, fmi2GetFMUstate, fmi2SetFMUstate, fmi2FreeFMUstate,
                    fmi2SerializedFMUstateSize, fmi2SerializeFMUstate, fmi2DeSerializeFMUstate)
-
-/* ---- stepping and status ----------------------------------------------------------------------- */
-fmi2Status fmi2DoStep(fmi2Component instance, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
-                      fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
-    BEGIN(fmi2DoStep)
-    (void)noSetFMUStatePriorToCurrentPoint;
-    return (fmi2Status)avr_do_step(inst, call, currentCommunicationPoint, communicationStepSize);
-}
-
-fmi2Status fmi2GetRealStatus(fmi2Component instance, const fmi2StatusKind s, fmi2Real *value) {
-    BEGIN(fmi2GetRealStatus)
-    if (s != fmi2LastSuccessfulTime || value == NULL) REFUSE("only fmi2LastSuccessfulTime is provided");
-    *value = inst->time;
-    return fmi2OK;
-}
-
-fmi2Status fmi2GetBooleanStatus(fmi2Component instance, const fmi2StatusKind s, fmi2Boolean *value) {
-    BEGIN(fmi2GetBooleanStatus)
-    if (s != fmi2Terminated || value == NULL) REFUSE("only fmi2Terminated is provided");
-    *value = fmi2False; /* the regulator never asks to end the simulation */
-    return fmi2OK;
-}
-

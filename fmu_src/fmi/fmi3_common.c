@@ -1,16 +1,77 @@
 /*
- * The FMI 3.0 functions no native FMU of this project provides (variable types neither model
- * has variables of, event mode, clocks, configuration mode, Model Exchange, Scheduled
- * Execution, derivatives).  Each exists so that every host resolves every symbol; each
- * refuses with fmi3Error and a log message, through the same prologue as the model's layer.
+ * What the FMI 3.0 layer of every native FMU of this project has the same: the version, the
+ * host's callbacks and the logger over them, the co-simulation options none supports, doStep
+ * over the model's instance (fmi_model.h), and the
+ * functions none provides (variable types neither model has variables of, event mode, clocks,
+ * configuration mode, Model Exchange, Scheduled Execution, derivatives).  Each of those exists
+ * so that every host resolves every symbol; each refuses with fmi3Error and a log message,
+ * through the same prologue as the model's layer.
  */
 #include "fmi_model.h" /* first: the model's own headers may set feature macros */
+
+#include <stdlib.h>
 
 #include "fmi3Functions.h"
 
 #define FMI_STATUS fmi3Status
 #define FMI_INSTANCE fmi3Instance
 #include "fmi_layer.h"
+
+const char *fmi3GetVersion(void) { return fmi3Version; }
+
+FmiCallbacks3 *fmi3_callbacks(fmi3InstanceEnvironment env, fmi3LogMessageCallback log) {
+    FmiCallbacks3 *cb = malloc(sizeof *cb);
+    if (cb != NULL) *cb = (FmiCallbacks3){.env = env, .log = log};
+    return cb;
+}
+
+void fmi3_log(const FmiModelInstance *inst, FmiModelStatus status, const char *category, const char *message) {
+    const FmiCallbacks3 *cb = (const FmiCallbacks3 *)inst->env;
+    if (cb != NULL && cb->log != NULL) cb->log(cb->env, (fmi3Status)status, category, message);
+}
+
+const char *fmi3_cosim_problem(fmi3Boolean eventModeUsed, size_t nRequiredIntermediateVariables) {
+    if (eventModeUsed) return "eventModeUsed: this FMU has no event mode";
+    if (nRequiredIntermediateVariables > 0) return "this FMU provides no intermediate variables";
+    return NULL;
+}
+
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage) {
+    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn;
+    if (logMessage != NULL)
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError", "this FMU supports co-simulation only");
+    return NULL;
+}
+
+fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
+                                               fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                               fmi3InstanceEnvironment instanceEnvironment,
+                                               fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
+                                               fmi3LockPreemptionCallback lockPreemption,
+                                               fmi3UnlockPreemptionCallback unlockPreemption) {
+    (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
+    return fmi3InstantiateModelExchange(instanceName, instantiationToken, resourcePath, visible, loggingOn,
+                                        instanceEnvironment, logMessage);
+}
+
+/* ---- stepping (the model steps: fmi_model_do_step) --------------------------------------------- */
+fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
+                      fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
+                      fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
+    BEGIN(fmi3DoStep)
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (eventHandlingNeeded == NULL || terminateSimulation == NULL || earlyReturn == NULL || lastSuccessfulTime == NULL)
+        REFUSE("NULL output argument");
+    if (fmi_model_do_step(inst, call, currentCommunicationPoint, communicationStepSize) != 0) return fmi3Error;
+    *eventHandlingNeeded = fmi3False;
+    *terminateSimulation = fmi3False;
+    *earlyReturn = fmi3False;
+    *lastSuccessfulTime = inst->time;
+    return fmi3OK;
+}
 
 /* Getters and setters of types without variables (NO_GET_SET, fmi_layer.h). */
 NO_GET_SET(Float32)
