@@ -55,6 +55,11 @@ CsStatus cs_allowed(const CsInstance *inst, const char *call, unsigned mask) {
     return cs_refuse(inst, call, "not allowed in state %s (allowed in: %s)", inst->phase_names[now], list);
 }
 
+CsStatus cs_check_categories(const CsInstance *inst, const char *call, size_t n, const char *const categories[]) {
+    if (n > 0 && categories == NULL) return cs_refuse(inst, call, "categories is NULL with nCategories = %zu", n);
+    return CS_OK;
+}
+
 /* ---- the schedule file ---------------------------------------------------------------------- */
 static int hexval(int c) {
     if (c >= '0' && c <= '9') return c - '0';
@@ -287,6 +292,12 @@ CsStatus cs_enter_init(CsInstance *inst, const char *call) {
     inst->time = inst->start_time;
     inst->row = row_at(inst, 0, inst->start_time);
     inst->phase = CS_INIT_MODE;
+    return CS_OK;
+}
+
+CsStatus cs_exit_init(CsInstance *inst, const char *call) {
+    (void)call; /* nothing to check: the outputs are the schedule's from the start */
+    inst->phase = CS_STEP_MODE;
     return CS_OK;
 }
 

@@ -16,6 +16,8 @@
 
 #include <stddef.h>
 
+#include "fmi_phase_rules.h"
+
 #define CS_N_OUTPUTS 6
 #define CS_TIME_RTOL 1e-9
 #define CS_MAX_ROWS 100000
@@ -23,14 +25,14 @@
 
 typedef enum { CS_OK = 0, CS_WARNING = 1, CS_DISCARD = 2, CS_ERROR = 3, CS_FATAL = 4 } CsStatus;
 
+/* Phases as the bits of fmi_phase_rules.h: a function's allowed phases are its FMI_MASK_<function>. */
 typedef enum {
-    CS_INSTANTIATED = 1u << 0,
-    CS_INIT_MODE = 1u << 1,
-    CS_STEP_MODE = 1u << 2,
-    CS_TERMINATED = 1u << 3,
+    CS_INSTANTIATED = FMI_INSTANTIATED,
+    CS_INIT_MODE = FMI_INIT_MODE,
+    CS_STEP_MODE = FMI_STEP_MODE,
+    CS_TERMINATED = FMI_TERMINATED,
 } CsPhase;
-#define CS_N_PHASES 4
-#define CS_ANY_PHASE (CS_INSTANTIATED | CS_INIT_MODE | CS_STEP_MODE | CS_TERMINATED)
+#define CS_N_PHASES 4 /* the bits above: 0 .. 3 */
 
 /* The output names in value-reference order (0..5), the schedule's columns after `time`. */
 extern const char *const CS_OUTPUT_NAMES[CS_N_OUTPUTS];
@@ -65,8 +67,11 @@ CsStatus cs_refuse(const CsInstance *inst, const char *call, const char *fmt, ..
 #endif
     ;
 CsStatus cs_allowed(const CsInstance *inst, const char *call, unsigned mask);
+/* fmi*SetDebugLogging's categories: CS_OK unless n > 0 and the array is NULL. */
+CsStatus cs_check_categories(const CsInstance *inst, const char *call, size_t n, const char *const categories[]);
 CsStatus cs_setup(CsInstance *inst, const char *call, double start_time, int stop_defined, double stop_time);
 CsStatus cs_enter_init(CsInstance *inst, const char *call);
+CsStatus cs_exit_init(CsInstance *inst, const char *call);
 void cs_reset(CsInstance *inst);
 CsStatus cs_check_get(const CsInstance *inst, const char *call, const unsigned vr[], size_t n);
 CsStatus cs_do_step(CsInstance *inst, const char *call, double t, double h);

@@ -20,11 +20,15 @@ from pythonfmu import Boolean, Fmi2Causality, Fmi2Initial, Fmi2Slave, Fmi2Variab
 from pythonfmu.enums import Fmi2Status
 
 from fmu_src.core.avr_errors import StateError
-from fmu_src.fmi.avr_fmustate import PHASES, value_problem
 from fmu_src.core.avr_specs import PYTHON_TYPES
+from fmu_src.fmi.avr_fmustate import PHASES, value_problem
+from fmu_src.fmi.phase_rules import FMI2_ALLOWED
 
-#: FMI 2.0 co-simulation phases the slaves track (section 4.2.4).
+#: FMI 2.0 co-simulation phases the slaves track (section 4.2.4; no stepFailed: a refused
+#: doStep changes nothing).  Which call is allowed in which is fmu_src/fmi/phase_rules.py's table.
 INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED = PHASES
+#: The phases a variable may be set in (the same for every type).
+_SET_PHASES = FMI2_ALLOWED["fmi2SetReal"]
 #: Relative tolerance on "doStep starts where the last step ended": a master that
 #: computes t = t0 + k*h differs from (t_prev + h) by a few ulp, far below 1e-9 s.
 TIME_MATCH_RTOL = 1e-9
@@ -107,7 +111,7 @@ class SpecSlave(Fmi2Slave):
         # float inside its range, not terminated.  Those are exactly the values set_problem
         # allows, so they are stored as the generic path would; anything else, or any
         # doubt, takes the generic path, which checks and refuses value by value.
-        if self._phase != TERMINATED:
+        if self._phase in _SET_PHASES:
             inputs, accepted = self._real_inputs, []
             for vr, value in zip(vrs, values):
                 entry = inputs.get(vr)
@@ -144,7 +148,7 @@ class SpecSlave(Fmi2Slave):
         spec = self._specs[name]
         if spec.causality == "output":
             return f"{name} is an output and cannot be set"
-        if self._phase == TERMINATED:
+        if self._phase not in _SET_PHASES:  # of the slave's phases only terminated
             return f"cannot set {name} after fmi2Terminate"
         if self._phase == STEP_COMPLETE and spec.causality == "parameter" and spec.variability == "fixed":
             return f"{name} is a fixed parameter: set it before fmi2ExitInitializationMode"
@@ -154,15 +158,23 @@ class SpecSlave(Fmi2Slave):
         return value_problem(spec, value)
 
     # -- life cycle ------------------------------------------------------------------------
-    def _in_phase(self, call: str, *phases: str) -> bool:
+    def _phase_problem(self, call: str) -> str | None:
+        """Why ``call`` is not allowed in the current phase (FMI2_ALLOWED), or None if it is."""
+        allowed = FMI2_ALLOWED[call]
+        if self._phase in allowed:
+            return None
+        return (f"{call} is not allowed in state {self._phase} "
+                f"(allowed in: {', '.join(p for p in PHASES if p in allowed)})")
+
+    def _in_phase(self, call: str) -> bool:
         """True if ``call`` is allowed now; else the call is refused (:meth:`_refuse`)."""
-        if self._phase in phases:
-            return True
-        self._refuse(f"{call} is not allowed in state {self._phase} (allowed in: {', '.join(phases)})")
-        return False
+        problem = self._phase_problem(call)
+        if problem is not None:
+            self._refuse(problem)
+        return problem is None
 
     def setup_experiment(self, start_time, stop_time=None, tolerance=None):
-        if not self._in_phase("fmi2SetupExperiment", INSTANTIATED):
+        if not self._in_phase("fmi2SetupExperiment"):
             return
         if math.isfinite(start_time):
             self._time_s = float(start_time)
@@ -170,17 +182,17 @@ class SpecSlave(Fmi2Slave):
             self._refuse(f"startTime = {start_time!r}: must be finite")
 
     def enter_initialization_mode(self):
-        if self._in_phase("fmi2EnterInitializationMode", INSTANTIATED):
+        if self._in_phase("fmi2EnterInitializationMode"):
             self._phase = INITIALIZATION_MODE
 
     def terminate(self):
-        if self._in_phase("fmi2Terminate", STEP_COMPLETE):
+        if self._in_phase("fmi2Terminate"):
             self._phase = TERMINATED
 
     def _step_problem(self, current_time, step_size) -> str | None:
         """Why a doStep from ``current_time`` of ``step_size`` is illegal now, or None."""
-        if self._phase != STEP_COMPLETE:
-            return f"fmi2DoStep is not allowed in state {self._phase} (allowed in: {STEP_COMPLETE})"
+        if (problem := self._phase_problem("fmi2DoStep")) is not None:
+            return problem
         if not (math.isfinite(step_size) and step_size > 0.0):
             return f"communicationStepSize = {step_size!r}: must be a finite number > 0"
         tolerance = TIME_MATCH_RTOL * max(1.0, abs(self._time_s))

@@ -1,6 +1,7 @@
 """Build the FMI guard (``fmu_src/guard/*.c``) of a pythonfmu FMU: its generated headers
 (``avr_guard_vars.h``, the variable table from the FMU's model description;
-``avr_slave_blob.h``, the slave's state-blob constants from ``fmu_src/fmi/avr_fmustate.py``)
+``avr_slave_blob.h``, the slave's state-blob constants from ``fmu_src/fmi/avr_fmustate.py``;
+``fmi_phase_rules.h``, the allowed states of each FMI function from ``fmu_src/fmi/phase_rules.py``)
 and the linux64 library."""
 from __future__ import annotations
 
@@ -8,16 +9,18 @@ import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from fmu_src.fmi import avr_fmustate
+from fmu_src.fmi import avr_fmustate, phase_rules
 from fmu_src.native.header import c_string
 from fmu_src.packing import compiler
 
 GUARD_DIR = Path(__file__).resolve().parent
 REPO_ROOT = GUARD_DIR.parents[1]
 #: The FMI guard's C sources (guard.h is included by each).
-GUARD_SOURCES = tuple(sorted(GUARD_DIR.glob("*.c")))
+#: The shared FMI layer (fmu_src/fmi/): the state-blob framing check the native FMU uses too.
+SHARED_FMI = Path(phase_rules.__file__).resolve().parent
+GUARD_SOURCES = (*sorted(GUARD_DIR.glob("*.c")), SHARED_FMI / "fmi_blob.c")
 #: What of the guard goes into the FMU's content GUID (the generated headers are made from the FMU's content).
-GUARD_TEXTS = (*GUARD_SOURCES, GUARD_DIR / "guard.h")
+GUARD_TEXTS = (*GUARD_SOURCES, GUARD_DIR / "guard.h", SHARED_FMI / "fmi_blob.h", SHARED_FMI / "phase_rules.py")
 FMI2_INCLUDE = GUARD_DIR.parent / "native" / "third_party" / "fmi2"
 #: Extra compiler flags of a sanitizer build (``python build.py --sanitize``): AddressSanitizer and
 #: UndefinedBehaviorSanitizer, every finding fatal, good stack traces.
@@ -114,9 +117,10 @@ def compile_guard(header: str, out_path: Path, sanitize: bool = False) -> None:
     with tempfile.TemporaryDirectory(prefix="avr_guard_") as tmp:
         (Path(tmp) / "avr_guard_vars.h").write_text(header)
         (Path(tmp) / "avr_slave_blob.h").write_text(slave_blob_header())
+        (Path(tmp) / "fmi_phase_rules.h").write_text(phase_rules.c_header())
         optimise = ["-O1", *SANITIZE_FLAGS] if sanitize else ["-O2"]
         cmd = [cc, "-shared", "-fPIC", *optimise, "-std=c11", "-Wall", "-Wextra", "-Werror",
                "-Wno-format-truncation", "-fvisibility=hidden", f"-ffile-prefix-map={tmp}=.",
-               f"-ffile-prefix-map={REPO_ROOT}=.", "-Wl,--build-id=none", f"-I{tmp}", f"-I{FMI2_INCLUDE}",
+               f"-ffile-prefix-map={REPO_ROOT}=.", "-Wl,--build-id=none", f"-I{tmp}", f"-I{SHARED_FMI}", f"-I{FMI2_INCLUDE}",
                *[str(p) for p in GUARD_SOURCES], "-o", str(out_path), "-ldl", "-lpthread", "-lm"]
         compiler.run(cmd, "the FMI guard")

@@ -38,7 +38,8 @@
  *
  * The variable table (AVR_VARS, the fixed parameters, the log categories) is generated
  * by build.py from the model description into avr_guard_vars.h.  Each FMI function's
- * allowed phases are one MASK_<function> in guard.h, checked by the one PROLOGUE macro.
+ * allowed phases are its FMI_MASK_<function> in fmi_phase_rules.h (generated from
+ * fmu_src/fmi/phase_rules.py), checked by the one PROLOGUE macro (guard.h).
  */
 #define _GNU_SOURCE
 #include <math.h>
@@ -56,38 +57,6 @@
 #define STEP_QUANTUM_TOL 1e-6
 #endif
 
-const char *const PHASE_NAMES[N_PHASES] = {"instantiated", "initializationMode", "stepComplete",
-                                           "stepFailed", "terminated", "fatal"};
-
-/* ---- logging -------------------------------------------------------------------- */
-static void vlog_to(const fmi2CallbackFunctions *cb, const char *name, fmi2Status status, const char *fmt,
-                    va_list args) {
-    char message[1024];
-    vsnprintf(message, sizeof message, fmt, args);
-    if (cb == NULL || cb->logger == NULL) return;
-    const char *category = status == fmi2Error ? "logStatusError" : status == fmi2Fatal ? "logStatusFatal" : "logAll";
-    /* the message is passed as an argument, never as the format string */
-    cb->logger(cb->componentEnvironment, name, status, category, "%s", message);
-}
-
-void guard_log(const Guard *g, fmi2Status status, const char *fmt, ...) {
-    if (g == NULL) return;
-    va_list args;
-    va_start(args, fmt);
-    vlog_to(&g->host, g->name, status, fmt, args);
-    va_end(args);
-}
-
-fmi2Status refuse(Guard *g, const char *call, const char *fmt, ...) {
-    char message[900];
-    va_list args;
-    va_start(args, fmt);
-    vsnprintf(message, sizeof message, fmt, args);
-    va_end(args);
-    guard_log(g, fmi2Error, "%s refused: %s", call, message);
-    return fmi2Error;
-}
-
 /* pythonfmu's messages reach the host through here: pythonfmu passes its text as the format
  * string and a NULL category when it has none; the host gets "%s" and a declared category. */
 static void inner_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Status status, fmi2String category,
@@ -100,36 +69,6 @@ static void inner_logger(fmi2ComponentEnvironment env, fmi2String name, fmi2Stat
     if (category == NULL || string_problem(category, MAX_CATEGORY_BYTES) != NULL) category = "logAll";
     if (message == NULL || string_problem(message, MAX_INNER_MESSAGE_BYTES) != NULL) message = "(unprintable message)";
     g->host.logger(g->host.componentEnvironment, g->name, status, category, "%s", message);
-}
-
-fmi2Status check_phase(Guard *g, const char *call, unsigned allowed) {
-    if (g == NULL || g->tag != GUARD_TAG) return fmi2Error;  /* not an instance: nothing to log to */
-    keep_python_thread_state();
-    if (g->phase == FATAL) {
-        guard_log(g, fmi2Fatal, "%s refused: the instance had a fatal error; only fmi2FreeInstance is allowed", call);
-        return fmi2Fatal;
-    }
-    if (allowed & BIT(g->phase)) return fmi2OK;
-    char list[256] = "";
-    for (int p = INSTANTIATED; p <= TERMINATED; ++p) {
-        if (!(allowed & BIT(p))) continue;
-        size_t used = strlen(list);
-        snprintf(list + used, sizeof list - used, "%s%s", used ? ", " : "", PHASE_NAMES[p]);
-    }
-    return refuse(g, call, "not allowed in state %s (allowed in: %s)", PHASE_NAMES[g->phase], list);
-}
-
-/* Records what the inner library answered: fmi2OK after the slave logged an fmi2Error is an
- * fmi2Error (the slave's way to refuse); a Fatal makes the instance unusable for good. */
-fmi2Status track(Guard *g, fmi2Status status) {
-    if (status == fmi2OK && g->inner_logged_error) status = fmi2Error;
-    g->inner_logged_error = 0;
-    if (status == fmi2Fatal && g->phase != FATAL) {
-        g->phase = FATAL;
-        guard_log(g, fmi2Fatal, "the Python slave failed (pythonfmu answered fmi2Fatal, its reason is logged above); "
-                  "only fmi2FreeInstance is allowed now");
-    }
-    return status;
 }
 
 /* ---- inquiry and life cycle ------------------------------------------------------------ */
@@ -334,8 +273,8 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boo
 }
 
 /* ---- not supported by this FMU (capability flags say so) ----------------------------------- */
-#define UNSUPPORTED(fn, why)   \
-    PROLOGUE(fn);              \
+#define UNSUPPORTED(fn, why)                  \
+    PROLOGUE_MASK(fn, FMI_ANY_PHASE);         \
     return refuse(g, call, "not supported (%s)", why)
 
 fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,

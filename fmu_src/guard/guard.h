@@ -1,5 +1,6 @@
 /*
- * Declarations shared by the FMI guard's translation units (fmi2_guard.c: the FMI
+ * Declarations shared by the FMI guard's translation units (guard_base.c: logging, refusals,
+ * the phase check and the fixed parameters' defaults, used by the others; fmi2_guard.c: the FMI
  * functions; guard_inner.c: pythonfmu's library and Python thread states; guard_state.c:
  * FMU states and their serialized form; guard_text.c: strings, URIs and number formatting).  The library is compiled with
  * -fvisibility=hidden: only the fmi2* functions (FMI2_Export) are exported.
@@ -10,12 +11,11 @@
 
 #include "fmi2Functions.h"
 #include "avr_guard_vars.h"
+#include "fmi_phase_rules.h"
 
 /* FMI 2.0 co-simulation states (section 4.2.4) plus FATAL: after a Fatal only
  * fmi2FreeInstance (and freeing FMU states) is allowed, and nothing reaches pythonfmu. */
 enum Phase { INSTANTIATED, INIT_MODE, STEP_COMPLETE, STEP_FAILED, TERMINATED, FATAL, N_PHASES };
-#define BIT(p) (1u << (p))
-#define ANY_LIVE (BIT(INSTANTIATED) | BIT(INIT_MODE) | BIT(STEP_COMPLETE) | BIT(STEP_FAILED) | BIT(TERMINATED))
 
 /* Bounds on strings the host hands us: a longer (or unterminated) one is refused. */
 #define MAX_NAME_BYTES 4096u     /* instanceName */
@@ -49,7 +49,7 @@ typedef struct {
     double fixed[AVR_N_FIXED];         /* the fixed parameters' values when it was saved */
 } GuardState;
 
-/* ---- fmi2_guard.c ---- */
+/* ---- guard_base.c ---- */
 extern const char *const PHASE_NAMES[N_PHASES];
 void guard_log(const Guard *g, fmi2Status status, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
 fmi2Status refuse(Guard *g, const char *call, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
@@ -90,52 +90,20 @@ char *resource_path(const char *uri, char *why, size_t why_size);
 /* Shortest decimal text that reads back as exactly x (e.g. "0.1", "1e+308", "nan"). */
 void format_double(double x, char *out, size_t size);
 
-/* ---- guard_state.c ---- */
+/* ---- guard_base.c: the fixed parameters ---- */
 void fixed_defaults(double fixed[AVR_N_FIXED]);
 /* Index of vr in AVR_FIXED_VRS, or -1 if it is not a fixed parameter. */
 int fixed_index(fmi2ValueReference vr);
 
-/* ---- where each FMI function may be called (FMI 2.0 section 4.2.4, co-simulation) ---- */
-#define GET_PHASES (BIT(INIT_MODE) | BIT(STEP_COMPLETE) | BIT(STEP_FAILED) | BIT(TERMINATED))
-#define SET_PHASES (BIT(INSTANTIATED) | BIT(INIT_MODE) | BIT(STEP_COMPLETE))
-#define STATUS_PHASES (BIT(STEP_COMPLETE) | BIT(STEP_FAILED) | BIT(TERMINATED))
-#define MASK_fmi2SetDebugLogging ANY_LIVE
-#define MASK_fmi2SetupExperiment BIT(INSTANTIATED)
-#define MASK_fmi2EnterInitializationMode BIT(INSTANTIATED)
-#define MASK_fmi2ExitInitializationMode BIT(INIT_MODE)
-#define MASK_fmi2Terminate (BIT(STEP_COMPLETE) | BIT(STEP_FAILED))
-#define MASK_fmi2Reset ANY_LIVE
-#define MASK_fmi2GetReal GET_PHASES
-#define MASK_fmi2GetInteger GET_PHASES
-#define MASK_fmi2GetBoolean GET_PHASES
-#define MASK_fmi2GetString GET_PHASES
-#define MASK_fmi2SetReal SET_PHASES
-#define MASK_fmi2SetInteger SET_PHASES
-#define MASK_fmi2SetBoolean SET_PHASES
-#define MASK_fmi2SetString SET_PHASES
-#define MASK_fmi2GetFMUstate ANY_LIVE
-#define MASK_fmi2SetFMUstate ANY_LIVE
-#define MASK_fmi2SerializedFMUstateSize ANY_LIVE
-#define MASK_fmi2SerializeFMUstate ANY_LIVE
-#define MASK_fmi2DeSerializeFMUstate ANY_LIVE
-#define MASK_fmi2DoStep BIT(STEP_COMPLETE)
-#define MASK_fmi2GetRealStatus STATUS_PHASES
-#define MASK_fmi2GetBooleanStatus STATUS_PHASES
-/* not supported by this FMU: refused in every phase, with the reason */
-#define MASK_fmi2GetDirectionalDerivative ANY_LIVE
-#define MASK_fmi2SetRealInputDerivatives ANY_LIVE
-#define MASK_fmi2GetRealOutputDerivatives ANY_LIVE
-#define MASK_fmi2CancelStep ANY_LIVE
-#define MASK_fmi2GetStatus ANY_LIVE
-#define MASK_fmi2GetIntegerStatus ANY_LIVE
-#define MASK_fmi2GetStringStatus ANY_LIVE
-
 /* The prologue of every FMI function that takes an instance: `g` and `call` are defined,
- * and the function returns at once unless c is a live instance in a phase where fn is allowed. */
-#define PROLOGUE(fn)                                                    \
+ * and the function returns at once unless c is a live instance in a phase where fn is allowed
+ * (FMI_MASK_<fn>, fmi_phase_rules.h, generated from fmu_src/fmi/phase_rules.py).  PROLOGUE_MASK:
+ * the same with another mask (a function this FMU does not provide: FMI_ANY_PHASE, then refused). */
+#define PROLOGUE(fn) PROLOGUE_MASK(fn, FMI_MASK_##fn)
+#define PROLOGUE_MASK(fn, mask)                                         \
     Guard *const g = (Guard *)c;                                        \
     static const char call[] = #fn;                                     \
     do {                                                                \
-        const fmi2Status allowed_ = check_phase(g, call, MASK_##fn);    \
+        const fmi2Status allowed_ = check_phase(g, call, (mask));       \
         if (allowed_ != fmi2OK) return allowed_;                        \
     } while (0)

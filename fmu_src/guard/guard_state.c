@@ -32,6 +32,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fmi_blob.h"
 #include "guard.h"
 
 #define STATE_MAGIC "AVRG"
@@ -50,17 +51,6 @@
 #define SLAVE_REFUSED_BYTES (sizeof(AVR_SLAVE_REFUSED) - 1)
 
 _Static_assert(sizeof(AVR_GUID) - 1 < GUID_FIELD, "the GUID must fit its field");
-
-/* ---- fixed parameters ---------------------------------------------------------------- */
-void fixed_defaults(double fixed[AVR_N_FIXED]) {
-    for (unsigned i = 0; i < AVR_N_FIXED; ++i) fixed[i] = AVR_VARS[AVR_FIXED_VRS[i]].start;
-}
-
-int fixed_index(fmi2ValueReference vr) {
-    for (unsigned i = 0; i < AVR_N_FIXED; ++i)
-        if (AVR_FIXED_VRS[i] == vr) return (int)i;
-    return -1;
-}
 
 /* fmi2Error naming every fixed parameter whose saved value differs from the instance's. */
 static fmi2Status check_fixed(Guard *g, const char *call, const double saved[AVR_N_FIXED]) {
@@ -81,24 +71,6 @@ static fmi2Status check_fixed(Guard *g, const char *call, const double saved[AVR
 }
 
 /* ---- CRC-64/XZ (ECMA-182 polynomial, reflected; check value of "123456789": 0x995DC9BBDF1939FA) -- */
-static uint64_t crc_table[256];
-static pthread_once_t crc_once = PTHREAD_ONCE_INIT;
-
-static void crc_init(void) {
-    for (unsigned i = 0; i < 256; ++i) {
-        uint64_t r = i;
-        for (int k = 0; k < 8; ++k) r = (r & 1u) ? (r >> 1) ^ 0xC96C5795D7870F42ull : r >> 1;
-        crc_table[i] = r;
-    }
-}
-
-static uint64_t crc64(const fmi2Byte *p, size_t n) {
-    pthread_once(&crc_once, crc_init);
-    uint64_t crc = ~0ull;
-    for (size_t i = 0; i < n; ++i) crc = crc_table[(crc ^ (uint8_t)p[i]) & 0xFFu] ^ (crc >> 8);
-    return ~crc;
-}
-
 /* ---- little-endian fields ------------------------------------------------------------- */
 static void put_u32(fmi2Byte *p, uint32_t x) { for (int i = 0; i < 4; ++i) p[i] = (fmi2Byte)((x >> (8 * i)) & 0xFFu); }
 static void put_u64(fmi2Byte *p, uint64_t x) { for (int i = 0; i < 8; ++i) p[i] = (fmi2Byte)((x >> (8 * i)) & 0xFFu); }
@@ -199,26 +171,17 @@ static fmi2Status slave_verdict(Guard *g, const char *call, fmi2FMUstate inner_s
 /* Checks a serialized state completely; fills meta (phase, time, fixed) and the inner blob. */
 static fmi2Status check_serialized(Guard *g, const char *call, const fmi2Byte *s, size_t size, GuardState *meta,
                                    const fmi2Byte **blob, uint64_t *blob_size) {
-    if (size < HEAD_BYTES + CRC_BYTES)
-        return refuse(g, call, "truncated: %zu bytes, a state of this FMU has at least %u", size,
-                      (unsigned)(HEAD_BYTES + CRC_BYTES));
-    if (memcmp(s, STATE_MAGIC, 4) != 0) return refuse(g, call, "not a serialized state of this FMU (bad magic)");
-    if (get_u32(s + 4) != STATE_VERSION)
-        return refuse(g, call, "format version %u; this FMU reads version %u", get_u32(s + 4), STATE_VERSION);
+    static const FmiBlobFormat format = {
+        .magic = STATE_MAGIC, .magic_bytes = 4, .version_at = 4, .version = STATE_VERSION,
+        .size_at = HEAD_BYTES - 8, .size_field_bytes = 8, .size_add = HEAD_BYTES + CRC_BYTES,
+        .crc_bytes = CRC_BYTES, .guid_at = 20, .guid_bytes = GUID_FIELD, .guid = AVR_GUID,
+        .min_bytes = HEAD_BYTES + CRC_BYTES};
+    char why[300];
+    if (fmi_blob_problem(&format, (const unsigned char *)s, size, why, sizeof why) != NULL)
+        return refuse(g, call, "%s", why);
     if (get_u32(s + 60) != AVR_N_FIXED)
         return refuse(g, call, "the state lists %u fixed parameters, this FMU has %u", get_u32(s + 60), AVR_N_FIXED);
     uint64_t n = get_u64(s + HEAD_BYTES - 8);
-    if (n > size || HEAD_BYTES + n + CRC_BYTES != size)
-        return refuse(g, call, "truncated or padded: %zu bytes, its header says %llu", size,
-                      (unsigned long long)(n > size ? n : HEAD_BYTES + n + CRC_BYTES));
-    if (crc64(s, size - CRC_BYTES) != get_u64(s + size - CRC_BYTES))
-        return refuse(g, call, "checksum mismatch: the state is corrupted");
-    char guid[GUID_FIELD + 1] = "", ours[GUID_FIELD] = "";
-    memcpy(guid, s + 20, GUID_FIELD);
-    memcpy(ours, AVR_GUID, sizeof(AVR_GUID) - 1);
-    if (memcmp(guid, ours, GUID_FIELD) != 0)
-        return refuse(g, call, "the state was saved by another FMU or another build of this one (GUID %s; this "
-                      "FMU is %s)", utf8_valid(guid, GUID_FIELD, NULL) ? guid : "not text", AVR_GUID);
     meta->time = get_f64(s + 8);
     uint32_t phase = get_u32(s + 16);
     if (!isfinite(meta->time)) return refuse(g, call, "the state's time is %g: must be finite", meta->time);
@@ -333,7 +296,7 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate state, fmi2Byte b
                       (size_t)(HEAD_BYTES + n + CRC_BYTES));
     write_header(bytes, gs, n);
     s = track(g, inner.fmi2SerializeFMUstate(g->inner, gs->inner, bytes + HEAD_BYTES, n));
-    if (s == fmi2OK) put_u64(bytes + size - CRC_BYTES, crc64(bytes, size - CRC_BYTES));
+    if (s == fmi2OK) put_u64(bytes + size - CRC_BYTES, fmi_crc64((const unsigned char *)bytes, size - CRC_BYTES));
     return s;
 }
 

@@ -1,87 +1,12 @@
 /*
- * The shapes the FMI layers (fmi2_api.c, fmi3_api.c, fmi3_refused.c) share, written once
- * for FMI 2.0 and FMI 3.0.  A layer defines, before including this header:
- *
- *   FMI_STATUS    its status type (fmi2Status, fmi3Status: both number OK..Fatal as AvrStatus)
- *   FMI_INSTANCE  its instance type (fmi2Component, fmi3Instance)
- *
- * and one MASK_<function> per FMI function: the phases it may be called in (its allowed-state
- * table).  Every function begins with the one prologue BEGIN(<function>), which defines `inst`
- * and `call` and refuses the call (logged, Error, nothing changed) outside those phases.
+ * The regulator's FMI functions whose shape both FMI versions share (fmi2_api.c, fmi3_api.c),
+ * over the shared FMI layer (fmu_src/fmi/fmi_layer.h: the prologue BEGIN, REFUSE, NOT_PROVIDED,
+ * the life-cycle shapes).  A layer defines FMI_STATUS and FMI_INSTANCE before including this.
  */
 #ifndef AVR_FMI_API_H
 #define AVR_FMI_API_H
 
-#include "avr_instance.h"
-
-#include <stdlib.h>
-
-#define FMI_ERROR ((FMI_STATUS)AVR_ERROR)
-
-/* Phase sets the masks of both versions use (FMI 2.0 section 4.2.4, FMI 3.0 section 4.3). */
-#define ANY AVR_ANY_PHASE
-#define GET_PHASES (AVR_INIT_MODE | AVR_STEP_MODE | AVR_TERMINATED)
-#define SET_PHASES (AVR_INSTANTIATED | AVR_INIT_MODE | AVR_STEP_MODE)
-
-/* The one prologue: the instance, the call's name, and its phase check against `mask`. */
-#define BEGIN_MASK(fn, mask)                                                \
-    AvrInstance *inst = (AvrInstance *)instance;                            \
-    static const char call[] = #fn;                                         \
-    if (avr_allowed(inst, call, mask) != AVR_OK) return FMI_ERROR;
-#define BEGIN(fn) BEGIN_MASK(fn, MASK_##fn)
-
-#define REFUSE(...) return (FMI_STATUS)avr_refuse(inst, call, __VA_ARGS__)
-
-/* Parameters a refusing function never reads (GCC and Clang; other compilers may warn). */
-#if defined(__GNUC__)
-#define AVR_UNUSED_PARAMETERS_BEGIN _Pragma("GCC diagnostic push") _Pragma("GCC diagnostic ignored \"-Wunused-parameter\"")
-#define AVR_UNUSED_PARAMETERS_END _Pragma("GCC diagnostic pop")
-#else
-#define AVR_UNUSED_PARAMETERS_BEGIN
-#define AVR_UNUSED_PARAMETERS_END
-#endif
-
-/* A function this FMU does not provide (the model description says so): refused in every phase
- * (mask 0) with the reason logged.  NOT_PROVIDED0 for the functions without further parameters. */
-#define NOT_PROVIDED(fn, ...)                                       \
-    AVR_UNUSED_PARAMETERS_BEGIN                                     \
-    FMI_STATUS fn(FMI_INSTANCE instance, __VA_ARGS__) {             \
-        BEGIN_MASK(fn, 0u)                                          \
-        return FMI_ERROR;                                           \
-    }                                                               \
-    AVR_UNUSED_PARAMETERS_END
-#define NOT_PROVIDED0(fn)                                           \
-    FMI_STATUS fn(FMI_INSTANCE instance) {                          \
-        BEGIN_MASK(fn, 0u)                                          \
-        return FMI_ERROR;                                           \
-    }
-
-/* Life cycle without arguments, the same in both versions. */
-#define FREE_INSTANCE(fn)                                           \
-    void fn(FMI_INSTANCE instance) {                                \
-        AvrInstance *inst = (AvrInstance *)instance;                \
-        if (inst == NULL) return;                                   \
-        void *callbacks = inst->env;                                \
-        avr_free_instance(inst);                                    \
-        free(callbacks);                                            \
-    }
-#define EXIT_INITIALIZATION_MODE(fn)                                \
-    FMI_STATUS fn(FMI_INSTANCE instance) {                          \
-        BEGIN(fn)                                                   \
-        return (FMI_STATUS)avr_exit_init(inst, call);               \
-    }
-#define TERMINATE(fn)                                               \
-    FMI_STATUS fn(FMI_INSTANCE instance) {                          \
-        BEGIN(fn)                                                   \
-        inst->phase = AVR_TERMINATED;                               \
-        return (FMI_STATUS)AVR_OK;                                  \
-    }
-#define RESET(fn)                                                   \
-    FMI_STATUS fn(FMI_INSTANCE instance) {                          \
-        BEGIN(fn)                                                   \
-        avr_reset(inst);                                            \
-        return (FMI_STATUS)AVR_OK;                                  \
-    }
+#include "fmi_layer.h"
 
 /* The six FMU-state functions over avr_state.c; STATE is the version's FMU-state type, BYTE
  * its byte type, and the names its spellings (FMI 2.0 "FMUstate", FMI 3.0 "FMUState"). */

@@ -2,8 +2,9 @@
  * One FMU instance, independent of the FMI version: the variable values, the FMI phase,
  * the networks and the learned state, and every check the FMI layers share (variable
  * legality and ranges, step arguments, FMU state blobs).  fmi2_api.c and fmi3_api.c
- * are thin layers over this: each holds the allowed-phase mask of each of its functions
- * and one prologue macro, and converts its types to and from the doubles kept here.
+ * are thin layers over this (through fmi_model.h and the shared fmu_src/fmi/fmi_layer.h, whose
+ * prologue checks each function's generated FMI_MASK_<function>), converting their types to and
+ * from the doubles kept here.
  *
  * Every refused call logs a message naming the call, the variable and its allowed range,
  * returns AVR_ERROR and changes nothing.
@@ -16,17 +17,20 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "fmi_phase_rules.h"
+
 typedef enum { AVR_OK = 0, AVR_WARNING = 1, AVR_DISCARD = 2, AVR_ERROR = 3, AVR_FATAL = 4 } AvrStatus;
 
-/* Phases as bits, so that a function's allowed phases are one mask. */
+/* Phases as the bits of fmi_phase_rules.h, so that a function's allowed phases are one mask
+ * (its FMI_MASK_<function>).  The bit is stored in FMU-state blobs.  No stepFailed: a refused
+ * doStep changes nothing. */
 typedef enum {
-    AVR_INSTANTIATED = 1u << 0,
-    AVR_INIT_MODE = 1u << 1,
-    AVR_STEP_MODE = 1u << 2, /* FMI 2.0 stepComplete, FMI 3.0 Step Mode */
-    AVR_TERMINATED = 1u << 3,
+    AVR_INSTANTIATED = FMI_INSTANTIATED,
+    AVR_INIT_MODE = FMI_INIT_MODE,
+    AVR_STEP_MODE = FMI_STEP_MODE, /* FMI 2.0 stepComplete, FMI 3.0 Step Mode */
+    AVR_TERMINATED = FMI_TERMINATED,
 } AvrPhase;
-#define AVR_ANY_PHASE (AVR_INSTANTIATED | AVR_INIT_MODE | AVR_STEP_MODE | AVR_TERMINATED)
-#define AVR_N_PHASES 4
+#define AVR_N_PHASES 4 /* the bits above: 0 .. 3 */
 
 /* Relative tolerance on "doStep starts where the last step ended" (t0 + k h vs t + h differ by ulps). */
 #define AVR_TIME_MATCH_RTOL 1e-9

@@ -29,6 +29,7 @@
 #include <string.h>
 
 #include "avr_guid.h"
+#include "fmi_blob.h"
 
 #define BLOB_MAGIC "AVRNATIV"
 #define BLOB_VERSION 2u
@@ -39,18 +40,6 @@
 #define N_STRIDE_DOUBLES 6
 
 /* zlib's CRC-32 (reflected polynomial 0xEDB88320), table built on the stack per call. */
-static uint32_t crc32(const unsigned char *p, size_t n) {
-    uint32_t table[256];
-    for (uint32_t i = 0; i < 256; ++i) {
-        uint32_t c = i;
-        for (int k = 0; k < 8; ++k) c = (c & 1u) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
-        table[i] = c;
-    }
-    uint32_t crc = 0xFFFFFFFFu;
-    for (size_t i = 0; i < n; ++i) crc = table[(crc ^ p[i]) & 0xFFu] ^ (crc >> 8);
-    return crc ^ 0xFFFFFFFFu;
-}
-
 static void put_u32(unsigned char *p, uint32_t x) {
     for (int i = 0; i < 4; ++i) p[i] = (unsigned char)(x >> (8 * i));
 }
@@ -123,7 +112,7 @@ static AvrBlob *state_get(const AvrInstance *inst, AvrBlob *reuse) {
     for (int vr = 0; vr < AVR_N_VARS; ++vr) put_f64(p + BLOB_HEADER + 8 * vr, inst->values[vr]);
     unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
     for (size_t i = 0; i < (size_t)AVR_N_ROWS * n; ++i) put_f64(w + 8 * i, inst->core.weights[i]);
-    put_u32(p + size - 4, crc32(p, size - 4));
+    put_u32(p + size - 4, fmi_crc32(p, size - 4));
     return blob;
 }
 
@@ -134,21 +123,16 @@ static int finite_doubles(const unsigned char *p, size_t count) {
     return 1;
 }
 
-/* The header's framing: magic, version, size, checksum, GUID, variable count. */
+/* The header's framing (fmi_blob.c: magic, version, size, checksum, GUID), then the variable count. */
 static AvrStatus check_frame(const AvrInstance *inst, const char *call, const unsigned char *p, size_t size) {
-    if (p == NULL || size < blob_size(0) || memcmp(p, BLOB_MAGIC, 8) != 0)
-        return avr_refuse(inst, call, "not a serialized state of this FMU (%zu bytes, bad header)", size);
-    if (get_u32(p + 8) != BLOB_VERSION)
-        return avr_refuse(inst, call, "state format version %u, this FMU reads %u (version 1 states predate the "
-                          "stride-averaged lateral/roll learning and cannot be continued)", (unsigned)get_u32(p + 8),
-                          BLOB_VERSION);
-    if (get_u32(p + 12) != size) return avr_refuse(inst, call, "state is %zu bytes, its header says %u", size,
-                                                   (unsigned)get_u32(p + 12));
-    if (crc32(p, size - 4) != get_u32(p + size - 4)) return avr_refuse(inst, call, "state checksum mismatch (corrupted)");
-    char guid[BLOB_GUID_BYTES + 1] = "";
-    memcpy(guid, p + 16, BLOB_GUID_BYTES);
-    if (strcmp(guid, AVR_GUID) != 0)
-        return avr_refuse(inst, call, "state belongs to the FMU with GUID %s, not to this one (%s)", guid, AVR_GUID);
+    static const FmiBlobFormat format = {
+        .magic = BLOB_MAGIC, .magic_bytes = 8, .version_at = 8, .version = BLOB_VERSION,
+        .version_note = "(version 1 states predate the stride-averaged lateral/roll learning and cannot be continued)",
+        .size_at = 12, .size_field_bytes = 4, .size_add = 0, .crc_bytes = 4,
+        .guid_at = 16, .guid_bytes = BLOB_GUID_BYTES, .guid = AVR_GUID,
+        .min_bytes = BLOB_HEADER + 8u * AVR_N_VARS + 4u}; /* blob_size(0) */
+    char why[400];
+    if (fmi_blob_problem(&format, p, size, why, sizeof why) != NULL) return avr_refuse(inst, call, "%s", why);
     if (get_u32(p + 64) != AVR_N_VARS)
         return avr_refuse(inst, call, "state has %u variables, this FMU %d", (unsigned)get_u32(p + 64), AVR_N_VARS);
     return AVR_OK;

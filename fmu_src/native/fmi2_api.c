@@ -1,8 +1,10 @@
 /*
  * FMI 2.0 co-simulation API of the native AdaptiveVelocityRegulator FMU: a thin layer
  * over the version-independent instance (avr_instance.c).  Every function starts with
- * the one prologue BEGIN (avr_fmi_api.h), which refuses a call outside the phases of
- * its mask below; the shapes both FMI versions share are written once in avr_fmi_api.h.
+ * the one prologue BEGIN (fmu_src/fmi/fmi_layer.h), which refuses a call outside the phases
+ * of its FMI_MASK_<function> (fmi_phase_rules.h, generated from fmu_src/fmi/phase_rules.py);
+ * the shapes both FMI versions share are written once in avr_fmi_api.h and fmi_layer.h, the
+ * functions no native FMU provides in fmi2_common.c.
  */
 #include "avr_instance.h" /* first: see avr_types.h */
 
@@ -15,77 +17,28 @@
 #define FMI_INSTANCE fmi2Component
 #include "avr_fmi_api.h"
 
-/* ---- allowed phases per function (FMI 2.0.4 section 4.2.4; stepFailed/stepCanceled never
- *      occur: a refused doStep changes nothing, and steps are never asynchronous) ---------- */
-#define MASK_fmi2SetDebugLogging ANY
-#define MASK_fmi2SetupExperiment AVR_INSTANTIATED
-#define MASK_fmi2EnterInitializationMode AVR_INSTANTIATED
-#define MASK_fmi2ExitInitializationMode AVR_INIT_MODE
-#define MASK_fmi2Terminate AVR_STEP_MODE
-#define MASK_fmi2Reset ANY
-#define MASK_fmi2GetReal GET_PHASES
-#define MASK_fmi2GetInteger GET_PHASES
-#define MASK_fmi2GetBoolean GET_PHASES
-#define MASK_fmi2GetString GET_PHASES
-#define MASK_fmi2SetReal SET_PHASES
-#define MASK_fmi2SetInteger SET_PHASES
-#define MASK_fmi2SetBoolean SET_PHASES
-#define MASK_fmi2SetString SET_PHASES
-#define MASK_fmi2GetFMUstate ANY
-#define MASK_fmi2SetFMUstate ANY
-#define MASK_fmi2FreeFMUstate ANY
-#define MASK_fmi2SerializedFMUstateSize ANY
-#define MASK_fmi2SerializeFMUstate ANY
-#define MASK_fmi2DeSerializeFMUstate ANY
-#define MASK_fmi2DoStep AVR_STEP_MODE
-#define MASK_fmi2GetRealStatus (AVR_STEP_MODE | AVR_TERMINATED)
-#define MASK_fmi2GetBooleanStatus (AVR_STEP_MODE | AVR_TERMINATED)
-/* Not provided, refused in every phase (NOT_PROVIDED below): fmi2GetDirectionalDerivative (not declared),
- * fmi2SetRealInputDerivatives (canInterpolateInputs = false), fmi2GetRealOutputDerivatives
- * (maxOutputDerivativeOrder = 0), fmi2CancelStep (canRunAsynchronuously = false), fmi2GetStatus (never
- * fmi2Pending), fmi2GetIntegerStatus, fmi2GetStringStatus (no such status). */
-
-static const char *const PHASE_NAMES[] = {"instantiated", "initializationMode", "stepComplete", "terminated"};
-
-static void log_fmi2(const AvrInstance *inst, AvrStatus status, const char *category, const char *message) {
-    const fmi2CallbackFunctions *cb = (const fmi2CallbackFunctions *)inst->env;
-    /* the message goes as an argument, never as the format string */
-    if (cb != NULL && cb->logger != NULL)
-        cb->logger(cb->componentEnvironment, inst->name, (fmi2Status)status, category, "%s", message);
-}
-
-/* ---- inquiry, creation, life cycle ---------------------------------------------------------- */
-const char *fmi2GetTypesPlatform(void) { return fmi2TypesPlatform; }
-const char *fmi2GetVersion(void) { return fmi2Version; }
+/* ---- creation, life cycle (the inquiry functions: fmi2_common.c) ------------------------------ */
 
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation, const fmi2CallbackFunctions *functions,
                               fmi2Boolean visible, fmi2Boolean loggingOn) {
     (void)fmuResourceLocation; /* the FMU needs no resources */
     (void)visible;
-    if (functions == NULL) return NULL;
-    fmi2CallbackFunctions *cb = malloc(sizeof *cb);
+    fmi2CallbackFunctions *cb = fmi2_callbacks(functions);
     if (cb == NULL) return NULL;
-    *cb = *functions;
-    AvrInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = log_fmi2};
+    AvrInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = fmi2_log};
     AvrInstance *inst = NULL;
     if (fmuType != fmi2CoSimulation)
         avr_refuse(&probe, "fmi2Instantiate", "this FMU supports co-simulation only");
     else
-        inst = avr_instantiate(instanceName, fmuGUID, cb, log_fmi2, loggingOn == fmi2True, PHASE_NAMES);
+        inst = avr_instantiate(instanceName, fmuGUID, cb, fmi2_log, loggingOn == fmi2True, FMI2_PHASE_NAMES);
     if (inst == NULL) free(cb);
     return inst;
 }
 
 FREE_INSTANCE(fmi2FreeInstance)
 
-fmi2Status fmi2SetDebugLogging(fmi2Component instance, fmi2Boolean loggingOn, size_t nCategories,
-                               const fmi2String categories[]) {
-    BEGIN(fmi2SetDebugLogging)
-    if (avr_check_categories(inst, call, nCategories, categories) != AVR_OK) return fmi2Error;
-    inst->logging_on = loggingOn == fmi2True;
-    return fmi2OK;
-}
+SET_DEBUG_LOGGING(fmi2SetDebugLogging, fmi2Boolean, fmi2String)
 
 fmi2Status fmi2SetupExperiment(fmi2Component instance, fmi2Boolean toleranceDefined, fmi2Real tolerance,
                                fmi2Real startTime, fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
@@ -150,38 +103,3 @@ fmi2Status fmi2SetString(fmi2Component instance, const fmi2ValueReference vr[], 
 /* ---- FMU state (avr_state.c) --------------------------------------------------------------------- */
 FMUSTATE_FUNCTIONS(fmi2FMUstate, fmi2Byte, fmi2GetFMUstate, fmi2SetFMUstate, fmi2FreeFMUstate,
                    fmi2SerializedFMUstateSize, fmi2SerializeFMUstate, fmi2DeSerializeFMUstate)
-
-/* ---- not provided (the model description says so) ------------------------------------------------ */
-NOT_PROVIDED(fmi2GetDirectionalDerivative, const fmi2ValueReference vUnknown_ref[], size_t nUnknown,
-             const fmi2ValueReference vKnown_ref[], size_t nKnown, const fmi2Real dvKnown[], fmi2Real dvUnknown[])
-NOT_PROVIDED(fmi2SetRealInputDerivatives, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer order[],
-             const fmi2Real value[])
-NOT_PROVIDED(fmi2GetRealOutputDerivatives, const fmi2ValueReference vr[], size_t nvr, const fmi2Integer order[],
-             fmi2Real value[])
-NOT_PROVIDED0(fmi2CancelStep)
-NOT_PROVIDED(fmi2GetStatus, const fmi2StatusKind s, fmi2Status *value)
-NOT_PROVIDED(fmi2GetIntegerStatus, const fmi2StatusKind s, fmi2Integer *value)
-NOT_PROVIDED(fmi2GetStringStatus, const fmi2StatusKind s, fmi2String *value)
-
-/* ---- stepping and status ----------------------------------------------------------------------- */
-fmi2Status fmi2DoStep(fmi2Component instance, fmi2Real currentCommunicationPoint, fmi2Real communicationStepSize,
-                      fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
-    BEGIN(fmi2DoStep)
-    (void)noSetFMUStatePriorToCurrentPoint;
-    return (fmi2Status)avr_do_step(inst, call, currentCommunicationPoint, communicationStepSize);
-}
-
-fmi2Status fmi2GetRealStatus(fmi2Component instance, const fmi2StatusKind s, fmi2Real *value) {
-    BEGIN(fmi2GetRealStatus)
-    if (s != fmi2LastSuccessfulTime || value == NULL) REFUSE("only fmi2LastSuccessfulTime is provided");
-    *value = inst->time;
-    return fmi2OK;
-}
-
-fmi2Status fmi2GetBooleanStatus(fmi2Component instance, const fmi2StatusKind s, fmi2Boolean *value) {
-    BEGIN(fmi2GetBooleanStatus)
-    if (s != fmi2Terminated || value == NULL) REFUSE("only fmi2Terminated is provided");
-    *value = fmi2False; /* the regulator never asks to end the simulation */
-    return fmi2OK;
-}
-

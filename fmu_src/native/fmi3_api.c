@@ -21,44 +21,7 @@
 
 typedef char fmi3Boolean_is_one_byte[sizeof(fmi3Boolean) == 1 ? 1 : -1];
 
-/* ---- allowed phases per function (FMI 3.0 section 4.3, co-simulation without event mode) ------ */
-#define MASK_fmi3SetDebugLogging ANY
-#define MASK_fmi3EnterInitializationMode AVR_INSTANTIATED
-#define MASK_fmi3ExitInitializationMode AVR_INIT_MODE
-#define MASK_fmi3Terminate AVR_STEP_MODE
-#define MASK_fmi3Reset ANY
-#define MASK_fmi3GetFloat64 GET_PHASES
-#define MASK_fmi3GetInt32 GET_PHASES
-#define MASK_fmi3GetBoolean GET_PHASES
-#define MASK_fmi3SetFloat64 SET_PHASES
-#define MASK_fmi3SetInt32 SET_PHASES
-#define MASK_fmi3SetBoolean SET_PHASES
-#define MASK_fmi3GetFMUState ANY
-#define MASK_fmi3SetFMUState ANY
-#define MASK_fmi3FreeFMUState ANY
-#define MASK_fmi3SerializedFMUStateSize ANY
-#define MASK_fmi3SerializeFMUState ANY
-#define MASK_fmi3DeserializeFMUState ANY
-#define MASK_fmi3DoStep AVR_STEP_MODE
-/* fmi3_refused.c: getters and setters of types this FMU has no variables of (GET_PHASES, SET_PHASES),
- * and the functions not provided at all (event mode, clocks, configuration mode, ME, SE, derivatives:
- * refused in every phase). */
-
-static const char *const PHASE_NAMES[] = {"Instantiated", "InitializationMode", "StepMode", "Terminated"};
-
-typedef struct {
-    fmi3InstanceEnvironment env;
-    fmi3LogMessageCallback log;
-} Callbacks;
-
-static void log_fmi3(const AvrInstance *inst, AvrStatus status, const char *category, const char *message) {
-    const Callbacks *cb = (const Callbacks *)inst->env;
-    if (cb != NULL && cb->log != NULL) cb->log(cb->env, (fmi3Status)status, category, message);
-}
-
-/* ---- inquiry, creation, life cycle ------------------------------------------------------------ */
-const char *fmi3GetVersion(void) { return fmi3Version; }
-
+/* ---- creation, life cycle (the version, ME and SE instantiation: fmi3_common.c) --------------- */
 fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String instantiationToken,
                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
                                          fmi3Boolean eventModeUsed, fmi3Boolean earlyReturnAllowed,
@@ -69,52 +32,22 @@ fmi3Instance fmi3InstantiateCoSimulation(fmi3String instanceName, fmi3String ins
                                          fmi3IntermediateUpdateCallback intermediateUpdate) {
     (void)resourcePath, (void)visible, (void)earlyReturnAllowed, (void)requiredIntermediateVariables;
     (void)intermediateUpdate; /* never called: no intermediate update */
-    Callbacks *cb = malloc(sizeof *cb);
+    FmiCallbacks3 *cb = fmi3_callbacks(instanceEnvironment, logMessage);
     if (cb == NULL) return NULL;
-    cb->env = instanceEnvironment;
-    cb->log = logMessage;
-    AvrInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = log_fmi3};
+    AvrInstance probe = {.name = (char *)(instanceName ? instanceName : ""), .env = cb, .log = fmi3_log};
     AvrInstance *inst = NULL;
-    if (eventModeUsed)
-        avr_refuse(&probe, "fmi3InstantiateCoSimulation", "eventModeUsed: this FMU has no event mode");
-    else if (nRequiredIntermediateVariables > 0)
-        avr_refuse(&probe, "fmi3InstantiateCoSimulation", "this FMU provides no intermediate variables");
+    const char *problem = fmi3_cosim_problem(eventModeUsed, nRequiredIntermediateVariables);
+    if (problem != NULL)
+        avr_refuse(&probe, "fmi3InstantiateCoSimulation", "%s", problem);
     else
-        inst = avr_instantiate(instanceName, instantiationToken, cb, log_fmi3, loggingOn, PHASE_NAMES);
+        inst = avr_instantiate(instanceName, instantiationToken, cb, fmi3_log, loggingOn, FMI3_PHASE_NAMES);
     if (inst == NULL) free(cb);
     return inst;
 }
 
-fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
-                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
-                                          fmi3InstanceEnvironment instanceEnvironment,
-                                          fmi3LogMessageCallback logMessage) {
-    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn;
-    if (logMessage != NULL)
-        logMessage(instanceEnvironment, fmi3Error, "logStatusError", "this FMU supports co-simulation only");
-    return NULL;
-}
-
-fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
-                                               fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
-                                               fmi3InstanceEnvironment instanceEnvironment,
-                                               fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
-                                               fmi3LockPreemptionCallback lockPreemption,
-                                               fmi3UnlockPreemptionCallback unlockPreemption) {
-    (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
-    return fmi3InstantiateModelExchange(instanceName, instantiationToken, resourcePath, visible, loggingOn,
-                                        instanceEnvironment, logMessage);
-}
-
 FREE_INSTANCE(fmi3FreeInstance)
 
-fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn, size_t nCategories,
-                               const fmi3String categories[]) {
-    BEGIN(fmi3SetDebugLogging)
-    if (avr_check_categories(inst, call, nCategories, categories) != AVR_OK) return fmi3Error;
-    inst->logging_on = loggingOn;
-    return fmi3OK;
-}
+SET_DEBUG_LOGGING(fmi3SetDebugLogging, fmi3Boolean, fmi3String)
 
 fmi3Status fmi3EnterInitializationMode(fmi3Instance instance, fmi3Boolean toleranceDefined, fmi3Float64 tolerance,
                                        fmi3Float64 startTime, fmi3Boolean stopTimeDefined, fmi3Float64 stopTime) {
@@ -185,20 +118,3 @@ SETTER(fmi3SetBoolean, fmi3Boolean, AVR_BOOLEAN, READ_BYTE)
 /* ---- FMU state (avr_state.c) --------------------------------------------------------------------- */
 FMUSTATE_FUNCTIONS(fmi3FMUState, fmi3Byte, fmi3GetFMUState, fmi3SetFMUState, fmi3FreeFMUState,
                    fmi3SerializedFMUStateSize, fmi3SerializeFMUState, fmi3DeserializeFMUState)
-
-/* ---- stepping ------------------------------------------------------------------------------------ */
-fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint,
-                      fmi3Float64 communicationStepSize, fmi3Boolean noSetFMUStatePriorToCurrentPoint,
-                      fmi3Boolean *eventHandlingNeeded, fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn,
-                      fmi3Float64 *lastSuccessfulTime) {
-    BEGIN(fmi3DoStep)
-    (void)noSetFMUStatePriorToCurrentPoint;
-    if (eventHandlingNeeded == NULL || terminateSimulation == NULL || earlyReturn == NULL || lastSuccessfulTime == NULL)
-        REFUSE("NULL output argument");
-    if (avr_do_step(inst, call, currentCommunicationPoint, communicationStepSize) != AVR_OK) return fmi3Error;
-    *eventHandlingNeeded = fmi3False;
-    *terminateSimulation = fmi3False;
-    *earlyReturn = fmi3False;
-    *lastSuccessfulTime = inst->time;
-    return fmi3OK;
-}

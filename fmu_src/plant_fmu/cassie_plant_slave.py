@@ -39,7 +39,7 @@ from pythonfmu.enums import Fmi2Status
 
 from fmu_src.core.avr_errors import StateError
 from fmu_src.fmi import avr_fmustate
-from fmu_src.fmi.avr_slavebase import INITIALIZATION_MODE, STEP_COMPLETE, SpecSlave
+from fmu_src.fmi.avr_slavebase import STEP_COMPLETE, SpecSlave
 from fmu_src.plant_fmu import fmu_core
 
 #: The folder in ``resources/`` that holds the plant package and the model files.
@@ -70,7 +70,7 @@ class CassiePlant(SpecSlave):
     # -- life cycle --------------------------------------------------------------------
     def exit_initialization_mode(self):
         """Build the walker; on invalid parameters log every problem and stay in initialization mode."""
-        if not self._in_phase("fmi2ExitInitializationMode", INITIALIZATION_MODE):
+        if not self._in_phase("fmi2ExitInitializationMode"):
             return
         try:
             walker = self._start_walker()

@@ -53,7 +53,7 @@ from fmu_src.core.avr_errors import AvrError, StateError
 from fmu_src.core.avr_network import build_networks
 from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams
 from fmu_src.core.avr_regulator import initial_state, step
-from fmu_src.fmi.avr_slavebase import INITIALIZATION_MODE, STEP_COMPLETE, SpecSlave
+from fmu_src.fmi.avr_slavebase import STEP_COMPLETE, SpecSlave
 from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
 from fmu_src.core.avr_statebytes import state_from_bytes, state_to_bytes
 
@@ -98,7 +98,7 @@ class AdaptiveVelocityRegulator(SpecSlave):
 
     # -- FMI life cycle -----------------------------------------------------------------
     def exit_initialization_mode(self):
-        self._in_phase("fmi2ExitInitializationMode", INITIALIZATION_MODE)
+        self._in_phase("fmi2ExitInitializationMode")
         self._params = self._make_params()
         if self._state is None:  # not already restored from an FMU state blob
             self._networks = build_networks(self._params)

@@ -8,16 +8,22 @@ call returns OK and no illegal call returns OK.
 """
 import json
 import math
+import os
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+from fmu_src.fmi import phase_rules
 
-from support.native_support import DRIVERS, H
+from support.native_support import DRIVERS, H, REGULATOR_FMUS
+from support.paths import SUPPORT_DIR
+
+ERROR = 3
 
 SPECS = {s.name: s for s in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)}
 LIVE = {"instantiated", "initializationMode", "stepComplete", "stepFailed", "terminated"}
@@ -182,3 +188,117 @@ def test_random_call_sequences_never_crash_and_illegal_calls_are_refused(driver,
         else:
             assert answer["status"] != 0, f"FMI {fmi}: illegal call {call} answered OK in phase {model.phase}"
     assert proc.poll() is None
+
+
+# ---- every function in every state, against the one table of phase rules ---------------------
+#: Functions the FMUs do not provide whatever their state (their model descriptions say so):
+#: refused with Error in every state.  The FMU-state functions of an FMU whose model description
+#: says canGetAndSetFMUstate="false" join them (_not_provided).
+NOT_PROVIDED = {
+    2: {"fmi2GetDirectionalDerivative", "fmi2SetRealInputDerivatives", "fmi2GetRealOutputDerivatives",
+        "fmi2CancelStep", "fmi2GetStatus", "fmi2GetIntegerStatus", "fmi2GetStringStatus"},
+    3: {"fmi3EnterConfigurationMode", "fmi3ExitConfigurationMode", "fmi3GetClock", "fmi3SetClock",
+        "fmi3GetNumberOfVariableDependencies", "fmi3GetVariableDependencies", "fmi3GetDirectionalDerivative",
+        "fmi3GetAdjointDerivative", "fmi3GetOutputDerivatives", "fmi3EnterEventMode", "fmi3EnterStepMode"},
+}
+STATE_FUNCTIONS = {2: {"fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate", "fmi2SerializedFMUstateSize",
+                       "fmi2SerializeFMUstate", "fmi2DeSerializeFMUstate"},
+                   3: {"fmi3GetFMUState", "fmi3SetFMUState", "fmi3FreeFMUState", "fmi3SerializedFMUStateSize",
+                       "fmi3SerializeFMUState", "fmi3DeserializeFMUState"}}
+PHASE_MATRIX = SUPPORT_DIR / "fmi" / "phase_matrix.py"
+COMMAND_SOURCES = ("command-source-fmi2", "command-source-fmi3")
+
+
+def _not_provided(fmu_dir, fmi: int) -> set:
+    from fmpy import read_model_description
+
+    cs = read_model_description(fmu_dir).coSimulation
+    assert not cs.providesDirectionalDerivative and not cs.canInterpolateInputs
+    assert not (cs.maxOutputDerivativeOrder or 0)
+    return NOT_PROVIDED[fmi] | (set() if cs.canGetAndSetFMUstate else STATE_FUNCTIONS[fmi])
+
+
+@pytest.fixture(scope="module", params=[*REGULATOR_FMUS, *COMMAND_SOURCES])
+def any_fmu(request, tmp_path_factory, build_module, unzip):
+    """(FMI version, extracted folder) of each FMU build.py builds but the plant: the pythonfmu
+    regulator (behind its C guard), the native regulators and the CommandSource FMUs."""
+    kind, fmi = request.param.rsplit("-fmi", 1)
+    fmi = int(fmi)
+    if kind == "python":
+        return fmi, request.getfixturevalue("fmu_dir")
+    if os.environ.get("AVR_TEST_FMU"):
+        pytest.skip("AVR_TEST_FMU names the one FMU this run tests")
+    out = tmp_path_factory.mktemp(request.param)
+    fmu = build_module.build_command_source(fmi, out) if kind == "command-source" else request.getfixturevalue(
+        "native_fmus")[fmi]
+    return fmi, unzip(fmu, out / "unzipped")
+
+
+def test_every_function_in_every_state_follows_the_phase_rules(any_fmu):
+    """Every FMI function the FMU exports, called in every state it can be brought to (real FMU,
+    ctypes, its own process): refused for its state exactly where fmu_src/fmi/phase_rules.py's
+    table says it is not allowed, never answering OK there, and a function the FMU does not
+    provide refused (Error) in every state."""
+    fmi, fmu_dir = any_fmu
+    proc = subprocess.run([sys.executable, str(PHASE_MATRIX), str(fmu_dir), str(fmi)], capture_output=True,
+                          text=True, timeout=600)
+    assert proc.returncode == 0, f"the host process died (exit {proc.returncode}):\n{proc.stderr[-3000:]}"
+    matrix = json.loads(proc.stdout.strip().splitlines()[-1])
+    table = phase_rules.FMI2_ALLOWED if fmi == 2 else phase_rules.FMI3_ALLOWED
+    not_provided = _not_provided(fmu_dir, fmi)
+    assert set(table) <= set(matrix), f"functions of the table the FMU does not export: {set(table) - set(matrix)}"
+    wrong = []
+    for name, by_state in matrix.items():
+        for state, answer in by_state.items():
+            if name in not_provided or name not in table:
+                if answer["status"] != ERROR:
+                    wrong.append(f"{name} in {state}: {answer['status']}, not provided: expected Error")
+            elif answer["phase"] != (state not in table[name]):
+                wrong.append(f"{name} in {state}: refused for its state {answer['phase']}, the table says allowed "
+                             f"{state in table[name]} ({answer['messages']})")
+            elif answer["phase"] and answer["status"] != ERROR:
+                wrong.append(f"{name} in {state}: refused for its state but answered {answer['status']}")
+    assert not wrong, "\n".join(wrong)
+
+
+# ---- the pythonfmu slaves take their phases from the same table ----------------------------------
+SLAVE_CALLS = {"fmi2SetupExperiment": lambda s: s.setup_experiment(0.0),
+               "fmi2EnterInitializationMode": lambda s: s.enter_initialization_mode(),
+               "fmi2ExitInitializationMode": lambda s: s.exit_initialization_mode(),
+               "fmi2Terminate": lambda s: s.terminate(),
+               "fmi2DoStep": lambda s: s.do_step(s._time_s, H)}
+#: The calls that bring a fresh slave to each of its phases.
+SLAVE_ROUTES = {"instantiated": [], "initializationMode": ["fmi2SetupExperiment", "fmi2EnterInitializationMode"],
+                "stepComplete": ["fmi2SetupExperiment", "fmi2EnterInitializationMode", "fmi2ExitInitializationMode"],
+                "terminated": ["fmi2SetupExperiment", "fmi2EnterInitializationMode", "fmi2ExitInitializationMode",
+                               "fmi2Terminate"]}
+
+
+def _slave_refuses(call: str, phase: str) -> bool:
+    from fmu_src.regulator_fmu.avr_slave import AdaptiveVelocityRegulator, FmiCallError
+
+    slave = AdaptiveVelocityRegulator(instance_name="phases")
+    for step in SLAVE_ROUTES[phase]:
+        SLAVE_CALLS[step](slave)
+    try:
+        answer = SLAVE_CALLS[call](slave)
+    except FmiCallError as exc:
+        assert f"{call} is not allowed in state {phase}" in str(exc)
+        return True
+    return answer is False  # do_step answers False (and logs why) for a step it does not take
+
+
+@pytest.mark.parametrize("call", sorted(SLAVE_CALLS))
+def test_the_slave_refuses_a_call_exactly_where_the_table_says(call):
+    """The regulator slave in process (as on win64, without the C guard): each life-cycle call in
+    each of its phases is refused exactly where fmu_src/fmi/phase_rules.py says it is not allowed."""
+    for phase in SLAVE_ROUTES:
+        assert _slave_refuses(call, phase) == (phase not in phase_rules.FMI2_ALLOWED[call]), phase
+
+
+def test_the_slave_reads_the_table_not_a_copy(monkeypatch):
+    """Change the table and the slave follows: its phase rules are phase_rules.FMI2_ALLOWED itself."""
+    assert _slave_refuses("fmi2Terminate", "initializationMode")
+    monkeypatch.setitem(phase_rules.FMI2_ALLOWED, "fmi2Terminate",
+                        phase_rules.FMI2_ALLOWED["fmi2Terminate"] | {"initializationMode"})
+    assert not _slave_refuses("fmi2Terminate", "initializationMode")

@@ -137,3 +137,49 @@ def test_fatal_error_cycles_are_clean_under_valgrind(built_fmu, tmp_path, unzip)
     print(f"\nvalgrind, 3 fatal-error cycles: exit {proc.returncode}, {len(invalid)} invalid accesses")
     assert proc.returncode == 0 and '"cycles"' in proc.stdout, proc.stderr[-6000:]
     assert invalid == [], "\n\n".join(invalid)[:8000]
+
+
+# ---- the CommandSource FMU (native C, FMI 2.0 and 3.0) under ASan + UBSan ---------------------------
+#: -Wno-error: GCC 12 warns falsely (format-truncation on a checked snprintf) in instrumented code.
+NATIVE_SANITIZE = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g",
+                   "-Wno-error")
+
+
+@pytest.fixture(scope="module")
+def sanitized_command_sources(build_module, tmp_path_factory, unzip):
+    """{FMI version: extracted folder} of both CommandSource FMUs as build.py builds them, their Linux
+    library rebuilt from the FMU's own sources/ with the sanitizers."""
+    from fmu_src.command_source import build_command_source as cs
+
+    out = {}
+    for fmi in (2, 3):
+        tmp = tmp_path_factory.mktemp(f"command_source_asan{fmi}")
+        folder = Path(unzip(build_module.build_command_source(fmi, tmp), tmp / "unzipped"))
+        lib = folder / "binaries" / ("linux64" if fmi == 2 else "x86_64-linux") / "CommandSource.so"
+        cs.compile_library(folder / "sources", fmi, "linux", tmp / lib.name, extra_flags=NATIVE_SANITIZE)
+        assert b"__asan_report" in (tmp / lib.name).read_bytes()  # instrumented
+        shutil.copyfile(tmp / lib.name, lib)
+        out[fmi] = folder
+    return out
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_command_source_under_asan_and_ubsan_with_zero_findings(sanitized_command_sources, fmi, tmp_path):
+    """Every FMI function in every state (tests/support/fmi/phase_matrix.py), 20 instances playing the
+    schedule, every illegal call and a malformed schedule (tests/support/native/sanitize_run.py)."""
+    reports = tmp_path / "reports"
+    reports.mkdir()
+    env = dict(os.environ, LD_PRELOAD=_preload(), ASAN_OPTIONS=f"detect_leaks=0:halt_on_error=1:log_path={reports}/asan",
+               UBSAN_OPTIONS=f"print_stacktrace=1:halt_on_error=1:log_path={reports}/ubsan")
+    folder = str(sanitized_command_sources[fmi])
+    runs = [subprocess.run([sys.executable, str(REPO_ROOT / "tests" / "fmi" / "phase_matrix.py"), folder, str(fmi)],
+                           env=env, capture_output=True, text=True, timeout=600),
+            subprocess.run([sys.executable, str(REPO_ROOT / "tests" / "native" / "sanitize_run.py"), "--command-source",
+                            folder, str(fmi)], env=env, capture_output=True, text=True, timeout=1200)]
+    findings = sorted(p.name for p in reports.iterdir())
+    print(f"\nCommandSource FMI {fmi}.0 under ASan+UBSan: every function in every state, "
+          f"{runs[1].stdout.strip().splitlines()[-1] if runs[1].stdout.strip() else '?'}; "
+          f"sanitizer reports: {len(findings)}")
+    assert findings == [], "\n\n".join(p.read_text()[:4000] for p in sorted(reports.iterdir()))
+    for run in runs:
+        assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]

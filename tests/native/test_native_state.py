@@ -36,6 +36,8 @@ def _corruptions(blob: bytes, other_blob: bytes):
     for offset in (0, 9, 20, 70, 100, 150, 170, values, weights + 3, len(blob) - 2):
         yield f"bit flip at {offset}", blob[:offset] + bytes([blob[offset] ^ 0x10]) + blob[offset + 1:]
     yield "other FMU's state (GUID)", other_blob
+    # the GUID field is the GUID NUL-padded (fmi_blob.c, as the guard's): nothing may follow the GUID
+    yield "a byte after the GUID in its field, valid checksum", patched(16 + 47, "<B", ord("x"))
     yield "NaN weight, valid checksum", patched(weights + 8, "<d", math.nan)
     yield "NaN time, valid checksum", patched(72, "<d", math.nan)
     yield "psi_limit out of range, valid checksum", patched(values + 8 * 11, "<d", 7.0)

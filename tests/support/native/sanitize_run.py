@@ -1,7 +1,10 @@
-"""In-process work for the sanitizer test (tests/support/native/test_native_hosts.py): state round trips,
-every corrupted blob of tests/support/native/test_native_state.py, and 20 instances, on the FMU given.
+"""In-process work for the sanitizer tests: on a regulator FMU (tests/native/test_native_hosts.py) state
+round trips, every corrupted blob of tests/native/test_native_state.py, and 20 instances; on a
+CommandSource FMU (tests/fmu/test_fmu_sanitize.py) 20 instances playing the schedule, every illegal
+call of tests/fmu/test_command_source.py and a schedule that fails the instantiation.
 
-    python sanitize_run.py FMU OTHER_FMU     (exit 0 when every check held)
+    python sanitize_run.py FMU OTHER_FMU                       (exit 0 when every check held)
+    python sanitize_run.py --command-source FMU_DIR FMI_VERSION
 """
 import sys
 from pathlib import Path
@@ -39,5 +42,36 @@ def main(fmu, other_fmu):
     print(f"refused {refused} corrupted states")
 
 
+def command_source(fmu_dir, fmi):
+    """The CommandSource FMU in this process: 20 instances stepping 400 times each, every illegal
+    call of test_command_source.ILLEGAL (Error), and a malformed schedule (instantiation refused)."""
+    import shutil
+    import tempfile
+
+    from command_source_driver import main as drive
+    from test_command_source import ERROR, H, ILLEGAL, OK, START
+
+    get = ["get", list(range(6))]
+    long_run = START + [["step", k * H, H] for k in range(400)] + [get, ["terminate"], ["reset"], *START[1:],
+                                                                   ["step", 0.0, H], get, ["free"]]
+    for _ in range(20):
+        results = drive(fmu_dir, fmi, long_run)["results"]
+        assert all(r == OK for c, r in zip(long_run, results) if c is not get), results
+        assert all(len(r) == 6 for c, r in zip(long_run, results) if c is get), results
+    for name, before, illegal, _ in ILLEGAL:
+        results = drive(fmu_dir, fmi, before + [illegal, ["free"]])["results"]
+        assert results[len(before)] == ERROR, (name, results)
+    with tempfile.TemporaryDirectory(dir=Path(fmu_dir).parent) as tmp:  # beside the FMU, under the test's tmp_path
+        broken = Path(tmp) / "fmu"
+        shutil.copytree(fmu_dir, broken)
+        (broken / "resources" / "schedule.csv").write_text("time,vx_des\n0,x\n")
+        assert drive(str(broken), fmi, [["instantiate"]])["results"] == [None]
+    print(f"command source FMI {fmi}.0: 20 x {len(long_run)} calls, {len(ILLEGAL)} illegal calls refused, "
+          "a malformed schedule refused")
+
+
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2])
+    if sys.argv[1] == "--command-source":
+        command_source(sys.argv[2], int(sys.argv[3]))
+    else:
+        main(sys.argv[1], sys.argv[2])

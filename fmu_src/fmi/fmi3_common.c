@@ -1,29 +1,79 @@
 /*
- * The FMI 3.0 functions this co-simulation FMU does not provide (variable types it has no
- * variables of, event mode, clocks, configuration mode, Model Exchange, Scheduled
- * Execution, derivatives).  Each exists so that every host resolves every symbol; each
- * refuses with fmi3Error and a log message, through the same prologue as fmi3_api.c.
+ * What the FMI 3.0 layer of every native FMU of this project has the same: the version, the
+ * host's callbacks and the logger over them, the co-simulation options none supports, doStep
+ * over the model's instance (fmi_model.h), and the
+ * functions none provides (variable types neither model has variables of, event mode, clocks,
+ * configuration mode, Model Exchange, Scheduled Execution, derivatives).  Each of those exists
+ * so that every host resolves every symbol; each refuses with fmi3Error and a log message,
+ * through the same prologue as the model's layer.
  */
-#include "avr_instance.h" /* first: see avr_types.h */
+#include "fmi_model.h" /* first: the model's own headers may set feature macros */
+
+#include <stdlib.h>
 
 #include "fmi3Functions.h"
 
 #define FMI_STATUS fmi3Status
 #define FMI_INSTANCE fmi3Instance
-#include "avr_fmi_api.h"
+#include "fmi_layer.h"
 
-/* Getters and setters of types without variables: nothing to get or set is fine, anything else refused. */
-#define NO_VARIABLES(fn, mask, ctype, type_name)                                                               \
-    fmi3Status fn(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,  \
-                  ctype values[], size_t nValues) {                                                            \
-        BEGIN_MASK(fn, mask)                                                                                   \
-        (void)valueReferences, (void)values, (void)nValues;                                                    \
-        if (nValueReferences == 0) return fmi3OK;                                                              \
-        return (fmi3Status)avr_refuse(inst, call, "this FMU has no %s variables", type_name);                 \
-    }
-#define NO_GET_SET(T)                                                             \
-    NO_VARIABLES(fmi3Get##T, GET_PHASES, fmi3##T, #T)                             \
-    NO_VARIABLES(fmi3Set##T, SET_PHASES, const fmi3##T, #T)
+const char *fmi3GetVersion(void) { return fmi3Version; }
+
+FmiCallbacks3 *fmi3_callbacks(fmi3InstanceEnvironment env, fmi3LogMessageCallback log) {
+    FmiCallbacks3 *cb = malloc(sizeof *cb);
+    if (cb != NULL) *cb = (FmiCallbacks3){.env = env, .log = log};
+    return cb;
+}
+
+void fmi3_log(const FmiModelInstance *inst, FmiModelStatus status, const char *category, const char *message) {
+    const FmiCallbacks3 *cb = (const FmiCallbacks3 *)inst->env;
+    if (cb != NULL && cb->log != NULL) cb->log(cb->env, (fmi3Status)status, category, message);
+}
+
+const char *fmi3_cosim_problem(fmi3Boolean eventModeUsed, size_t nRequiredIntermediateVariables) {
+    if (eventModeUsed) return "eventModeUsed: this FMU has no event mode";
+    if (nRequiredIntermediateVariables > 0) return "this FMU provides no intermediate variables";
+    return NULL;
+}
+
+fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
+                                          fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                          fmi3InstanceEnvironment instanceEnvironment,
+                                          fmi3LogMessageCallback logMessage) {
+    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible, (void)loggingOn;
+    if (logMessage != NULL)
+        logMessage(instanceEnvironment, fmi3Error, "logStatusError", "this FMU supports co-simulation only");
+    return NULL;
+}
+
+fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3String instantiationToken,
+                                               fmi3String resourcePath, fmi3Boolean visible, fmi3Boolean loggingOn,
+                                               fmi3InstanceEnvironment instanceEnvironment,
+                                               fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
+                                               fmi3LockPreemptionCallback lockPreemption,
+                                               fmi3UnlockPreemptionCallback unlockPreemption) {
+    (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
+    return fmi3InstantiateModelExchange(instanceName, instantiationToken, resourcePath, visible, loggingOn,
+                                        instanceEnvironment, logMessage);
+}
+
+/* ---- stepping (the model steps: fmi_model_do_step) --------------------------------------------- */
+fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
+                      fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
+                      fmi3Boolean *terminateSimulation, fmi3Boolean *earlyReturn, fmi3Float64 *lastSuccessfulTime) {
+    BEGIN(fmi3DoStep)
+    (void)noSetFMUStatePriorToCurrentPoint;
+    if (eventHandlingNeeded == NULL || terminateSimulation == NULL || earlyReturn == NULL || lastSuccessfulTime == NULL)
+        REFUSE("NULL output argument");
+    if (fmi_model_do_step(inst, call, currentCommunicationPoint, communicationStepSize) != 0) return fmi3Error;
+    *eventHandlingNeeded = fmi3False;
+    *terminateSimulation = fmi3False;
+    *earlyReturn = fmi3False;
+    *lastSuccessfulTime = inst->time;
+    return fmi3OK;
+}
+
+/* Getters and setters of types without variables (NO_GET_SET, fmi_layer.h). */
 NO_GET_SET(Float32)
 NO_GET_SET(Int8)
 NO_GET_SET(UInt8)
@@ -36,19 +86,21 @@ NO_GET_SET(String)
 
 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                          size_t valueSizes[], fmi3Binary values[], size_t nValues) {
-    BEGIN_MASK(fmi3GetBinary, GET_PHASES)
+    BEGIN(fmi3GetBinary)
     (void)valueReferences, (void)valueSizes, (void)values, (void)nValues;
-    return nValueReferences == 0 ? fmi3OK : (fmi3Status)avr_refuse(inst, call, "this FMU has no Binary variables");
+    if (nValueReferences == 0) return fmi3OK;
+    REFUSE("this FMU has no Binary variables");
 }
 
 fmi3Status fmi3SetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                          const size_t valueSizes[], const fmi3Binary values[], size_t nValues) {
-    BEGIN_MASK(fmi3SetBinary, SET_PHASES)
+    BEGIN(fmi3SetBinary)
     (void)valueReferences, (void)valueSizes, (void)values, (void)nValues;
-    return nValueReferences == 0 ? fmi3OK : (fmi3Status)avr_refuse(inst, call, "this FMU has no Binary variables");
+    if (nValueReferences == 0) return fmi3OK;
+    REFUSE("this FMU has no Binary variables");
 }
 
-/* Not provided at all: refused in every phase (NOT_PROVIDED, avr_fmi_api.h). */
+/* Not provided at all: refused in every phase (NOT_PROVIDED, fmi_layer.h). */
 NOT_PROVIDED0(fmi3EnterEventMode)
 NOT_PROVIDED0(fmi3EnterConfigurationMode)
 NOT_PROVIDED0(fmi3ExitConfigurationMode)

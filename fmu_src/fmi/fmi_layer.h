@@ -1,0 +1,144 @@
+/*
+ * The FMI layer the native FMUs share (the regulator's fmi2_api.c/fmi3_api.c, CommandSource's
+ * cmdsrc_fmi2.c/cmdsrc_fmi3.c, and fmi2_common.c/fmi3_common.c beside this header: what every
+ * native FMU's layer has the same), written once for both models and both FMI versions.  A layer defines, before including this header:
+ *
+ *   FMI_STATUS    its status type (fmi2Status, fmi3Status: both number OK..Fatal as 0..4)
+ *   FMI_INSTANCE  its instance type (fmi2Component, fmi3Instance)
+ *
+ * and the model's fmi_model.h (found beside its sources) says what an instance is:
+ *
+ *   FmiModelInstance                           the model's instance type (phase, env, name)
+ *   FmiModelStatus                             its status type (OK..Fatal as 0..4)
+ *   fmi_model_allowed(inst, call, mask)        0 if inst is in one of the phases of mask, else
+ *                                              the refusal (logged) as a nonzero status
+ *   fmi_model_refuse(inst, call, fmt, ...)     logs "<call> refused: ..." and returns Error
+ *   fmi_model_free(inst)                       frees the instance (not the FMI layer's callbacks)
+ *   fmi_model_exit_init(inst, call)            leaves Initialization Mode (status as 0..4)
+ *   fmi_model_do_step(inst, call, t, h)        one communication step (status as 0..4; inst->time
+ *                                              is then the end of the last successful step)
+ *   fmi_model_reset(inst)                      back to Instantiated with the start values
+ *   fmi_model_check_categories(inst, call, n, categories)
+ *                                              0 if fmi*SetDebugLogging may take these log
+ *                                              categories, else the refusal as a nonzero status
+ *
+ * Every function begins with the one prologue BEGIN(<function>): it defines `inst` and `call`
+ * and refuses the call (logged, Error, nothing changed) outside the phases of its
+ * FMI_MASK_<function>, generated from fmu_src/fmi/phase_rules.py into fmi_phase_rules.h.
+ */
+#ifndef FMI_LAYER_H
+#define FMI_LAYER_H
+
+#include <stdlib.h>
+
+#include "fmi_model.h"
+#include "fmi_phase_rules.h"
+
+#define FMI_OK ((FMI_STATUS)0)
+#define FMI_ERROR ((FMI_STATUS)3)
+
+/* The one prologue: the instance, the call's name, and its phase check against `mask`. */
+#define BEGIN_MASK(fn, mask)                                                \
+    FmiModelInstance *inst = (FmiModelInstance *)instance;                  \
+    static const char call[] = #fn;                                         \
+    if (fmi_model_allowed(inst, call, (mask)) != 0) return FMI_ERROR;
+#define BEGIN(fn) BEGIN_MASK(fn, FMI_MASK_##fn)
+
+#define REFUSE(...) return (FMI_STATUS)fmi_model_refuse(inst, call, __VA_ARGS__)
+
+/* Parameters a refusing function never reads (GCC and Clang; other compilers may warn). */
+#if defined(__GNUC__)
+#define FMI_UNUSED_PARAMETERS_BEGIN _Pragma("GCC diagnostic push") _Pragma("GCC diagnostic ignored \"-Wunused-parameter\"")
+#define FMI_UNUSED_PARAMETERS_END _Pragma("GCC diagnostic pop")
+#else
+#define FMI_UNUSED_PARAMETERS_BEGIN
+#define FMI_UNUSED_PARAMETERS_END
+#endif
+
+/* A function this FMU does not provide (the model description says so): refused in every phase
+ * (mask 0) with the reason logged.  NOT_PROVIDED0 for the functions without further parameters. */
+#define NOT_PROVIDED(fn, ...)                                       \
+    FMI_UNUSED_PARAMETERS_BEGIN                                     \
+    FMI_STATUS fn(FMI_INSTANCE instance, __VA_ARGS__) {             \
+        BEGIN_MASK(fn, 0u)                                          \
+        return FMI_ERROR;                                           \
+    }                                                               \
+    FMI_UNUSED_PARAMETERS_END
+#define NOT_PROVIDED0(fn)                                           \
+    FMI_STATUS fn(FMI_INSTANCE instance) {                          \
+        BEGIN_MASK(fn, 0u)                                          \
+        return FMI_ERROR;                                           \
+    }
+
+/* FMI 3.0 getters and setters of a type the model has no variables of: nothing to get or set
+ * is fine, anything else refused. */
+#define NO_VARIABLES(fn, ctype, type_name)                                                                     \
+    FMI_STATUS fn(FMI_INSTANCE instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,  \
+                  ctype values[], size_t nValues) {                                                            \
+        BEGIN(fn)                                                                                              \
+        (void)valueReferences, (void)values, (void)nValues;                                                    \
+        if (nValueReferences == 0) return FMI_OK;                                                              \
+        REFUSE("this FMU has no %s variables", type_name);                                                     \
+    }
+#define NO_GET_SET(T)                                    \
+    NO_VARIABLES(fmi3Get##T, fmi3##T, #T)                \
+    NO_VARIABLES(fmi3Set##T, const fmi3##T, #T)
+
+/* Life cycle without arguments, the same in both versions and both models. */
+#define FREE_INSTANCE(fn)                                           \
+    void fn(FMI_INSTANCE instance) {                                \
+        FmiModelInstance *inst = (FmiModelInstance *)instance;      \
+        if (inst == NULL) return;                                   \
+        void *callbacks = inst->env;                                \
+        fmi_model_free(inst);                                       \
+        free(callbacks);                                            \
+    }
+/* fmi*SetDebugLogging: the model checks the categories, the instance keeps loggingOn. */
+#define SET_DEBUG_LOGGING(fn, BOOLEAN, STRING)                                                            \
+    FMI_STATUS fn(FMI_INSTANCE instance, BOOLEAN loggingOn, size_t nCategories, const STRING categories[]) { \
+        BEGIN(fn)                                                                                         \
+        if (fmi_model_check_categories(inst, call, nCategories, categories) != 0) return FMI_ERROR;       \
+        inst->logging_on = loggingOn == 1;                                                                \
+        return FMI_OK;                                                                                    \
+    }
+#define EXIT_INITIALIZATION_MODE(fn)                                \
+    FMI_STATUS fn(FMI_INSTANCE instance) {                          \
+        BEGIN(fn)                                                   \
+        return (FMI_STATUS)fmi_model_exit_init(inst, call);         \
+    }
+#define TERMINATE(fn)                                               \
+    FMI_STATUS fn(FMI_INSTANCE instance) {                          \
+        BEGIN(fn)                                                   \
+        inst->phase = FMI_TERMINATED;                               \
+        return FMI_OK;                                              \
+    }
+#define RESET(fn)                                                   \
+    FMI_STATUS fn(FMI_INSTANCE instance) {                          \
+        BEGIN(fn)                                                   \
+        fmi_model_reset(inst);                                      \
+        return FMI_OK;                                              \
+    }
+
+/* ---- fmi2_common.c / fmi3_common.c: the host's callbacks, kept as an instance's env ---------- */
+#ifdef fmi2Version
+/* A copy of the host's callbacks (malloc'd; NULL if functions is NULL or memory is out). */
+fmi2CallbackFunctions *fmi2_callbacks(const fmi2CallbackFunctions *functions);
+/* The model's logger for an instance whose env is an fmi2_callbacks copy. */
+void fmi2_log(const FmiModelInstance *inst, FmiModelStatus status, const char *category, const char *message);
+#endif
+#ifdef fmi3Version
+typedef struct {
+    fmi3InstanceEnvironment env;
+    fmi3LogMessageCallback log;
+} FmiCallbacks3;
+/* The host's environment and logger (malloc'd; NULL if memory is out). */
+FmiCallbacks3 *fmi3_callbacks(fmi3InstanceEnvironment env, fmi3LogMessageCallback log);
+/* The model's logger for an instance whose env is an fmi3_callbacks copy. */
+void fmi3_log(const FmiModelInstance *inst, FmiModelStatus status, const char *category, const char *message);
+/* Why fmi3InstantiateCoSimulation with these options cannot give an instance of a native FMU of
+ * this project (no event mode, no intermediate variables), or NULL. */
+const char *fmi3_cosim_problem(fmi3Boolean eventModeUsed, size_t nRequiredIntermediateVariables);
+#endif
+
+
+#endif
