@@ -15,7 +15,7 @@ Steps for a pythonfmu FMU: the slave and its modules become one package imported
 private to the build (``fmu_src/packing/pack.py``), which pythonfmu packs; the model
 description is post-processed (units, ranges, default experiment, a content-derived
 GUID, no generation time), a documentation page and a ``requirements.txt`` are added,
-the FMI guard (``fmu_src/guard/*.c``) is compiled as the linux64 library the host loads
+the FMI guard (``fmu_src/regulator_fmu/guard/*.c``) is compiled as the linux64 library the host loads
 (pythonfmu's own library moves beside it as ``<id>_pythonfmu.so``), and the archive is
 written with sorted entries and fixed timestamps, so two builds of the same sources give
 the same sha256.  Every FMU build function then simulates the FMU it wrote once with FMPy
@@ -28,7 +28,7 @@ Temporary folders are removed when the build ends, also when it fails.
 This file is the entry point and the orchestration; the pieces live beside what they
 build: ``fmu_src/packing/`` (archives and GUIDs, model descriptions, documentation
 pages, the pythonfmu library fix, the plant's vendored modules),
-``fmu_src/guard/build_guard.py`` and ``fmu_src/native/build_native.py``.
+``fmu_src/regulator_fmu/guard/build_guard.py`` and ``fmu_src/regulator_fmu/native/build_native.py``.
 """
 from __future__ import annotations
 
@@ -47,11 +47,11 @@ REPO_ROOT = Path(__file__).resolve().parent
 if str(REPO_ROOT) not in sys.path:  # build.py also runs without the package installed
     sys.path.insert(0, str(REPO_ROOT))
 
-from fmu_src.guard.build_guard import (GUARD_TEXTS, SANITIZE_FLAGS,  # noqa: E402,F401 (SANITIZE_FLAGS: documented)
+from fmu_src.regulator_fmu.guard.build_guard import (GUARD_TEXTS, SANITIZE_FLAGS,  # noqa: E402,F401 (SANITIZE_FLAGS: documented)
                                        compile_guard, guard_header)
-from fmu_src.native import build_native  # noqa: E402
+from fmu_src.regulator_fmu.native import build_native  # noqa: E402
 from fmu_src.command_source import build_command_source as command_source  # noqa: E402
-from fmu_src.native.build_native import compile_native  # noqa: E402,F401 (the tests' sanitizer build)
+from fmu_src.regulator_fmu.native.build_native import compile_native  # noqa: E402,F401 (the tests' sanitizer build)
 from fmu_src.packing import crosscheck, pack, pages, vendor  # noqa: E402
 from fmu_src.packing.archive import content_guid, read_entries, sha256_of, write_zip  # noqa: E402
 from fmu_src.packing.describe import (DEFAULT_EXPERIMENT, PLANT_INITIAL_UNKNOWNS, UNITS,  # noqa: E402

@@ -216,7 +216,7 @@ def measure_c_host(inputs, dt, n_neurons, repeats: int = 5) -> float | None:
         lib = tmp / "native.so"
         lib.write_bytes(zipfile.ZipFile(fmu).read("binaries/linux64/AdaptiveVelocityRegulatorNative.so"))
         host = tmp / "fmi2_host"
-        subprocess.run([cc, "-std=c99", "-O2", f"-I{root / 'fmu_src' / 'native' / 'third_party' / 'fmi2'}",
+        subprocess.run([cc, "-std=c99", "-O2", f"-I{root / 'fmu_src' / 'fmi' / 'third_party' / 'fmi2'}",
                         str(root / "tests" / "support" / "native" / "fmi2_host.c"), "-o", str(host), "-ldl"], check=True)
         lines = [f"P {vr['n_neurons']} I {n_neurons}",
                  "I " + " ".join(str(vr[s.name]) for s in INPUT_SPECS),

@@ -5,7 +5,7 @@ One C source for both FMI versions (``cmdsrc.c`` + the layer ``cmdsrc_fmi<2|3>.c
 layer the native FMUs share, ``fmu_src/fmi/``: its prologue, generated phase rules and refused
 functions),
 compiled for the platforms and with the compilers and options of the regulator's native
-FMU (:mod:`fmu_src.native.build_native`; a platform whose cross compiler is missing is
+FMU (:mod:`fmu_src.regulator_fmu.native.build_native`; a platform whose cross compiler is missing is
 skipped).  The GUID hashes the model description and the sources, not
 ``resources/schedule.csv``: :func:`with_schedule` makes a copy with another schedule that is
 the same FMU (same binaries, same GUID).
@@ -28,7 +28,7 @@ from typing import Iterable, Mapping
 
 from fmu_src.packing import compiler
 from fmu_src.packing.archive import PLACEHOLDER_GUID, content_guid, read_entries, write_zip
-from fmu_src.native import build_native
+from fmu_src.regulator_fmu.native import build_native
 
 SRC = Path(__file__).resolve().parent
 MODEL_IDENTIFIER = "CommandSource"

@@ -4,7 +4,7 @@ content GUIDs (:mod:`.archive`), the pythonfmu FMUs' model description and docum
 the fix of pythonfmu's linux64 library (:mod:`.pythonfmu_fix`), how a pythonfmu FMU carries
 its code (:mod:`.pack`: one package under a name private to the build, its modules vendored
 by :mod:`.vendor`) and the CassiePlant FMU's models.  The C parts are built beside their sources:
-``fmu_src/guard/build_guard.py`` and ``fmu_src/native/build_native.py``.
+``fmu_src/regulator_fmu/guard/build_guard.py`` and ``fmu_src/regulator_fmu/native/build_native.py``.
 
 Named ``packing``, not ``packaging``: a ``packaging`` folder on ``sys.path`` would shadow
 PyPA's ``packaging`` that matplotlib and others import.

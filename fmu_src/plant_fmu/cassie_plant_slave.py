@@ -7,7 +7,7 @@ are imported under a name private to the build (``fmu_src/packing/pack.py``): th
 own ``plant`` package, the regulator FMU's modules and other builds of this FMU never mix with
 them (pythonfmu issue #228).  The models are read from each instance's own resources folder.
 
-Statuses: the FMU's linux64 library is the FMI guard (``fmu_src/guard/``, built with this
+Statuses: the FMU's linux64 library is the FMI guard (``fmu_src/regulator_fmu/guard/``, built with this
 FMU's variable table and ``AVR_STEP_QUANTUM`` = 0.5 ms): calls the state machine forbids,
 sets of outputs or of fixed parameters after initialization, NaN/inf or out-of-range
 values, communication steps that are not whole multiples of 0.5 ms or longer than the

@@ -148,7 +148,7 @@ def test_counters_stop_at_max_calls_instead_of_overflowing():
     assert AdaptiveVelocityRegulator._fmu_state_from_bytes(s._get_fmu_state()) == s._get_fmu_state()
 
 
-NATIVE_COUNTERS = {  # offset in the native blob (fmu_src/native/avr_state.c), value, reason
+NATIVE_COUNTERS = {  # offset in the native blob (fmu_src/regulator_fmu/native/avr_state.c), value, reason
     "n_calls = INT64_MAX": (96, INT64_MAX, f"n_calls = {INT64_MAX}: must be in [0, {MAX_CALLS}]"),
     "stride_calls = INT64_MAX": (152, INT64_MAX, "stride_calls = 9223372036854775807"),
     "last_step_index -1 after calls": (88, -1, "last_step_index = -1 with n_calls = 10"),

@@ -20,8 +20,9 @@ import pytest
 from fmu_src.core import avr_core
 from fmu_src.core.avr_specs import INPUT_SPECS
 from fmu_src.core.avr_network import SplitMix64, build_networks
-from fmu_src.native.header import vars_header
-from support.native_support import CC, H, NATIVE_DIR, OUTPUT_NAMES, AnySlave, compile_c, core_outputs, input_sequence, require
+from fmu_src.regulator_fmu.native.header import vars_header
+from support.native_support import CC, H, OUTPUT_NAMES, AnySlave, compile_c, core_outputs, input_sequence, require
+from support.paths import REPO_ROOT
 from fmu_src.core.avr_network import expm1_fixed, log1p_fixed
 from fmu_src.core.avr_params import RegulatorParams
 
@@ -43,7 +44,7 @@ def c_core(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("c_core")
     (tmp / "avr_vars.h").write_text(vars_header())
     for name in ("avr_types.h", "avr_model.h", "avr_model.c"):
-        shutil.copy(NATIVE_DIR.parent.parent / "fmu_src" / "native" / name, tmp / name)
+        shutil.copy(REPO_ROOT / "fmu_src" / "core" / "c" / name, tmp / name)
     lib = ctypes.CDLL(str(compile_c(CC, [tmp / "avr_model.c"], tmp / "libavr_model.so", "-std=c99", "-O2",
                                     "-ffp-contract=off", "-shared", "-fPIC", f"-I{tmp}", "-lm")))
     lib.avr_networks_new.restype = ctypes.POINTER(_Net)

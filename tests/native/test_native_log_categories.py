@@ -1,7 +1,7 @@
 """The native FMUs' fmi2SetDebugLogging/fmi3SetDebugLogging take only the log categories their
 model description declares, as the pythonfmu FMUs' guard does: a NULL, non-UTF-8, overlong or
 undeclared category is Error naming its index (and the declared ones).  The declared list is
-generated once (fmu_src/native/header.py LOG_CATEGORIES) into modelDescription.xml and the C table.
+generated once (fmu_src/regulator_fmu/native/header.py LOG_CATEGORIES) into modelDescription.xml and the C table.
 """
 from ctypes import c_char_p
 
@@ -9,7 +9,7 @@ import pytest
 from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 
-from fmu_src.native.header import LOG_CATEGORIES
+from fmu_src.regulator_fmu.native.header import LOG_CATEGORIES
 from support.native_support import logged_slave
 
 ERROR = 3

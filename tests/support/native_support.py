@@ -34,7 +34,7 @@ fmi2_only = pytest.mark.parametrize("regulator_fmu", FMI2_REGULATOR_FMUS, indire
 DRIVERS = {2: Path(__file__).parent / "fmi" / "driver.py", 3: NATIVE_DIR / "driver3.py"}
 #: The plain C FMI 2.0 host (tests/support/native/fmi2_host.c) and the FMI 2.0 headers it is compiled with.
 C_HOST = NATIVE_DIR / "fmi2_host.c"
-FMI2_INCLUDE = REPO_ROOT / "fmu_src" / "native" / "third_party" / "fmi2"
+FMI2_INCLUDE = REPO_ROOT / "fmu_src" / "fmi" / "third_party" / "fmi2"
 #: System compilers and Wine are Debian packages (.ci/run installs them), not Python tools.
 CC = Path("/usr/bin/cc")
 MINGW_CC = Path("/usr/bin/x86_64-w64-mingw32-gcc")

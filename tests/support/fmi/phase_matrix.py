@@ -8,7 +8,7 @@ Runs in a process of its own (a crash shows as a failed test, not a dead pytest)
 prints one JSON object {function: {state: {"status": s, "phase": bool, "messages": [...]}}}:
 ``phase`` is whether the FMU refused the call naming its state ("<function> refused: not allowed
 in state ...").  Every function is called through ctypes with its signature from the FMI
-standard's own header (fmu_src/native/third_party/), every argument zero or NULL: a call the
+standard's own header (fmu_src/fmi/third_party/), every argument zero or NULL: a call the
 state allows then goes on to the argument checks (refused or OK, but never for its state).
 A call that may change the state (initialization, terminate, reset) gets an instance of its own.
 """
@@ -25,7 +25,7 @@ from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYP
                        fmi2CallbackLoggerTYPE)
 from fmpy.logging import addLoggerProxy
 
-THIRD_PARTY = Path(__file__).resolve().parents[3] / "fmu_src" / "native" / "third_party"
+THIRD_PARTY = Path(__file__).resolve().parents[3] / "fmu_src" / "fmi" / "third_party"
 #: C types of the scalar arguments (anything with * or [] is a pointer: NULL).
 SCALARS = {
     "fmi2Component": c_void_p, "fmi2FMUstate": c_void_p, "fmi2Real": c_double, "fmi2Integer": c_int32,

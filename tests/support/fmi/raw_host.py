@@ -8,7 +8,7 @@ process of its own, so that a crash shows as a failed test, not a dead pytest:
 
 prints one JSON object (the case's results, with every log message the FMU sent).
 FMU_DIR is the extracted FMU.  The serialized-state layout used to craft blobs is the
-one documented in fmu_src/guard/guard_state.c; ``crc64`` is an independent bitwise
+one documented in fmu_src/regulator_fmu/guard/guard_state.c; ``crc64`` is an independent bitwise
 CRC-64/XZ.
 """
 import ctypes

@@ -2,7 +2,7 @@
 
 ``model_description`` writes ``modelDescription.xml`` for FMI 2.0 or FMI 3.0 from
 ``PARAM_SPECS``/``INPUT_SPECS``/``OUTPUT_SPECS`` (in value-reference order, as
-:func:`fmu_src.native.header.all_specs`), ``build_description`` the FMI 3.0
+:func:`fmu_src.regulator_fmu.native.header.all_specs`), ``build_description`` the FMI 3.0
 ``sources/buildDescription.xml``, and ``documentation`` the HTML page; build.py packs
 them with the binaries.  Only units listed in ``units`` are declared (the same
 ``UNITS`` as the pythonfmu FMU's model description).
@@ -14,7 +14,7 @@ import xml.etree.ElementTree as ET
 
 from fmu_src.packing.describe import xml_value
 from fmu_src.packing.method_page import method_html
-from fmu_src.native.header import LOG_CATEGORIES, all_specs
+from fmu_src.regulator_fmu.native.header import LOG_CATEGORIES, all_specs
 
 AUTHOR = "cassie-avr project"
 VERSION = "0.1.0"
