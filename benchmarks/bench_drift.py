@@ -1,0 +1,164 @@
+"""Parameter drift of the learned weights on a long walk with changing commands (issue 25).
+
+The setup: torso 20 kg, torso COM offset (+0.05, -0.03, 0) m, every joint's damping x3,
+flat ground; the command changes every 10 s to a seeded draw of vx in [0, 1] m/s and vy in
+[-0.2, 0.2] m/s; the regulator core in the loop (``inprocess``: the same bits as the FMUs,
+see tests/test_native_same_bits.py).  For every variant (a set of regulator parameter
+overrides) and network seed it prints, per window: the mean |step-averaged vx - command|
+(m/s), the mean |Psi_x| (rad), and at the window's end the Euclidean norm of each weight
+row (x, y, pitch, roll; rad/Hz); then whether and when the robot fell.
+
+    python benchmarks/bench_drift.py                       # plain rule, seeds 1 2 3, 600 s
+    python benchmarks/bench_drift.py --variant leakage --duration 300 --seeds 1
+    python benchmarks/bench_drift.py --variant all --json drift.json
+
+Variants (``VARIANTS``): plain (the paper's rule: every remedy off), leakage, deadzone,
+projection, combined; ``defaults`` runs the shipped parameter defaults.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from scenarios import master, metrics, spec  # noqa: E402
+from scenarios.regulators import InProcessRegulator  # noqa: E402
+
+log = logging.getLogger("bench_drift")
+
+#: Every remedy off: the paper's plain PES rule.
+PLAIN = {"leakage_per_s": 0.0, "error_deadzone_mps": 0.0, "weight_norm_max": 0.0}
+VARIANTS = {
+    "plain": PLAIN,
+    "leakage": {**PLAIN, "leakage_per_s": 0.01},
+    "deadzone": {**PLAIN, "error_deadzone_mps": 0.05},
+    "projection": {**PLAIN, "weight_norm_max": 1e-4},
+    "combined": {**PLAIN, "leakage_per_s": 0.01, "weight_norm_max": 1e-4},
+    "defaults": {},
+}
+WEIGHT_ROWS = ("x", "y", "pitch", "roll")
+
+
+def drift_scenario(seed: int, duration_s: float, overrides: dict, *, command_seed: int = 25,
+                   change_every_s: float = 10.0, pushes: bool = False) -> dict:
+    """The issue's drift setup as a scenario document (``seed``: the regulator's network seed)."""
+    rng = np.random.default_rng(command_seed)
+    n = int(math.ceil(duration_s / change_every_s))
+    commands = [{"t_s": change_every_s * k, "vx_des": round(float(rng.uniform(0.0, 1.0)), 3),
+                 "vy_des": round(float(rng.uniform(-0.2, 0.2)), 3)} for k in range(n)]
+    doc = {
+        "name": f"drift_seed{seed}", "description": "long walk, command changing every 10 s",
+        "duration_s": float(duration_s), "model": "menagerie", "comm_step_s": 0.005, "seed": seed,
+        "perturbation_t_s": 0.0, "torso_mass_kg": 20.0, "torso_com_offset_m": [0.05, -0.03, 0.0],
+        "joint_damping_scale": 3.0, "compare": ["adaptive"], "command": commands,
+    }
+    if overrides:
+        doc["regulator"] = dict(overrides)
+    if pushes:  # one 25 N, 0.1 s push every 60 s, its direction turning by 90 degrees each time
+        doc["push"] = [{"t_s": 60.0 * k + 35.0, "duration_s": 0.1,
+                        "force_n": [25.0 * math.cos(k * math.pi / 2), 25.0 * math.sin(k * math.pi / 2), 0.0]}
+                       for k in range(int(duration_s // 60.0))]
+    return doc
+
+
+class WeightRecorder(InProcessRegulator):
+    """The in-process regulator that also records its weight-row norms every ``every_s``."""
+
+    def __init__(self, every_s: float) -> None:
+        super().__init__()
+        self.every_s = every_s
+        self.samples: list[tuple[float, list[float]]] = []
+        self._regulator = None
+
+    def start(self, parameters, t0, t_stop):
+        super().start(parameters, t0, t_stop)
+        self._regulator = self._step_fn.__self__
+        self._next = t0 + self.every_s
+
+    def step(self, t, h, inputs):
+        out = super().step(t, h, inputs)
+        if t + h >= self._next - 1e-9:  # (1e-9 s: below the 5 ms communication step's rounding)
+            weights = self._regulator.state.weights
+            self.samples.append((t + h, np.sqrt(np.sum(weights * weights, axis=1)).tolist()))
+            self._next += self.every_s
+        return out
+
+
+def run_one(seed: int, duration_s: float, overrides: dict, *, window_s: float = 100.0,
+            pushes: bool = False) -> dict:
+    """One walk; per-window errors, |Psi_x| and weight norms, fall time."""
+    scenario = spec.parse_scenario(drift_scenario(seed, duration_s, overrides, pushes=pushes))
+    recorder = WeightRecorder(window_s)
+    started = time.perf_counter()
+    result = master.run_arm(scenario, scenario.arms[0], recorder)
+    wall = time.perf_counter() - started
+    rows = result.rows
+    ex, _ = metrics.velocity_errors(rows)
+    t = rows["t"]
+    windows = []
+    for k in range(int(round(duration_s / window_s))):
+        inside = (t >= k * window_s) & (t < (k + 1) * window_s)
+        if not inside.any():
+            break
+        norms = next((n for ts, n in recorder.samples if abs(ts - (k + 1) * window_s) < 1e-6), None)
+        windows.append({"t0_s": k * window_s, "err_vx": float(np.mean(np.abs(ex[inside]))),
+                        "psi_x": float(np.mean(np.abs(rows["out_psi_x"][inside]))),
+                        "weight_norms": norms})
+    return {"seed": seed, "fell": bool(result.fell), "t_fall_s": result.t_fall_s,
+            "fall_reason": result.fall_reason, "wall_s": wall, "windows": windows,
+            "overrides": overrides, "window_s": window_s}
+
+
+def print_run(variant: str, run: dict) -> None:
+    fell = f"FELL at {run['t_fall_s']:.1f} s ({run['fall_reason']})" if run["fell"] else "walked"
+    print(f"{variant} seed {run['seed']}: {fell}; wall {run['wall_s']:.0f} s")
+    print("  window      |e_vx| m/s   |Psi_x| rad   |w| x / y / pitch / roll (rad/Hz)")
+    for w in run["windows"]:
+        norms = " / ".join(f"{v:.2e}" for v in w["weight_norms"]) if w["weight_norms"] else "-"
+        print(f"  {w['t0_s']:5.0f}-{w['t0_s'] + run['window_s']:<5.0f}  {w['err_vx']:.3f}        {w['psi_x']:.3f}"
+              f"         {norms}")
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--variant", default="plain", help=f"one of {', '.join(VARIANTS)}, or all")
+    ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="network seeds")
+    ap.add_argument("--duration", type=float, default=600.0, help="walk length, s")
+    ap.add_argument("--window", type=float, default=100.0, help="window length, s")
+    ap.add_argument("--pushes", action="store_true", help="a 25 N push every 60 s")
+    ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE",
+                    help="extra regulator overrides on top of the variant")
+    ap.add_argument("--json", type=Path, help="also write the numbers here")
+    args = ap.parse_args(argv)
+    names = list(VARIANTS) if args.variant == "all" else [args.variant]
+    unknown = [n for n in names if n not in VARIANTS]
+    if unknown:
+        ap.error(f"--variant {unknown[0]!r}: must be one of {', '.join(VARIANTS)} or all")
+    extra = {}
+    for item in args.set:
+        name, _, value = item.partition("=")
+        extra[name] = float(value)
+    out = []
+    for name in names:
+        for seed in args.seeds:
+            run = run_one(seed, args.duration, {**VARIANTS[name], **extra}, window_s=args.window,
+                          pushes=args.pushes)
+            run["variant"] = name
+            print_run(name, run)
+            sys.stdout.flush()
+            out.append(run)
+    if args.json:
+        args.json.write_text(json.dumps(out, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
