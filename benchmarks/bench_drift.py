@@ -3,9 +3,9 @@
 The setup: torso 20 kg, torso COM offset (+0.05, -0.03, 0) m, every joint's damping x3,
 flat ground; the command changes every 10 s to a seeded draw of vx in [0, 1] m/s and vy in
 [-0.2, 0.2] m/s; the regulator core in the loop (``inprocess``: the same bits as the FMUs,
-see tests/test_native_same_bits.py).  For every variant (a set of regulator parameter
+see tests/test_native_crosscheck.py).  For every variant (a set of regulator parameter
 overrides) and network seed it prints, per window: the mean |step-averaged vx - command|
-(m/s), the mean |Psi_x| (rad), and at the window's end the Euclidean norm of each weight
+(m/s), the mean |Psi_x| (rad), the mean swing of Psi_x within a step (rad), and at the window's end the Euclidean norm of each weight
 row (x, y, pitch, roll; rad/Hz); then whether and when the robot fell.
 
     python benchmarks/bench_drift.py                       # plain rule, seeds 1 2 3, 600 s
@@ -13,7 +13,8 @@ row (x, y, pitch, roll; rad/Hz); then whether and when the robot fell.
     python benchmarks/bench_drift.py --variant all --json drift.json
 
 Variants (``VARIANTS``): plain (the paper's rule: every remedy off), leakage, deadzone,
-projection, combined; ``defaults`` runs the shipped parameter defaults.
+projection, combined; ``defaults`` runs the shipped parameter defaults, ``pd_only`` the
+PD regulator alone (adaptation off).
 """
 from __future__ import annotations
 
@@ -40,11 +41,14 @@ VARIANTS = {
     "plain": PLAIN,
     "leakage": {**PLAIN, "leakage_per_s": 0.01},
     "deadzone": {**PLAIN, "error_deadzone_mps": 0.05},
-    "projection": {**PLAIN, "weight_norm_max": 1e-4},
-    "combined": {**PLAIN, "leakage_per_s": 0.01, "weight_norm_max": 1e-4},
+    "projection": {**PLAIN, "weight_norm_max": 1.5e-5},
+    "combined": {**PLAIN, "leakage_per_s": 0.01, "weight_norm_max": 1.5e-5},
     "defaults": {},
+    "pd_only": {"adaptation_enabled": False},
 }
 WEIGHT_ROWS = ("x", "y", "pitch", "roll")
+#: The weight norms are sampled this often (s); a window's end is a multiple of it.
+NORM_EVERY_S = 10.0
 
 
 def drift_scenario(seed: int, duration_s: float, overrides: dict, *, command_seed: int = 25,
@@ -92,11 +96,21 @@ class WeightRecorder(InProcessRegulator):
         return out
 
 
+def within_step_swing(rows, column: str) -> float:
+    """Mean over the steps of ``rows`` of (max - min) of ``column`` within the step: how much
+    the output follows the velocity's swing inside a step rather than its step average."""
+    index = rows["in_step_index"]
+    starts = np.r_[0, np.nonzero(np.diff(index))[0] + 1, len(index)]
+    values = rows[column]
+    swings = [np.ptp(values[a:b]) for a, b in zip(starts[:-1], starts[1:]) if b - a > 1]
+    return float(np.mean(swings)) if swings else 0.0
+
+
 def run_one(seed: int, duration_s: float, overrides: dict, *, window_s: float = 100.0,
             pushes: bool = False) -> dict:
     """One walk; per-window errors, |Psi_x| and weight norms, fall time."""
     scenario = spec.parse_scenario(drift_scenario(seed, duration_s, overrides, pushes=pushes))
-    recorder = WeightRecorder(window_s)
+    recorder = WeightRecorder(NORM_EVERY_S)
     started = time.perf_counter()
     result = master.run_arm(scenario, scenario.arms[0], recorder)
     wall = time.perf_counter() - started
@@ -111,20 +125,54 @@ def run_one(seed: int, duration_s: float, overrides: dict, *, window_s: float = 
         norms = next((n for ts, n in recorder.samples if abs(ts - (k + 1) * window_s) < 1e-6), None)
         windows.append({"t0_s": k * window_s, "err_vx": float(np.mean(np.abs(ex[inside]))),
                         "psi_x": float(np.mean(np.abs(rows["out_psi_x"][inside]))),
+                        "psi_x_swing": within_step_swing(rows[inside], "out_psi_x"),
                         "weight_norms": norms})
     return {"seed": seed, "fell": bool(result.fell), "t_fall_s": result.t_fall_s,
             "fall_reason": result.fall_reason, "wall_s": wall, "windows": windows,
-            "overrides": overrides, "window_s": window_s}
+            "overrides": overrides, "window_s": window_s,
+            "norms": [[ts, *n] for ts, n in recorder.samples]}
 
 
 def print_run(variant: str, run: dict) -> None:
     fell = f"FELL at {run['t_fall_s']:.1f} s ({run['fall_reason']})" if run["fell"] else "walked"
     print(f"{variant} seed {run['seed']}: {fell}; wall {run['wall_s']:.0f} s")
-    print("  window      |e_vx| m/s   |Psi_x| rad   |w| x / y / pitch / roll (rad/Hz)")
+    print("  window      |e_vx| m/s   |Psi_x| rad   Psi_x swing rad   |w| x / y / pitch / roll (rad/Hz)")
     for w in run["windows"]:
         norms = " / ".join(f"{v:.2e}" for v in w["weight_norms"]) if w["weight_norms"] else "-"
         print(f"  {w['t0_s']:5.0f}-{w['t0_s'] + run['window_s']:<5.0f}  {w['err_vx']:.3f}        {w['psi_x']:.3f}"
-              f"         {norms}")
+              f"         {w['psi_x_swing']:.4f}            {norms}")
+
+
+def plot(runs: list[dict], path: Path) -> None:
+    """Per-window error and the x row's weight norm over time, one colour per variant (one
+    line per seed; a cross where a walk fell)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    variants = list(dict.fromkeys(run["variant"] for run in runs))
+    colours = dict(zip(variants, plt.rcParams["axes.prop_cycle"].by_key()["color"]))
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(7.5, 6.0), sharex=True)
+    for run in runs:
+        c = colours[run["variant"]]
+        label = run["variant"] if run["seed"] == min(r["seed"] for r in runs if r["variant"] == run["variant"]) else None
+        mids = [w["t0_s"] + run["window_s"] / 2 for w in run["windows"]]
+        top.plot(mids, [w["err_vx"] for w in run["windows"]], "o-", color=c, lw=1, ms=3, label=label)
+        norms = np.array(run.get("norms") or [[w["t0_s"] + run["window_s"], *w["weight_norms"]]
+                                                for w in run["windows"] if w["weight_norms"]] or np.zeros((0, 5)))
+        bottom.plot(norms[:, 0], norms[:, 1], color=c, lw=1)
+        if run["fell"]:
+            top.plot([run["t_fall_s"]], [run["windows"][-1]["err_vx"]], "x", color=c, ms=10, mew=2)
+            bottom.plot([run["t_fall_s"]], [norms[-1, 1] if len(norms) else 0.0], "x", color=c, ms=10, mew=2)
+    top.set_ylabel("mean |step-avg vx - cmd| per window, m/s")
+    top.legend(fontsize=8)
+    top.set_title("20 kg torso, COM (+0.05, -0.03) m, damping x3, command every 10 s (x: fall)", fontsize=9)
+    bottom.set_ylabel("|w_x| (forward network), rad/Hz")
+    bottom.set_xlabel("t, s")
+    fig.tight_layout()
+    fig.savefig(path, dpi=80)
+    plt.close(fig)
 
 
 def main(argv=None) -> int:
@@ -137,7 +185,13 @@ def main(argv=None) -> int:
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE",
                     help="extra regulator overrides on top of the variant")
     ap.add_argument("--json", type=Path, help="also write the numbers here")
+    ap.add_argument("--plot", type=Path, metavar="PNG",
+                    help="plot the runs of the --json files given as --from (runs nothing)")
+    ap.add_argument("--from", dest="sources", type=Path, nargs="*", default=[], metavar="JSON")
     args = ap.parse_args(argv)
+    if args.plot:
+        plot([run for src in args.sources for run in json.loads(src.read_text())], args.plot)
+        return 0
     names = list(VARIANTS) if args.variant == "all" else [args.variant]
     unknown = [n for n in names if n not in VARIANTS]
     if unknown:
@@ -151,8 +205,8 @@ def main(argv=None) -> int:
         for seed in args.seeds:
             run = run_one(seed, args.duration, {**VARIANTS[name], **extra}, window_s=args.window,
                           pushes=args.pushes)
-            run["variant"] = name
-            print_run(name, run)
+            run["variant"] = name + "".join(f" {k}={v:g}" for k, v in extra.items())
+            print_run(run["variant"], run)
             sys.stdout.flush()
             out.append(run)
     if args.json:

@@ -31,10 +31,17 @@ HYP = settings(derandomize=True, deadline=None, max_examples=40,
                suppress_health_check=[HealthCheck.too_slow])
 
 
+#: The paper's plain rule: every remedy against drift off.
+PLAIN = dict(leakage_per_s=0.0, error_deadzone_mps=0.0, weight_norm_max=0.0)
+
+
 def small(**changes) -> RegulatorParams:
-    """A small network that learns from the first call (learn_from_step=0): the learning
-    tests drive step_index freely; the gate has tests of its own."""
+    """A small network that learns from the first call (learn_from_step=0) with the paper's
+    plain rule (remedies off unless given): the learning tests drive step_index freely; the
+    gate and each remedy have tests of their own."""
     changes.setdefault("learn_from_step", 0)
+    for name, value in PLAIN.items():
+        changes.setdefault(name, value)
     return RegulatorParams(n_neurons=changes.pop("n_neurons", 60), **changes)
 
 
@@ -784,13 +791,11 @@ def test_alternating_sway_leaves_the_lateral_and_roll_weights_bounded():
 
 
 # ------------------------------------------------------- remedies against parameter drift
-#: The paper's plain rule: every remedy off.
-PLAIN = dict(leakage_per_s=0.0, error_deadzone_mps=0.0, weight_norm_max=0.0)
 
 
 def _learned(**params):
     """A regulator (plain rule until ``params`` are set) that has learned for 30 calls."""
-    reg = Regulator(small(learning_rate=1e-4, **PLAIN))
+    reg = Regulator(small(learning_rate=1e-4))
     run(reg, [RegulatorInputs(vx=0.5, vx_des=0.1, pitch=0.1, step_index=k // 7) for k in range(30)])
     assert np.all(np.abs(reg.state.weights[[0, 2]]).max(axis=1) > 0.0)
     reg.set_params(**params)
@@ -851,14 +856,14 @@ def test_dead_zone_leaves_the_torso_errors_alone():
 
 def test_projection_bounds_every_row_norm_and_is_inactive_below_it():
     seq = [RegulatorInputs(vx=0.5, vx_des=0.1, pitch=0.1, step_index=k // 7) for k in range(200)]
-    plain = Regulator(small(learning_rate=1e-4, **PLAIN))
+    plain = Regulator(small(learning_rate=1e-4))
     plain_norms = []
     for u in seq:
         plain.step(u, DT)
         plain_norms.append(np.linalg.norm(plain.state.weights, axis=1))
     bound = float(np.max(plain_norms[-1][[0, 2]])) / 3.0  # binds in the second half of the run
-    projected = Regulator(small(learning_rate=1e-4, **dict(PLAIN, weight_norm_max=bound)))
-    plain = Regulator(small(learning_rate=1e-4, **PLAIN))
+    projected = Regulator(small(learning_rate=1e-4, weight_norm_max=bound))
+    plain = Regulator(small(learning_rate=1e-4))
     bound_reached = False
     for u, norms in zip(seq, plain_norms):
         o_plain, o_proj = plain.step(u, DT), projected.step(u, DT)
