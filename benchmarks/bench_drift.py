@@ -11,6 +11,7 @@ row (x, y, pitch, roll; rad/Hz); then whether and when the robot fell.
     python benchmarks/bench_drift.py                       # plain rule, seeds 1 2 3, 600 s
     python benchmarks/bench_drift.py --variant leakage --duration 300 --seeds 1
     python benchmarks/bench_drift.py --variant all --json drift.json
+    python benchmarks/bench_drift.py --variant defaults --require-stable   # the 10-minute check
 
 Variants (``VARIANTS``): plain (the paper's rule: every remedy off), leakage, deadzone,
 projection, combined; ``defaults`` runs the shipped parameter defaults, ``pd_only`` the
@@ -143,6 +144,29 @@ def print_run(variant: str, run: dict) -> None:
               f"         {w['psi_x_swing']:.4f}            {norms}")
 
 
+#: The stated bound of ``--require-stable`` (the 10-minute version of the 30-minute long tests):
+#: no fall; no 100 s window after the first has a mean error above ERROR_BOUND_MPS; no weight
+#: row's norm at the end exceeds NORM_GROWTH_BOUND times its largest value at 200-400 s.
+ERROR_BOUND_MPS = 0.10
+NORM_GROWTH_BOUND = 1.2
+
+
+def stability_problems(run: dict) -> list[str]:
+    """What breaks the stated bound in ``run`` (empty: it holds)."""
+    problems = []
+    if run["fell"]:
+        problems.append(f"fell at {run['t_fall_s']:.1f} s")
+    worst = max((w["err_vx"] for w in run["windows"][1:]), default=0.0)
+    if worst > ERROR_BOUND_MPS:
+        problems.append(f"window error {worst:.3f} > {ERROR_BOUND_MPS} m/s")
+    norms = np.array(run["norms"])
+    if len(norms) and norms[-1, 0] >= 400.0:
+        middle = norms[(norms[:, 0] >= 200.0) & (norms[:, 0] <= 400.0), 1:].max(axis=0)
+        if np.any(norms[-1, 1:] > NORM_GROWTH_BOUND * middle):
+            problems.append(f"weight norms {norms[-1, 1:].tolist()} > {NORM_GROWTH_BOUND} x {middle.tolist()}")
+    return problems
+
+
 def plot(runs: list[dict], path: Path) -> None:
     """Per-window error and the x row's weight norm over time, one colour per variant (one
     line per seed; a cross where a walk fell)."""
@@ -165,7 +189,7 @@ def plot(runs: list[dict], path: Path) -> None:
         if run["fell"]:
             top.plot([run["t_fall_s"]], [run["windows"][-1]["err_vx"]], "x", color=c, ms=10, mew=2)
             bottom.plot([run["t_fall_s"]], [norms[-1, 1] if len(norms) else 0.0], "x", color=c, ms=10, mew=2)
-    top.set_ylabel("mean |step-avg vx - cmd| per window, m/s")
+    top.set_ylabel("mean |step-avg vx - cmd|, m/s")
     top.legend(fontsize=8)
     top.set_title("20 kg torso, COM (+0.05, -0.03) m, damping x3, command every 10 s (x: fall)", fontsize=9)
     bottom.set_ylabel("|w_x| (forward network), rad/Hz")
@@ -185,6 +209,8 @@ def main(argv=None) -> int:
     ap.add_argument("--set", nargs="*", default=[], metavar="NAME=VALUE",
                     help="extra regulator overrides on top of the variant")
     ap.add_argument("--json", type=Path, help="also write the numbers here")
+    ap.add_argument("--require-stable", action="store_true",
+                    help="exit 1 unless every run keeps the stated bound (ERROR_BOUND_MPS, NORM_GROWTH_BOUND)")
     ap.add_argument("--plot", type=Path, metavar="PNG",
                     help="plot the runs of the --json files given as --from (runs nothing)")
     ap.add_argument("--from", dest="sources", type=Path, nargs="*", default=[], metavar="JSON")
@@ -209,8 +235,14 @@ def main(argv=None) -> int:
             print_run(run["variant"], run)
             sys.stdout.flush()
             out.append(run)
-    if args.json:
-        args.json.write_text(json.dumps(out, indent=1))
+            if args.json:  # after every run: a long batch cut short keeps what it measured
+                args.json.write_text(json.dumps(out, indent=1))
+    if args.require_stable:
+        failed = {f"{run['variant']} seed {run['seed']}": stability_problems(run) for run in out}
+        failed = {k: v for k, v in failed.items() if v}
+        for name, problems in failed.items():
+            print(f"NOT STABLE: {name}: {'; '.join(problems)}")
+        return 1 if failed else 0
     return 0
 
 
