@@ -29,7 +29,6 @@ import os
 import pathlib
 
 import mujoco
-import numpy as np
 
 from plant.constants import (
     ACTUATOR_NAMES, HOME_JOINT_QPOS, HOME_KEY, HOME_PELVIS_POS_M, HOME_PELVIS_QUAT, JOINT_NAMES,

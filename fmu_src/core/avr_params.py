@@ -56,6 +56,9 @@ class RegulatorParams:
     n_neurons: int = _default("n_neurons")
     seed: int = _default("seed")
     delta_limit_rad: float = _default("delta_limit_rad")  # rad
+    leakage_per_s: float = _default("leakage_per_s")  # 1/s
+    error_deadzone_mps: float = _default("error_deadzone_mps")  # m/s
+    weight_norm_max: float = _default("weight_norm_max")  # rad/Hz
 
     def __post_init__(self):
         values, problems = _checked(self)

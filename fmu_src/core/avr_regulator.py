@@ -297,11 +297,35 @@ def _learning_errors(stride: dict, vx: float, vx_des: float, vy_des: float, pitc
         e_roll = params.roll_des - 0.5 * (stride["roll_mean_prev"] + stride["roll_mean_last"])
     else:
         e_y = e_roll = 0.0
-    return (vx_des - vx, e_y, params.pitch_des - pitch, e_roll)
+    zone = params.error_deadzone_mps
+    e_x = vx_des - vx
+    if zone != 0.0:
+        e_x, e_y = _dead_zone(e_x, zone), _dead_zone(e_y, zone)
+    return (e_x, e_y, params.pitch_des - pitch, e_roll)
+
+
+def _dead_zone(error: float, zone: float) -> float:
+    """``error`` moved toward 0 by ``zone`` (0 inside ``[-zone, zone]``): errors within the
+    step-to-step noise of the velocity do not learn, larger ones learn their excess."""
+    if error > zone:
+        return error - zone
+    if error < -zone:
+        return error + zone
+    return 0.0
+
+
+def _leak_factor(leakage_per_s: float, dt: float) -> float:
+    """What every weight is multiplied by before a call's PES step: ``1 - leakage dt``
+    (0 once ``leakage dt`` reaches 1: a leak never flips a weight's sign)."""
+    if leakage_per_s == 0.0:
+        return 1.0
+    amount = leakage_per_s * dt
+    return 1.0 - amount if amount < 1.0 else 0.0
 
 
 def _pes_update(weights, row_rates, raw, errors, dt, params) -> np.ndarray:
-    """The weights after one PES step with conditional-integration anti-windup.
+    """The weights after one PES step with conditional-integration anti-windup, the
+    leakage before it and the norm projection after it (both off at 0).
 
     The update moves raw[j] by ``-learning_rate dt/n E_j |rates|^2``, i.e. in the
     direction of -E_j; rows at or beyond the limit that it would push further out
@@ -313,11 +337,28 @@ def _pes_update(weights, row_rates, raw, errors, dt, params) -> np.ndarray:
     alpha = -params.learning_rate * dt / row_rates.shape[1] * INV_TAU_RC  # per unit of tau_rc * rate
     coefficients = [0.0 if (value >= limit or value <= -limit) and value * error < 0.0
                     else alpha * error for value, error in zip(raw, errors)]
-    if not any(coefficients):  # nothing to learn: keep (share) the read-only array
-        return weights
+    keep = _leak_factor(params.leakage_per_s, dt)
+    bound = params.weight_norm_max
+    if not any(coefficients) and keep == 1.0 and bound == 0.0:
+        return weights  # nothing changes: keep (share) the read-only array
     new_weights = np.multiply(row_rates, np.array(coefficients)[:, None], out=row_rates)
-    new_weights += weights
+    if keep == 1.0:
+        new_weights += weights
+    else:  # leak first (+ 0.0: an underflow gives +0.0, never -0.0), then the PES step
+        new_weights += weights * keep + 0.0
+    if bound != 0.0:
+        _project(new_weights, bound)
     return readonly(new_weights)
+
+
+def _project(weights: np.ndarray, bound: float) -> None:
+    """Scale, in place, every row of ``weights`` whose Euclidean norm exceeds ``bound``
+    back to ``bound``.  The squared norm is summed in neuron order (a cumulative sum, as
+    the C core's loop), its square root is IEEE's correctly rounded one."""
+    norms = np.sqrt(np.cumsum(weights * weights, axis=1)[:, -1]).tolist()
+    for row, norm in enumerate(norms):
+        if norm > bound:
+            weights[row] = weights[row] * (bound / norm) + 0.0
 
 
 def _compose_outputs(pd_terms: tuple, psi: list | None, params) -> dict:

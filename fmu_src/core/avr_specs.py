@@ -143,6 +143,22 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
            "paper's suite (largest |delta| there 0.152 rad) nor with default gains inside "
            "the declared input ranges of a walking robot (the networks add at most "
            "2 psi_limit = 0.6 rad); 0 makes every offset 0"),
+    # Robust-adaptive-control remedies against parameter drift (docs/adaptation.md); each
+    # acts only on calls that learn, and with all three 0 the rule is the paper's plain PES.
+    _param("leakage_per_s", 0.002, 0.0, 1.0, "1/s",
+           "Leakage (sigma-modification) of the learned weights toward zero, 1/s, in [0, 1]: "
+           "every call that learns first scales every weight by (1 - leakage_per_s dt) (by 0 "
+           "if leakage_per_s dt >= 1); 0 switches it off (the paper's plain rule)"),
+    _param("error_deadzone_mps", 0.0, 0.0, 1.0, "m/s",
+           "Dead-zone on the two velocity learning errors (x: vx_des - vx; y: vy_des - the "
+           "stride-averaged vy), m/s, in [0, 1]: an error e learns as e - d if e > d, e + d "
+           "if e < -d and 0 otherwise (d = error_deadzone_mps); the torso errors are not "
+           "affected; 0 switches it off (the paper's plain rule)"),
+    _param("weight_norm_max", 0.0, 0.0, 1.0, "rad/Hz",
+           "Projection of every weight row (x, y, pitch, roll) onto the ball of this Euclidean "
+           "norm, rad/Hz, in [0, 1]: after every call that learns, a row whose norm exceeds it "
+           "is scaled back to it (|Psi| <= norm times the norm of the rates, Hz); 0 switches "
+           "it off (the paper's plain rule)"),
 )
 
 

@@ -34,10 +34,17 @@ HYP = settings(derandomize=True, deadline=None, max_examples=40,
                suppress_health_check=[HealthCheck.too_slow])
 
 
+#: The paper's plain rule: every remedy against drift off.
+PLAIN = dict(leakage_per_s=0.0, error_deadzone_mps=0.0, weight_norm_max=0.0)
+
+
 def small(**changes) -> RegulatorParams:
-    """A small network that learns from the first call (learn_from_step=0): the learning
-    tests drive step_index freely; the gate has tests of its own."""
+    """A small network that learns from the first call (learn_from_step=0) with the paper's
+    plain rule (remedies off unless given): the learning tests drive step_index freely; the
+    gate and each remedy have tests of their own."""
     changes.setdefault("learn_from_step", 0)
+    for name, value in PLAIN.items():
+        changes.setdefault(name, value)
     return RegulatorParams(n_neurons=changes.pop("n_neurons", 60), **changes)
 
 
@@ -102,7 +109,8 @@ def test_specs_match_dataclasses_and_api_order():
         "psi_gain_swing_hip_pitch", "psi_gain_swing_knee", "psi_gain_swing_hip_roll",
         "psi_gain_stance_hip_roll", "psi_gain_stance_hip_pitch", "psi_gain_stance_knee",
         "adaptation_enabled", "velocity_scale_mps", "angle_scale_rad",
-        "rate_scale_radps", "n_neurons", "seed", "delta_limit_rad"]
+        "rate_scale_radps", "n_neurons", "seed", "delta_limit_rad",
+        "leakage_per_s", "error_deadzone_mps", "weight_norm_max"]
     assert [f.name for f in dataclasses.fields(RegulatorParams)] == [s.name for s in PARAM_SPECS]
     p = RegulatorParams()
     for s in PARAM_SPECS:
@@ -783,3 +791,96 @@ def test_alternating_sway_leaves_the_lateral_and_roll_weights_bounded():
     peaks = np.array(peaks)
     first, second = peaks[:200].max(axis=0), peaks[200:].max(axis=0)
     assert np.all(second <= 1.5 * first), (first, second)
+
+
+# ------------------------------------------------------- remedies against parameter drift
+
+
+def _learned(**params):
+    """A regulator (plain rule until ``params`` are set) that has learned for 30 calls."""
+    reg = Regulator(small(learning_rate=1e-4))
+    run(reg, [RegulatorInputs(vx=0.5, vx_des=0.1, pitch=0.1, step_index=k // 7) for k in range(30)])
+    assert np.all(np.abs(reg.state.weights[[0, 2]]).max(axis=1) > 0.0)
+    reg.set_params(**params)
+    return reg
+
+
+def test_leakage_scales_every_weight_before_the_pes_step():
+    reg = _learned(leakage_per_s=0.5)
+    w = reg.state.weights
+    # No learning error (vx = vx_des, pitch = pitch_des, y and roll not ready): only the leak acts,
+    # on every weight, silent neurons' too, by exactly one rounded product each.
+    reg.step(RegulatorInputs(vx=0.3, vx_des=0.3, step_index=4), DT)
+    assert np.array_equal(reg.state.weights, w * (1.0 - 0.5 * DT))
+    # With an error: the plain rule's increment added to the leaked weights.
+    u = RegulatorInputs(vx=0.5, vx_des=0.1, pitch=0.1, step_index=4)
+    plain = _learned()
+    plain.step(u, DT)
+    leaky = _learned(leakage_per_s=0.5)
+    leaky.step(u, DT)
+    w = _learned().state.weights
+    np.testing.assert_allclose(leaky.state.weights, plain.state.weights - w * (0.5 * DT),
+                               rtol=0, atol=1e-15 * np.abs(w).max())  # a few roundings of |w|
+
+
+def test_leakage_never_flips_a_weight_sign():
+    """leakage_per_s dt >= 1 empties the weights (a factor 1 - leakage dt < 0 would flip them)."""
+    reg = _learned(leakage_per_s=1.0)
+    reg.step(RegulatorInputs(vx=0.3, vx_des=0.3, step_index=4), 1.5)
+    assert np.array_equal(reg.state.weights, np.zeros_like(reg.state.weights))
+    assert not np.signbit(reg.state.weights).any()
+
+
+@pytest.mark.parametrize("error", [0.3, -0.3])
+def test_dead_zone_learns_only_the_excess_of_a_velocity_error(error):
+    inside = _learned(error_deadzone_mps=0.35)
+    w = inside.state.weights
+    inside.step(RegulatorInputs(vx=0.4 - error, vx_des=0.4, step_index=4), DT)
+    assert inside.state.weights is w  # |error| within the zone (pitch, y, roll errors 0): no change
+    plain, zoned = _learned(), _learned(error_deadzone_mps=0.1)
+    u = RegulatorInputs(vx=0.4 - error, vx_des=0.4, pitch=0.1, step_index=4)
+    plain.step(u, DT)
+    zoned.step(u, DT)
+    # The x row moves by (|error| - zone) / |error| of the plain step (up to the rounding of
+    # the coefficient and of the sums: 1e-12 relative to the increment); the pitch row as plain.
+    dx_plain, dx_zone = plain.state.weights[0] - w[0], zoned.state.weights[0] - w[0]
+    np.testing.assert_allclose(dx_zone, dx_plain * (0.2 / 0.3), rtol=1e-9,
+                               atol=1e-12 * np.abs(dx_plain).max())
+    assert np.array_equal(zoned.state.weights[2], plain.state.weights[2])
+
+
+def test_dead_zone_leaves_the_torso_errors_alone():
+    plain, zoned = _learned(), _learned(error_deadzone_mps=0.5)
+    u = RegulatorInputs(vx=0.4, vx_des=0.4, pitch=0.1, step_index=4)  # a pitch error only
+    plain.step(u, DT)
+    zoned.step(u, DT)
+    assert np.array_equal(zoned.state.weights, plain.state.weights)
+
+
+def test_projection_bounds_every_row_norm_and_is_inactive_below_it():
+    seq = [RegulatorInputs(vx=0.5, vx_des=0.1, pitch=0.1, step_index=k // 7) for k in range(200)]
+    plain = Regulator(small(learning_rate=1e-4))
+    plain_norms = []
+    for u in seq:
+        plain.step(u, DT)
+        plain_norms.append(np.linalg.norm(plain.state.weights, axis=1))
+    bound = float(np.max(plain_norms[-1][[0, 2]])) / 3.0  # binds in the second half of the run
+    projected = Regulator(small(learning_rate=1e-4, weight_norm_max=bound))
+    plain = Regulator(small(learning_rate=1e-4))
+    bound_reached = False
+    for u, norms in zip(seq, plain_norms):
+        o_plain, o_proj = plain.step(u, DT), projected.step(u, DT)
+        got = np.linalg.norm(projected.state.weights, axis=1)
+        assert np.all(got <= bound * (1.0 + 1e-14))  # the rescaled norm: a few roundings of bound
+        if not bound_reached:
+            assert o_proj == o_plain  # below the bound the projection does nothing, bit for bit
+        bound_reached = bound_reached or bool(np.any(norms > bound))
+    assert bound_reached and got.max() >= bound * (1.0 - 1e-14)  # it did bind, at the bound
+
+
+def test_remedies_are_in_the_parameter_table_with_ranges():
+    for name, unit in (("leakage_per_s", "1/s"), ("error_deadzone_mps", "m/s"), ("weight_norm_max", "rad/Hz")):
+        spec = next(s for s in PARAM_SPECS if s.name == name)
+        assert (spec.unit, spec.min, spec.variability) == (unit, 0.0, "tunable")
+        with pytest.raises(ParameterError, match=rf"{name} = -0.1: must be a finite number in \[0, 1\]"):
+            small(**{name: -0.1})

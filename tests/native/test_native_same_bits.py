@@ -8,7 +8,8 @@ sources forbid that themselves (avr_types.h), so here each FMU's ``sources/`` is
 fmpy's ``build_platform_binary`` with options an importer may well use (``-std=gnu11 -O3
 -march=native``; for Linux aarch64 the cross compiler at ``-std=gnu11 -O3``), run through
 the plain C host (aarch64 under qemu-aarch64), and its printed outputs must be the shipped
-x86-64 binary's, byte for byte (``%.17g`` reads back as the same double).
+x86-64 binary's, byte for byte (``%.17g`` reads back as the same double): once with the
+paper's plain rule, once with every remedy against drift on (leakage, dead-zone, projection).
 """
 import os
 import sys
@@ -22,6 +23,10 @@ from fmpy.build import build_platform_binary
 from support.native_support import AARCH64_CC, CC, c_host_script, compile_host, input_sequence, require, run_host
 
 PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_knee": 0.0}
+#: The same with every remedy against drift on, each acting on this sequence: the leak, a
+#: dead-zone the synthetic errors exceed, a bound below the x row's plain norm (7.6e-5 rad/Hz).
+REMEDIES = {**PARAMS, "leakage_per_s": 0.5, "error_deadzone_mps": 0.05, "weight_norm_max": 3e-5}
+RUNS = {"plain": PARAMS, "remedies": REMEDIES}
 N_STEPS = 400
 LIBRARY = "AdaptiveVelocityRegulatorNative.so"
 SHIPPED = {2: f"binaries/linux64/{LIBRARY}", 3: f"binaries/x86_64-linux/{LIBRARY}"}
@@ -53,18 +58,23 @@ def build_with_fmpy(fmu: Path, compiler: Path, cpu: str, flags: str, folder: Pat
 
 @pytest.fixture(scope="module")
 def shipped_outputs(native_fmus, tmp_path_factory):
-    """{fmi: (script, instantiation token, the shipped Linux x86-64 binary's outputs through the C host)}."""
+    """{fmi: (instantiation token, {run: (script, the shipped Linux x86-64 binary's outputs
+    through the C host)})}, one run per parameter set of ``RUNS``."""
     out = {}
     for fmi, fmu in native_fmus.items():
         tmp = tmp_path_factory.mktemp(f"shipped{fmi}")
-        script = tmp / "script.txt"
-        script.write_text(c_host_script(fmu, PARAMS, input_sequence(N_STEPS, seed=8)))
         library = tmp / LIBRARY
         with zipfile.ZipFile(fmu) as z:
             library.write_bytes(z.read(SHIPPED[fmi]))
         token = read_model_description(str(fmu)).guid
         host = compile_host(CC, fmi, tmp / "host")
-        out[fmi] = (script, token, run_host(host, "x86_64", library, token, script))
+        runs = {}
+        for name, params in RUNS.items():
+            script = tmp / f"script_{name}.txt"
+            script.write_text(c_host_script(fmu, params, input_sequence(N_STEPS, seed=8)))
+            runs[name] = (script, run_host(host, "x86_64", library, token, script))
+        assert runs["plain"][1] != runs["remedies"][1]  # the remedies act on this sequence
+        out[fmi] = (token, runs)
     return out
 
 
@@ -75,8 +85,9 @@ def test_sources_built_by_fmpy_give_the_shipped_bits(native_fmus, shipped_output
     cpu, compiler, flags = BUILDS[build]
     library = build_with_fmpy(native_fmus[fmi], compiler, cpu, flags, tmp_path, monkeypatch)
     host = compile_host(CC if cpu == "x86_64" else AARCH64_CC, fmi, tmp_path / "host")
-    script, token, expected = shipped_outputs[fmi]
-    got = run_host(host, cpu, library, token, script)
-    differ = sum(a != b for a, b in zip(got.splitlines(), expected.splitlines()))
-    assert len(got.splitlines()) == len(expected.splitlines()) == N_STEPS
-    assert got == expected, f"{build}: {differ} of {N_STEPS} steps differ from the shipped binary"
+    token, runs = shipped_outputs[fmi]
+    for name, (script, expected) in runs.items():
+        got = run_host(host, cpu, library, token, script)
+        differ = sum(a != b for a, b in zip(got.splitlines(), expected.splitlines()))
+        assert len(got.splitlines()) == len(expected.splitlines()) == N_STEPS
+        assert got == expected, f"{build}, {name}: {differ} of {N_STEPS} steps differ from the shipped binary"

@@ -14,7 +14,7 @@ from plant.constants import OFFSET_NAMES
 from plant.controller_params import ControllerParams
 from plant.gaits import GaitParams
 from plant.kinematics import LegKinematics
-from plant.controller import bezier
+from plant.kinematics import bezier
 from plant.gaits import DEFAULT_LIBRARY_PATH, GaitLibrary
 from scenarios.gaits.make_gaits import PD_ONLY_PARAMS
 from plant.errors import ModelError

@@ -249,8 +249,42 @@ static double sparse_dot(const AvrCore *core, int k, const double *restrict w) {
     return sum;
 }
 
+/* The error moved toward 0 by zone, 0 inside [-zone, zone] (avr_regulator._dead_zone). */
+static double dead_zone(double e, double zone) {
+    return e > zone ? e - zone : (e < -zone ? e + zone : 0.0);
+}
+
+/* The factor every weight is scaled by before a call's PES step (avr_regulator._leak_factor). */
+static double leak_factor(double leakage, double dt) {
+    if (leakage == 0.0) return 1.0;
+    double amount = leakage * dt;
+    return amount < 1.0 ? 1.0 - amount : 0.0;
+}
+
+/* Every weight row whose Euclidean norm exceeds bound scaled back to it (avr_regulator._project):
+ * the squared norm summed in neuron order, sqrt correctly rounded. */
+VECTOR_CLONES static void project(double *restrict weights, int n, double bound) {
+    for (int r = 0; r < AVR_N_ROWS; ++r) {
+        double *restrict w = weights + (size_t)r * n;
+        double norm2 = 0.0;
+        for (int i = 0; i < n; ++i) norm2 += w[i] * w[i];
+        double norm = sqrt(norm2);
+        if (norm > bound) {
+            double scale = bound / norm;
+            for (int i = 0; i < n; ++i) w[i] = w[i] * scale + 0.0;
+        }
+    }
+}
+
+/* w[i] * keep + 0.0 for every weight of a row (+ 0.0: an underflow gives +0.0, as the numpy core). */
+VECTOR_CLONES static void leak_row(double *restrict w, int n, double keep) {
+    for (int i = 0; i < n; ++i) w[i] = w[i] * keep + 0.0;
+}
+
 /* Learning with anti-windup (avr_regulator._adapt, _pes_update): raw = unsaturated outputs.
- * A silent neuron's weight would change by coef * 0: it is left as it is. */
+ * A silent neuron's weight would change by coef * 0: it is left as it is.  The remedies
+ * against drift (each off at 0): the dead-zone on the velocity errors, the leak before the
+ * PES step, the norm projection after it. */
 static void learn(AvrCore *core, const double *values, double dt, const double raw[AVR_N_ROWS]) {
     int n = core->n;
     double alpha = -V(learning_rate) * dt / (double)n * INV_TAU_RC;
@@ -259,17 +293,22 @@ static void learn(AvrCore *core, const double *values, double dt, const double r
     int ready = core->stride_boundaries >= AVR_STRIDE_READY;
     double e_y = ready ? V(vy_des) - 0.5 * (core->vy_mean_prev + core->vy_mean_last) : 0.0;
     double e_roll = ready ? V(roll_des) - 0.5 * (core->roll_mean_prev + core->roll_mean_last) : 0.0;
-    double err[AVR_N_ROWS] = {V(vx_des) - V(vx), e_y, V(pitch_des) - V(pitch), e_roll};
+    double e_x = V(vx_des) - V(vx), zone = V(error_deadzone_mps);
+    if (zone != 0.0) e_x = dead_zone(e_x, zone), e_y = dead_zone(e_y, zone);
+    double err[AVR_N_ROWS] = {e_x, e_y, V(pitch_des) - V(pitch), e_roll};
+    double keep = leak_factor(V(leakage_per_s), dt);
     for (int r = 0; r < AVR_N_ROWS; ++r) {
         int saturated_outward = (raw[r] >= lim || raw[r] <= -lim) && raw[r] * err[r] < 0.0;
         double coef = saturated_outward ? 0.0 : alpha * err[r];
+        double *restrict w = core->weights + (size_t)r * n;
+        if (keep != 1.0) leak_row(w, n, keep);
         if (coef == 0.0) continue;
         int k = NET_OF_ROW[r];
-        double *restrict w = core->weights + (size_t)r * n;
         const double *restrict rates = core->rates + (size_t)k * n;
         const int *restrict active = core->active + (size_t)k * n;
         for (int i = 0; i < core->n_active[k]; ++i) w[active[i]] = coef * rates[i] + w[active[i]];
     }
+    if (V(weight_norm_max) != 0.0) project(core->weights, n, V(weight_norm_max));
 }
 
 /* Saturated network outputs psi (x, y, pitch, roll) from the weights before this call's update. */
