@@ -35,7 +35,7 @@ LOGGER_AFTER_MASTER = """
 import gc, sys
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
-from scenarios.cosim.master import FmuRegulator
+from scenarios.cosim.regulators import FmuRegulator
 path, unzip = sys.argv[1], sys.argv[2]  # unzip: a folder of the test's own (nothing in the system temp)
 for _ in range(2):  # masters come and go; their FMU messages must not leave a dangling logger
     reg = FmuRegulator(path)
