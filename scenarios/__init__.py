@@ -4,7 +4,7 @@
 - :mod:`scenarios.cosim.master`: the fmpy co-simulation master (FMU or in-process regulator);
 - :mod:`scenarios.results.metrics`: pure metric functions over the master's structured array;
 - :mod:`scenarios.results.output` / :mod:`scenarios.report`: csv, summary.json, plots, report.md;
-- :mod:`scenarios.cli`: ``python -m scenarios list|validate|run|report``.
+- :mod:`scenarios.cli`: ``python -m scenarios list|validate|run|report`` (``run``: :mod:`scenarios.run.command`).
 
 The paper suite lives in ``scenarios/suite/*.toml``.
 """
