@@ -72,8 +72,10 @@ class Perturbation(Checked):
             if not is_real(added):
                 p.append(f"torso_added_mass_kg={added!r} must be a real number (kg)")
             elif base_torso_mass_kg is not None:  # the sum is checked as it will be set (base + added), to the last bit
-                check_range(p, f"torso_added_mass_kg={added!r}: the torso mass {base_torso_mass_kg:g} + it",
-                            base_torso_mass_kg + added, 0.0, MAX_TORSO_MASS_KG, "kg", True)
+                mass = base_torso_mass_kg + added
+                if not 0.0 < mass <= MAX_TORSO_MASS_KG:
+                    p.append(f"torso_added_mass_kg={added!r} makes the torso mass {base_torso_mass_kg:g} + {added:g} = "
+                             f"{mass:g} kg: it must be in (0, {MAX_TORSO_MASS_KG:g}] kg")
         off = self.torso_com_offset_m
         try:
             comps = list(off)

@@ -24,7 +24,8 @@ def test_apply_to_compiled_reports_the_torso_mass_before_and_after():
 
 def test_an_added_mass_is_checked_on_the_model_it_is_added_to():
     model = load_model("menagerie")
-    with pytest.raises(PerturbationError, match=r"torso_added_mass_kg=-20.*out of range \(0, 100\] kg"):
+    with pytest.raises(PerturbationError, match=r"torso_added_mass_kg=-20.0 makes the torso mass 10.33 \+ -20 = -9.67 kg: "
+                                                r"it must be in \(0, 100\] kg"):
         apply_to_compiled(model, Perturbation(torso_added_mass_kg=-20.0))
     assert torso_mass_kg(model) == NOMINAL_TORSO_MASS_KG  # unchanged
     both = Perturbation(torso_mass_kg=20.0, torso_added_mass_kg=5.0).problems()
