@@ -19,8 +19,9 @@ OFFSET_NAMES = tuple(f"delta_{joint}" for joint in OFFSET_JOINTS)
 SIDES = ("left", "right")
 #: Name of the pelvis (torso) body; the floating base joint(s) sit on it.
 PELVIS_BODY = "cassie-pelvis"
-#: Pelvis mass of both models, kg.
-NOMINAL_PELVIS_MASS_KG = 10.33
+#: Torso mass (the pelvis body's) of both models, kg; "torso" is the name scenario files and
+#: the plant FMU's parameters use.
+NOMINAL_TORSO_MASS_KG = 10.33
 
 #: Motor joints of one leg, in actuator order (each motor has its joint's name).
 MOTOR_JOINTS = ("hip-roll", "hip-yaw", "hip-pitch", "knee", "foot")

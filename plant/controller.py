@@ -33,17 +33,18 @@ tracking at plant rate with fresh joint measurements.
   ``neutral_point_blend = 1``): the nominal gait is speed-neutral and the
   per-speed offset from the gait library makes it settle at ``v_des``.  There is
   no integral action anywhere in the nominal controller, so a model change
-  (pelvis mass, COM) leaves a steady-state speed error for the regulator.
+  (torso mass, COM) leaves a steady-state speed error for the regulator.
 * Heading and turning: the reference heading starts at the yaw at start and
-  turns at the commanded yaw rate (``yaw_rate_des``, rad/s, positive to the left,
-  through the rate limit ``yaw_accel_limit_radps2``, and only while walking).  The
+  turns at the commanded yaw rate ``yaw_rate_des`` (rad/s, positive to the left)
+  through the rate limit ``yaw_accel_limit_radps2``, and only while walking: at
+  ``yaw_rate_ref``.  The
   stance hip yaw is a PD on the pelvis yaw about that reference (rate reference
-  ``yaw_rate_des``); the swing hip yaw lands the foot along the reference heading
-  advanced by half a step, ``yaw_rate_des * T / 2``, so that the stance hip yaw
+  ``yaw_rate_ref``); the swing hip yaw lands the foot along the reference heading
+  advanced by half a step, ``yaw_rate_ref * T / 2``, so that the stance hip yaw
   swings symmetrically about zero while the pelvis turns over it.  Speeds stay in
   the pelvis heading frame, so ``vx``/``vy`` mean the same when turning.
-* The gait speed follows the command through a rate limit
-  (``accel_limit_mps2``).
+* The gait speed ``vx_ref``/``vy_ref`` follows the command ``vx_des``/``vy_des``
+  through a rate limit (``accel_limit_mps2``).
 * Start from rest: ``stand_time_s`` standing on both feet (COM fed back through
   the foot torques), ``shift_time_s`` shifting the pelvis over the first stance
   foot, then walking.  No velocity kick.
@@ -81,7 +82,7 @@ rates as above.  Because ``fmu_src.core.avr_core`` samples and holds its lateral
 once per step (like the longitudinal one), a held lateral term alone was unstable
 here too (falls within 8-17 s at Kp_y = 0.3); the nominal controller therefore
 closes the lateral sway loop itself, continuously, with the same filtered ``vy``:
-landing lateral angle ``+= lateral_speed_gain * (vy - vy_des)`` (0.3 rad per m/s,
+landing lateral angle ``+= lateral_speed_gain * (vy - vy_ref)`` (0.3 rad per m/s,
 proportional only), and the regulator's held lateral PD trims the drift.
 
 All offsets are applied on top of the calibrated gait, so zero offsets at the
@@ -197,13 +198,14 @@ class NominalController:
         self.ankle_height0 = 0.5 * (float(phys.foot_position("left")[2]) + float(phys.foot_position("right")[2]))
         self.offsets = {k: 0.0 for k in OFFSET_NAMES}
         self.gait = None
-        #: Gait speed (m/s): the command through the rate limiter.
-        self.vx_des = 0.0
-        self.vy_des = 0.0
-        self.cmd_vx = self.cmd_vy = 0.0
-        #: Turning rate of the reference heading (rad/s): the command through its rate limit.
+        #: Gait speed (m/s): the command ``vx_des``/``vy_des`` through the rate limiter.
+        self.vx_ref = 0.0
+        self.vy_ref = 0.0
+        #: The commanded speed (m/s), as the regulator and the plant FMU name it.
+        self.vx_des = self.vy_des = 0.0
+        #: Turning rate of the reference heading (rad/s): the command ``yaw_rate_des`` through its rate limit.
+        self.yaw_rate_ref = 0.0
         self.yaw_rate_des = 0.0
-        self.cmd_yaw_rate = 0.0
         self._gaits = GaitLibrary.uniform(GaitParams())
         self.mode = "stand"
         self.stance = self.p.first_stance
@@ -235,7 +237,7 @@ class NominalController:
     # ----------------------------------------------------------- memory
     #: Everything the controller carries from one update to the next (the rest is fixed
     #: at construction from the model and the standing pose); the FMU state holds these.
-    MEMORY_FIELDS = ("offsets", "vx_des", "vy_des", "cmd_vx", "cmd_vy", "yaw_rate_des", "cmd_yaw_rate",
+    MEMORY_FIELDS = ("offsets", "vx_ref", "vy_ref", "vx_des", "vy_des", "yaw_rate_ref", "yaw_rate_des",
                      "mode", "stance", "step_index",
                      "t_step_start", "tau", "vx_step_avg", "vy_filt", "vx_filt",
                      "_step_start_xy", "_swing_start", "_last_t", "yaw_ref")
@@ -279,7 +281,7 @@ class NominalController:
         else:
             for k in OFFSET_NAMES:
                 number(f"offsets[{k!r}]", offsets[k])
-        for name in ("vx_des", "vy_des", "cmd_vx", "cmd_vy", "yaw_rate_des", "cmd_yaw_rate", "vx_step_avg",
+        for name in ("vx_ref", "vy_ref", "vx_des", "vy_des", "yaw_rate_ref", "yaw_rate_des", "vx_step_avg",
                      "vy_filt", "vx_filt", "yaw_ref"):
             number(name, memory[name])
         if memory["mode"] not in self.MODES:
@@ -318,7 +320,7 @@ class NominalController:
 
         Raises KeyError naming a missing field and ValueError naming every invalid one
         (:meth:`memory_problems`, against the physics' current time), nothing changed; the gait is looked up again for the
-        saved gait speed (it is always ``lookup(vx_des, vy_des)``).
+        saved gait speed (it is always ``lookup(vx_ref, vy_ref)``).
         """
         missing = [n for n in self.MEMORY_FIELDS if n not in memory]
         if missing:
@@ -335,7 +337,7 @@ class NominalController:
             elif name == "offsets":
                 value = {k: float(value[k]) for k in OFFSET_NAMES}
             setattr(self, name, value)
-        self.gait = self._gaits.lookup(self.vx_des, self.vy_des)
+        self.gait = self._gaits.lookup(self.vx_ref, self.vy_ref)
 
     # ----------------------------------------------------------- interface
     def set_command(self, vx: float, vy: float, gaits, yaw_rate: float = 0.0) -> None:
@@ -346,8 +348,8 @@ class NominalController:
         (``ControllerParams.accel_limit_mps2``, ``yaw_accel_limit_radps2``) so walking
         starts from rest smoothly.
         """
-        self.cmd_vx, self.cmd_vy, self._gaits = float(vx), float(vy), gaits
-        self.cmd_yaw_rate = float(yaw_rate)
+        self.vx_des, self.vy_des, self._gaits = float(vx), float(vy), gaits
+        self.yaw_rate_des = float(yaw_rate)
         self.gait = None  # force a new lookup (the library may have changed)
         self._refresh_gait(0.0)
 
@@ -356,15 +358,15 @@ class NominalController:
         if self.mode != "walk":
             tx, ty = 0.0, 0.0  # standing/shifting: ramp starts with the first step
         else:
-            tx, ty = self.cmd_vx, self.cmd_vy
-        nx = self.vx_des + max(-a, min(a, tx - self.vx_des))
-        ny = self.vy_des + max(-a, min(a, ty - self.vy_des))
-        tw = self.cmd_yaw_rate if self.mode == "walk" else 0.0
-        if tw != self.yaw_rate_des:
+            tx, ty = self.vx_des, self.vy_des
+        nx = self.vx_ref + max(-a, min(a, tx - self.vx_ref))
+        ny = self.vy_ref + max(-a, min(a, ty - self.vy_ref))
+        tw = self.yaw_rate_des if self.mode == "walk" else 0.0
+        if tw != self.yaw_rate_ref:
             aw = self.p.yaw_accel_limit_radps2 * dt
-            self.yaw_rate_des += max(-aw, min(aw, tw - self.yaw_rate_des))
-        if nx != self.vx_des or ny != self.vy_des or self.gait is None:
-            self.vx_des, self.vy_des = nx, ny
+            self.yaw_rate_ref += max(-aw, min(aw, tw - self.yaw_rate_ref))
+        if nx != self.vx_ref or ny != self.vy_ref or self.gait is None:
+            self.vx_ref, self.vy_ref = nx, ny
             self.gait = self._gaits.lookup(nx, ny)
 
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
@@ -445,8 +447,8 @@ class NominalController:
         yaw, pitch, roll, vx_h, vy_h, roll_rate, pitch_rate, yaw_rate = phys.heading_state()
         dt = max(t - self._last_t, 0.0)
         self._last_t = t
-        if self.yaw_rate_des:
-            self.yaw_ref = math.remainder(self.yaw_ref + self.yaw_rate_des * dt, math.tau)
+        if self.yaw_rate_ref:
+            self.yaw_ref = math.remainder(self.yaw_ref + self.yaw_rate_ref * dt, math.tau)
         yaw_err = math.remainder(yaw - self.yaw_ref, math.tau)
         self.vy_filt = _low_pass(self.vy_filt, vy_h, dt, p.vy_filter_tau_s)
         self.vx_filt = _low_pass(self.vx_filt, vx_h, dt, p.vx_filter_tau_s)
@@ -491,7 +493,7 @@ class NominalController:
         # Heading hold: hip yaw axes point up, so with the foot fixed the pelvis
         # yaw falls as the hip yaw rises.
         targets.q[s, "hip-yaw"] = q["hip-yaw"] + sensed.yaw_err
-        targets.qd[s, "hip-yaw"] = qd["hip-yaw"] + sensed.yaw_rate - self.yaw_rate_des
+        targets.qd[s, "hip-yaw"] = qd["hip-yaw"] + sensed.yaw_rate - self.yaw_rate_ref
         targets.q[s, "foot"] = q["foot"]
         targets.kp[s, "foot"] = 0.0
         targets.kd[s, "foot"] = 0.0
@@ -528,14 +530,14 @@ class NominalController:
         """Where the swing leg lands: (forward, lateral) absolute leg angles (rad)."""
         p, gait, offsets = self.p, self.gait, self.offsets
         step_time_s, leg_length_m = gait.step_time_s, p.stance_leg_length_m
-        v_np = self.vx_des + p.neutral_point_blend * (self.vx_filt - self.vx_des)
+        v_np = self.vx_ref + p.neutral_point_blend * (self.vx_filt - self.vx_ref)
         theta = (_neutral_angle(v_np, step_time_s, leg_length_m) + gait.leg_angle_offset_rad
                  + offsets["delta_swing_hip_pitch"])
         side = 1.0 if self.swing == "left" else -1.0
-        phi = (_neutral_angle(self.vy_des, step_time_s, leg_length_m) + gait.lateral_offset_rad
+        phi = (_neutral_angle(self.vy_ref, step_time_s, leg_length_m) + gait.lateral_offset_rad
                + side * gait.step_width_rad + offsets["delta_swing_hip_roll"]
-               + p.lateral_speed_gain * (self.vy_filt - self.vy_des)
-               + p.turn_lateral_gain * self.vx_des * self.yaw_rate_des)
+               + p.lateral_speed_gain * (self.vy_filt - self.vy_ref)
+               + p.turn_lateral_gain * self.vx_ref * self.yaw_rate_ref)
         return theta, phi
 
     def _walking_targets(self, targets: _Targets, sensed: _Sensed) -> None:
@@ -564,7 +566,7 @@ class NominalController:
         targets.q[sw, "hip-pitch"] = theta + sensed.pitch - kin.angle_offset(knee)
         targets.q[sw, "hip-roll"] = phi - sensed.roll
         # The swing foot lands along the reference heading half a step ahead.
-        targets.q[sw, "hip-yaw"] = -sensed.yaw_err + 0.5 * self.yaw_rate_des * gait.step_time_s
+        targets.q[sw, "hip-yaw"] = -sensed.yaw_err + 0.5 * self.yaw_rate_ref * gait.step_time_s
         targets.q[sw, "foot"] = self._level_foot(sensed.q[sw], sensed.pitch)
 
     def _swing_foot_xy(self, hip, theta: float, phi: float, yaw_err: float) -> tuple[float, float]:

@@ -58,11 +58,11 @@ class ControllerParams:
     #: m/s), continuous (the foot lands where the latest vy asks): stabilises the
     #: lateral sway; the regulator's held-per-step lateral PD only trims the drift.
     lateral_speed_gain: float = 0.3
-    #: Rate limit of the gait speed toward the command (m/s^2).
+    #: Rate limit of the gait speed (``NominalController.vx_ref``/``vy_ref``) toward the command (m/s^2).
     accel_limit_mps2: float = 0.5
     #: Rate limit of the reference heading's turning rate toward the command (rad/s^2).
     yaw_accel_limit_radps2: float = 0.5
-    #: Landing lateral angle per unit of centripetal acceleration vx_des * yaw_rate_des
+    #: Landing lateral angle per unit of centripetal acceleration vx_ref * yaw_rate_ref
     #: (rad per m/s^2): leans the step into the turn so the pelvis keeps no lateral speed.
     turn_lateral_gain: float = -0.13
     swing_leg_max_length_m: float = 0.93

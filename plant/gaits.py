@@ -33,9 +33,9 @@ class GaitParams:
     """
 
     step_time_s: float = 0.4
-    #: Landing leg angle = asin(vx_des*T/(2L)) + leg_angle_offset_rad (+ regulator offset).
+    #: Landing leg angle = asin(vx_ref*T/(2L)) + leg_angle_offset_rad (+ regulator offset).
     leg_angle_offset_rad: float = 0.0
-    #: Landing lateral angle = asin(vy_des*T/(2L)) + lateral_offset_rad + side*step_width_rad.
+    #: Landing lateral angle = asin(vy_ref*T/(2L)) + lateral_offset_rad + side*step_width_rad.
     lateral_offset_rad: float = 0.0
     step_width_rad: float = 0.0
     torso_pitch_des_rad: float = 0.0

@@ -36,7 +36,7 @@ from plant.constants import (
 )
 from plant.errors import ModelError, PerturbationError
 from plant.mjcf import spec_from_file
-from plant.perturbation import Perturbation, apply_to_compiled
+from plant.perturbation import Applied, Perturbation, apply_to_compiled
 from plant.terrain import (
     add_terrain, terrain_summary,
 )
@@ -140,7 +140,15 @@ def _compile(spec: mujoco.MjSpec, src: str, when: str = "") -> mujoco.MjModel:
 
 def load_model(source: str | os.PathLike = "menagerie",
                perturbation: Perturbation | None = None) -> mujoco.MjModel:
-    """Compile the Cassie model with an optional perturbation.
+    """Compile the Cassie model with an optional perturbation (:func:`load_perturbed`,
+    without its report)."""
+    return load_perturbed(source, perturbation)[0]
+
+
+def load_perturbed(source: str | os.PathLike = "menagerie",
+                   perturbation: Perturbation | None = None) -> tuple[mujoco.MjModel, Applied | None]:
+    """Compile the Cassie model with an optional perturbation; also what the perturbation
+    applied (:class:`plant.perturbation.Applied`, None without one).
 
     Args:
         source: ``"menagerie"`` (Menagerie's ``agility_cassie`` scene with floor),
@@ -179,11 +187,10 @@ def load_model(source: str | os.PathLike = "menagerie",
         if key.qpos.shape != (model.nq,):
             raise ModelError(f"{HOME_KEY!r} keyframe has {key.qpos.size} qpos, model nq={model.nq}")
 
-    if perturbation is not None:
-        apply_to_compiled(model, perturbation)
+    applied = None if perturbation is None else apply_to_compiled(model, perturbation)
     if log.isEnabledFor(logging.INFO):
-        log.info("loaded Cassie model %r: %s", src, model_summary(model))
-    return model
+        log.info("loaded Cassie model %r: %s (%s)", src, model_summary(model), applied)
+    return model, applied
 
 
 def model_summary(model: mujoco.MjModel) -> dict:

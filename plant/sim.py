@@ -38,7 +38,8 @@ log = logging.getLogger(__name__)
 
 
 class CassieWalker:
-    """Cassie plant with the nominal controller; see the module docstring.
+    """Cassie plant with the nominal controller (a :class:`plant.interface.Plant`); see the
+    module docstring.
 
     Args:
         model: compiled Cassie model (``plant.model.load_model``), already carrying
@@ -61,9 +62,9 @@ class CassieWalker:
         self.controller = NominalController(self.physics, self.params)
         self._substep = 0
         self._fall_reason = None
-        self.vx_des_mps = 0.0
-        self.vy_des_mps = 0.0
-        self.yaw_rate_des_radps = 0.0
+        self.vx_des = 0.0
+        self.vy_des = 0.0
+        self.yaw_rate_des = 0.0
         self.set_command(0.0, 0.0)
 
     @property
@@ -80,12 +81,13 @@ class CassieWalker:
         """Simulated time (s)."""
         return self.physics.time_s
 
-    def set_command(self, vx_des_mps: float, vy_des_mps: float, yaw_rate_des_radps: float = 0.0) -> None:
+    def set_command(self, vx_des: float, vy_des: float, yaw_rate_des: float = 0.0) -> None:
         """Commanded forward/lateral speed (m/s, heading frame; selects the gait) and
-        turning rate (rad/s, positive turns left)."""
-        self.vx_des_mps, self.vy_des_mps = float(vx_des_mps), float(vy_des_mps)
-        self.yaw_rate_des_radps = float(yaw_rate_des_radps)
-        self.controller.set_command(self.vx_des_mps, self.vy_des_mps, self.gaits, self.yaw_rate_des_radps)
+        turning rate (rad/s, positive turns left); the controller follows them through
+        its rate limits (``NominalController.vx_ref``, ...)."""
+        self.vx_des, self.vy_des = float(vx_des), float(vy_des)
+        self.yaw_rate_des = float(yaw_rate_des)
+        self.controller.set_command(self.vx_des, self.vy_des, self.gaits, self.yaw_rate_des)
 
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
         """Regulator joint offsets (rad); keys from ``OFFSET_NAMES``; unknown key -> KeyError."""
@@ -124,8 +126,8 @@ class CassieWalker:
         the servo gains, the walker's and the controller's memory (plain Python values)."""
         return {"physics": self.physics.physics_state().tolist(),
                 "walker": {"substep": self._substep, "fall_reason": self._fall_reason,
-                           "vx_des_mps": self.vx_des_mps, "vy_des_mps": self.vy_des_mps,
-                           "yaw_rate_des_radps": self.yaw_rate_des_radps},
+                           "vx_des": self.vx_des, "vy_des": self.vy_des,
+                           "yaw_rate_des": self.yaw_rate_des},
                 "controller": self.controller.memory()}
 
     def set_state(self, state: Mapping) -> None:
@@ -143,7 +145,7 @@ class CassieWalker:
             raise
 
     #: The walker's own fields in a state (besides the physics and the controller's memory).
-    WALKER_FIELDS = ("substep", "fall_reason", "vx_des_mps", "vy_des_mps", "yaw_rate_des_radps")
+    WALKER_FIELDS = ("substep", "fall_reason", "vx_des", "vy_des", "yaw_rate_des")
 
     def state_problems(self, state) -> list[str]:
         """Why ``state`` is not what :meth:`get_state` of this walker can have returned (every
@@ -162,7 +164,7 @@ class CassieWalker:
         if not (walker["fall_reason"] is None or isinstance(walker["fall_reason"], str)):
             problems.append(f"walker fall_reason = {walker['fall_reason']!r}: must be null or a text")
         bound = self.physics.MAX_STATE_VALUE
-        for name in ("vx_des_mps", "vy_des_mps", "yaw_rate_des_radps"):
+        for name in ("vx_des", "vy_des", "yaw_rate_des"):
             value = walker[name]
             if isinstance(value, bool) or not isinstance(value, (int, float)) or not -bound <= value <= bound:
                 problems.append(f"walker {name} = {value!r}: must be a finite number in [{-bound:g}, {bound:g}]")
@@ -182,8 +184,8 @@ class CassieWalker:
         self.controller.restore_memory(state["controller"])
         self._substep = substep
         self._fall_reason = walker["fall_reason"]
-        self.vx_des_mps, self.vy_des_mps = float(walker["vx_des_mps"]), float(walker["vy_des_mps"])
-        self.yaw_rate_des_radps = float(walker["yaw_rate_des_radps"])
+        self.vx_des, self.vy_des = float(walker["vx_des"]), float(walker["vy_des"])
+        self.yaw_rate_des = float(walker["yaw_rate_des"])
 
     def set_pelvis_force(self, force_n) -> None:
         """Constant world-frame force (N, 3-vector) on the pelvis until changed."""
@@ -200,6 +202,9 @@ class CassieWalker:
         """Reason of the first detected fall, or None."""
         return self._fall_reason
 
+    def close(self) -> None:
+        """Nothing to free (the model and data are Python objects); part of :class:`plant.interface.Plant`."""
+
     def telemetry(self) -> dict:
         """Named floats for logging (SI units; stance 0 = left, 1 = right)."""
         ph, c = self.physics, self.controller
@@ -215,8 +220,8 @@ class CassieWalker:
             "stance": 0.0 if c.stance == "left" else 1.0,
             "tau": float(c.tau), "step_index": float(c.step_index),
             "left_foot_force": float(fl), "right_foot_force": float(fr),
-            "vx_des": self.vx_des_mps, "vy_des": self.vy_des_mps,
-            "yaw": yaw, "yaw_rate": yaw_rate, "yaw_rate_des": self.yaw_rate_des_radps,
+            "vx_des": self.vx_des, "vy_des": self.vy_des,
+            "yaw": yaw, "yaw_rate": yaw_rate, "yaw_rate_des": self.yaw_rate_des,
         }
 
 

@@ -1,7 +1,8 @@
 """Co-simulation scenarios: the master and the experiments that use it, in layers that import
 downward only:
 
-- :mod:`scenarios.cli` / :mod:`scenarios.report`: ``python -m scenarios`` and ``report DIR``;
+- :mod:`scenarios.cli` / :mod:`scenarios.report`: ``python -m scenarios`` and ``report DIR``
+  (``run`` itself: :mod:`scenarios.run.command`);
 - :mod:`scenarios.run`, :mod:`scenarios.campaign`, :mod:`scenarios.ssp`, :mod:`scenarios.gaits`,
   :mod:`scenarios.rl_hzd`: the experiments (the suite's runs, Monte-Carlo campaigns on Dask,
   SSP export and other masters, the gait calibration, the RL-HZD baseline);

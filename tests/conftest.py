@@ -19,8 +19,13 @@ from pathlib import Path
 
 import pytest
 
-from support.native_support import REGULATOR_FMUS
-from support.paths import SUPPORT_DIR
+# Test modules of one layer reuse another layer's tables (e.g. the native hosts run the FMU
+# compliance calls), whatever subset pytest collects.
+sys.path[:0] = [str(p) for p in sorted(Path(__file__).parent.iterdir())
+                if p.is_dir() and p.name not in ("support", "third_party", "__pycache__")]
+
+from support.native_support import REGULATOR_FMUS  # noqa: E402
+from support.paths import SUPPORT_DIR  # noqa: E402
 
 
 @pytest.fixture(scope="session")

@@ -30,7 +30,7 @@ from typing import Mapping
 from fmu_src.fmi import avr_fmustate
 from fmu_src.core.avr_specs import VarSpec
 from fmu_src.core.avr_errors import StateError
-from plant.constants import NOMINAL_PELVIS_MASS_KG, OFFSET_NAMES, SIDES
+from plant.constants import NOMINAL_TORSO_MASS_KG, OFFSET_NAMES, SIDES
 from plant.errors import PerturbationError
 from plant.model import load_model
 from plant.perturbation import MAX_COM_OFFSET_M, MAX_DAMPING_SCALE, MAX_TORSO_MASS_KG, Perturbation
@@ -73,8 +73,8 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
     _p("cassie_model", "menagerie", None, None, "",
        "Cassie model: 'menagerie' (MuJoCo Menagerie's agility_cassie) or 'osu' (Oregon State's "
        "cassie-mujoco-sim model); both travel in the FMU's resources", type="String"),
-    _p("torso_mass_kg", NOMINAL_PELVIS_MASS_KG, 0.0, MAX_TORSO_MASS_KG, "kg",
-       f"Torso (pelvis) mass, kg, in (0, {MAX_TORSO_MASS_KG:g}]; the nominal {NOMINAL_PELVIS_MASS_KG:g} kg "
+    _p("torso_mass_kg", NOMINAL_TORSO_MASS_KG, 0.0, MAX_TORSO_MASS_KG, "kg",
+       f"Torso (pelvis) mass, kg, in (0, {MAX_TORSO_MASS_KG:g}]; the nominal {NOMINAL_TORSO_MASS_KG:g} kg "
        "leaves the model as it is; the pelvis inertia scales with it"),
     *(_p(f"torso_com_offset_{axis}_m", 0.0, -MAX_COM_OFFSET_M, MAX_COM_OFFSET_M, "m",
          f"Torso COM offset, pelvis frame {axis} ({where}), m, in [{-MAX_COM_OFFSET_M:g}, {MAX_COM_OFFSET_M:g}]")
@@ -141,7 +141,7 @@ def perturbation_from_values(values: Mapping) -> Perturbation:
                               max_slope_deg=values["terrain_max_slope_deg"],
                               seed=values["terrain_seed"], size_m=values["terrain_size_m"])
     return Perturbation(
-        torso_mass_kg=None if mass == NOMINAL_PELVIS_MASS_KG else mass,
+        torso_mass_kg=None if mass == NOMINAL_TORSO_MASS_KG else mass,
         torso_com_offset_m=(values["torso_com_offset_x_m"], values["torso_com_offset_y_m"],
                             values["torso_com_offset_z_m"]),
         joint_damping_scale=values["joint_damping_scale"], terrain=terrain)
@@ -151,6 +151,9 @@ def values_from_perturbation(model: str, perturbation: Perturbation | None) -> d
     """The parameter values of ``model`` with ``perturbation`` (the inverse of
     :func:`perturbation_from_values`); the scenarios' --plant fmu path uses it."""
     p = perturbation or Perturbation()
+    if p.torso_added_mass_kg is not None:
+        raise ValueError(f"torso_added_mass_kg = {p.torso_added_mass_kg!r}: the CassiePlant FMU takes the absolute "
+                         "torso_mass_kg only (plant.perturbation.resolved gives it)")
     values = dict(PARAM_DEFAULTS, cassie_model=model, joint_damping_scale=float(p.joint_damping_scale))
     if p.torso_mass_kg is not None:
         values["torso_mass_kg"] = float(p.torso_mass_kg)
@@ -219,7 +222,7 @@ def step_problem(step_size_s: float) -> str | None:
 def apply_inputs(walker: CassieWalker, inputs: Mapping) -> None:
     """Command (only when it changes: a new command re-selects the gait), offsets, force."""
     command = (float(inputs["vx_des"]), float(inputs["vy_des"]), float(inputs["yaw_rate_des"]))
-    if command != (walker.vx_des_mps, walker.vy_des_mps, walker.yaw_rate_des_radps):
+    if command != (walker.vx_des, walker.vy_des, walker.yaw_rate_des):
         walker.set_command(*command)
     walker.set_offsets({k: inputs[k] for k in OFFSET_NAMES})
     force = [inputs["push_fx"], inputs["push_fy"], inputs["push_fz"]]
@@ -264,7 +267,7 @@ def decode_fmu_state(blob) -> avr_fmustate.FmuStateParts:
 #: Walker state blob: magic, version, JSON length.
 _STATE_HEADER = struct.Struct("<4sII")
 _STATE_MAGIC = b"CPWS"
-_STATE_VERSION = 1
+_STATE_VERSION = 2
 
 
 def state_to_bytes(walker: CassieWalker) -> bytes:
@@ -306,13 +309,13 @@ def checked_state(walker: CassieWalker, blob: bytes) -> dict:
 
 
 #: The command and offsets a walker state holds, each with the input whose range it has (the
-#: controller's own copies too: its rate-limited gait speed and yaw rate lie between 0 and the
+#: controller's own copies too: its rate-limited gait speed and yaw rate, ``*_ref``, lie between 0 and the
 #: command): a state outside them cannot come from this FMU.
-_STATE_INPUTS = (("walker", "vx_des_mps", "vx_des"), ("walker", "vy_des_mps", "vy_des"),
-                 ("walker", "yaw_rate_des_radps", "yaw_rate_des"),
-                 ("controller", "cmd_vx", "vx_des"), ("controller", "vx_des", "vx_des"),
-                 ("controller", "cmd_vy", "vy_des"), ("controller", "vy_des", "vy_des"),
-                 ("controller", "cmd_yaw_rate", "yaw_rate_des"), ("controller", "yaw_rate_des", "yaw_rate_des"))
+_STATE_INPUTS = (("walker", "vx_des", "vx_des"), ("walker", "vy_des", "vy_des"),
+                 ("walker", "yaw_rate_des", "yaw_rate_des"),
+                 ("controller", "vx_des", "vx_des"), ("controller", "vx_ref", "vx_des"),
+                 ("controller", "vy_des", "vy_des"), ("controller", "vy_ref", "vy_des"),
+                 ("controller", "yaw_rate_des", "yaw_rate_des"), ("controller", "yaw_rate_ref", "yaw_rate_des"))
 
 
 def _command_problems(state: Mapping) -> list[str]:

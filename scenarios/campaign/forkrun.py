@@ -9,7 +9,7 @@ that and checked the campaign's base model once, and forks one child per run. Th
 is a fresh process all the same (a pythonfmu FMU is loaded in it alone; a crash takes
 nothing else with it): it starts its own session, dies with the server (Linux
 ``PR_SET_PDEATHSIG``), takes the task's environment (``TMPDIR``, ``MENAGERIE_ROOT``),
-writes its stderr to a file and runs :func:`scenarios.cli.main` on the run's arguments.
+writes its stderr to a file and runs :func:`scenarios.run.command.main` on the run's arguments.
 
 Protocol (one run at a time per server; a worker starts another server for a second
 concurrent task): the server, started with the environment every run shares, says
@@ -20,6 +20,7 @@ signal). The server ends when its stdin closes, or with the thread that started 
 """
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import select
@@ -31,13 +32,23 @@ import time
 from pathlib import Path
 from typing import Any
 
-from scenarios.campaign.task import die_with_parent
+try:  # Linux: the child gets SIGKILL when the thread that started it (the task) goes away
+    _PRCTL = ctypes.CDLL(None, use_errno=True).prctl
+except (OSError, AttributeError):  # pragma: no cover - not Linux
+    _PRCTL = None
+_PR_SET_PDEATHSIG = 1
 
 #: What the server imports before its first fork (what a run imports, matplotlib aside).
 PRELOAD = ("numpy", "mujoco", "fmpy", "fmpy.fmi2", "fmpy.fmi3", "tqdm", "plant.model", "plant.sim",
-           "scenarios.cli", "scenarios.run.run_session", "scenarios.run.runner", "scenarios.cosim.master", "scenarios.results.output",
+           "scenarios.run.command", "scenarios.run.run_session", "scenarios.run.runner", "scenarios.cosim.master", "scenarios.results.output",
            "scenarios.results.store", "scenarios.lang.spec", "scenarios.lang.plantio", "scenarios.cosim.regulators")
 SERVER_START_S = 120.0  # a server must be ready within this time
+
+
+def die_with_parent() -> None:  # runs in the child between fork and exec: no allocation-heavy work
+    """Linux: this process gets SIGKILL when the thread that started it goes away."""
+    if _PRCTL is not None:
+        _PRCTL(_PR_SET_PDEATHSIG, signal.SIGKILL)
 
 
 # --------------------------------------------------------------------------- server side
@@ -58,7 +69,7 @@ def _child(request: dict[str, Any], server_pid: int) -> None:
         err = os.open(request["stderr"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
         for fd, target in ((0, null), (1, null), (2, err)):
             os.dup2(target, fd)
-        from scenarios.cli import main
+        from scenarios.run.command import main
 
         code = main(request["argv"])
     except SystemExit as exc:
@@ -143,7 +154,7 @@ class ForkServer:
         return json.loads(line)
 
     def run(self, argv: list[str], env: dict[str, str], stderr: Path, timeout: float) -> int | None:
-        """Run ``scenarios.cli.main(argv)`` in a forked child; its exit code (negative: the
+        """Run ``scenarios.run.command.main(argv)`` (``argv``: the ``run`` command's arguments) in a forked child; its exit code (negative: the
         signal that killed it), or None after ``timeout`` s (the child is killed)."""
         self.proc.stdin.write(json.dumps({"argv": argv, "env": env, "stderr": str(stderr)}) + "\n")
         self.proc.stdin.flush()

@@ -21,7 +21,6 @@ run output.
 """
 from __future__ import annotations
 
-import ctypes
 import json
 import logging
 import os
@@ -35,6 +34,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from scenarios.campaign import forkrun
+from scenarios.campaign.forkrun import die_with_parent
+
 log = logging.getLogger(__name__)
 
 #: The metrics copied from each arm of ``summary.json`` into the campaign CSV.
@@ -42,13 +44,6 @@ METRICS = ("fell", "t_fall_s", "steady_state_error_vx", "steady_state_error_vy",
            "mean_vx_last_s", "mean_vy_last_s", "max_abs_pitch_rad", "max_abs_roll_rad", "sim_s", "wall_s")
 COMPLETE, FAILED = "complete", "failed"
 _TAIL = 600  # characters of the run's stderr kept in a failure reason
-
-try:  # Linux: the child gets SIGKILL when the thread that started it (the task) goes away
-    _PRCTL = ctypes.CDLL(None, use_errno=True).prctl
-except (OSError, AttributeError):  # pragma: no cover - not Linux
-    _PRCTL = None
-_PR_SET_PDEATHSIG = 1
-
 
 class RunProcessDied(RuntimeError):
     """The ``scenarios run`` process was killed by a signal (Dask retries the task)."""
@@ -79,11 +74,6 @@ def client_env() -> tuple[tuple[str, str], ...]:
     return (("MENAGERIE_ROOT", str(root.resolve())),) if root is not None else ()
 
 
-def die_with_parent() -> None:  # runs in the child between fork and exec: no allocation-heavy work
-    if _PRCTL is not None:
-        _PRCTL(_PR_SET_PDEATHSIG, signal.SIGKILL)
-
-
 def _claim_out(runs_dir: Path) -> Path:
     runs_dir.mkdir(parents=True, exist_ok=True)
     k = 1
@@ -97,6 +87,7 @@ def _claim_out(runs_dir: Path) -> Path:
 
 
 def run_command(task: Task, out: Path) -> list[str]:
+    """``python -m scenarios run ...`` for ``task`` (from index 4: the ``run`` command's own arguments)."""
     cmd = [sys.executable, "-m", "scenarios", "run", task.scenario_file, "--out", str(out),
            "--regulator", task.regulator, "--no-plots"]  # the campaign's report plots the campaign
     return cmd + (["--fmu", task.fmu] if task.fmu else [])
@@ -156,8 +147,6 @@ def _server_env(task: Task) -> dict[str, str]:
 def warm_fork_server(task: Task) -> None:
     """Start this worker's fork server for runs like ``task``'s ahead of them (the campaign
     calls it on every worker: ``client.run``); a failure leaves it to the first run."""
-    from scenarios.campaign import forkrun
-
     try:
         forkrun.warm(_server_env(task), task.warm_models)
     except Exception as exc:
@@ -166,11 +155,9 @@ def warm_fork_server(task: Task) -> None:
 
 def _run_forked(task: Task, out: Path, tmp: str) -> tuple[int | None, str]:
     """The run forked from this worker's warm server (:mod:`scenarios.campaign.forkrun`)."""
-    from scenarios.campaign import forkrun
-
     stderr = Path(tmp) / "run.stderr"
     try:
-        code = forkrun.run_forked(run_command(task, out)[3:], _server_env(task), {"TMPDIR": tmp}, stderr,
+        code = forkrun.run_forked(run_command(task, out)[4:], _server_env(task), {"TMPDIR": tmp}, stderr,
                                   task.timeout_s, task.warm_models)
     except EOFError as exc:
         raise RunProcessDied(f"sample {task.sample}: the fork server died during the run ({exc})") from None

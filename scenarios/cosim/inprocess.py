@@ -13,7 +13,7 @@ def apply_regulator(walker: CassieWalker, regulator, dt_s: float) -> dict[str, f
     Args:
         walker: the plant; its :meth:`CassieWalker.regulator_inputs` (vx, vy in m/s,
             pitch, roll in rad, their rates in rad/s, step_index) and its commanded
-            speeds ``vx_des_mps``/``vy_des_mps`` (m/s) are the regulator inputs.
+            speeds ``vx_des``/``vy_des`` (m/s) are the regulator inputs.
         regulator: an ``fmu_src.core.avr_core.Regulator`` (e.g. with
             ``RegulatorParams(adaptation_enabled=False)``: the paper's PD only), or
             any object with the same ``step(RegulatorInputs, dt) -> dict`` whose dict
@@ -26,7 +26,7 @@ def apply_regulator(walker: CassieWalker, regulator, dt_s: float) -> dict[str, f
         (the core's diagnostic outputs ``psi_*``/``error_*`` are dropped).
     """
     u = walker.regulator_inputs()
-    out = regulator.step(RegulatorInputs(vx_des=walker.vx_des_mps, vy_des=walker.vy_des_mps,
+    out = regulator.step(RegulatorInputs(vx_des=walker.vx_des, vy_des=walker.vy_des,
                                          **u), dt_s)
     offsets = {k: out[k] for k in OFFSET_NAMES}
     walker.set_offsets(offsets)

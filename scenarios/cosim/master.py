@@ -30,6 +30,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from plant.constants import OFFSET_NAMES
+from plant.interface import Plant
 from scenarios.errors import CosimError, ScenarioError
 from scenarios.cosim.regulators import RegulatorPath, arm_regulator
 from scenarios.lang.scenario import Arm, Scenario
@@ -145,8 +146,8 @@ class _Steps:
 def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
             progress: Callable[[int], None] | None = None, model=None, model_summary: dict | None = None,
             stop: Callable[[], bool] | None = None,
-            plant: Callable[[Scenario, Any], Any] | None = None,
-            recorder: Callable[[int, float, Any], None] | None = None,
+            plant: Callable[[Scenario, Any], Plant] | None = None,
+            recorder: Callable[[int, float, Plant], None] | None = None,
             exchange: str = "gauss-seidel") -> ArmResult:
     """Run one arm of ``scenario`` closed-loop; return its trajectory (nothing printed).
 
@@ -156,8 +157,8 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     communication step; when it answers true the run ends with ``KeyboardInterrupt``
     (a cooperative Ctrl-C: raised here, never inside the FMU). The regulator is closed
     whatever happens. ``plant(scenario, model)`` makes the walker instead of
-    ``CassieWalker(model)`` (``scenarios.cosim.plant_fmu``: the plant FMU); its ``close()``, if
-    any, is called at the end. ``recorder(k, t, walker)`` is called at every
+    ``CassieWalker(model)`` (``scenarios.cosim.plant_fmu``: the plant FMU); either is a
+    :class:`plant.interface.Plant`, closed at the end. ``recorder(k, t, walker)`` is called at every
     communication step before the plant advances (``run --render``:
     :class:`scenarios.results.render.StateRecorder`; its ``track()`` goes into the result).
     The result's ``timings`` say where the time went (:data:`TIMINGS`).
@@ -176,7 +177,7 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     if model is None:
         model, model_summary = load_plant_model(scenario)
         lap = _lap(timings, "model_s", lap)
-    walker = CassieWalker(model) if plant is None else plant(scenario, model)  # its own copy of the model
+    walker: Plant = CassieWalker(model) if plant is None else plant(scenario, model)  # its own copy of the model
     n_plant = plant_steps_per_comm(scenario.comm_step_s, float(walker.SIM_DT_S))
     outputs = regulator.output_names()
     missing = [n for n in OFFSET_NAMES if n not in outputs]
@@ -191,8 +192,7 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
         lap = _lap(timings, "loop_s", lap)
     finally:
         regulator.close()
-        if hasattr(walker, "close"):
-            walker.close()
+        walker.close()
     if progress is not None and steps.done % PROGRESS_EVERY:
         progress(steps.done % PROGRESS_EVERY)
     rows = steps.recorder.rows(steps.done) if steps.recorder is not None else np.zeros(0, dtype=[("t", "f8")])
@@ -212,7 +212,7 @@ def _lap(timings: dict[str, float], key: str, since: float) -> float:
     return now
 
 
-def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n_plant: int, steps: _Steps,
+def _run_steps(scenario: Scenario, arm: Arm, walker: Plant, regulator: RegulatorPath, n_plant: int, steps: _Steps,
                progress: Callable[[int], None] | None, stop: Callable[[], bool] | None,
                recorder: Callable[[int, float, Any], None] | None = None, exchange: str = "gauss-seidel") -> None:
     """The communication steps of :func:`run_arm` (see the module docstring), into ``steps``."""
@@ -268,7 +268,7 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
                 progress(PROGRESS_EVERY)
             if walker.fell():
                 steps.fell, steps.t_fall = True, t0 + (k + 1) * h
-                steps.reason = str(getattr(walker, "fall_reason", "") or "") or None
+                steps.reason = walker.fall_reason or None
                 log.info("%s/%s: fell at t = %.3f s (%s)", scenario.name, arm.name, steps.t_fall, steps.reason)
                 break
     finally:
@@ -277,7 +277,7 @@ def _run_steps(scenario: Scenario, arm: Arm, walker, regulator: RegulatorPath, n
 
 def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | Path | None = None,
                  arms: tuple[str, ...] | None = None, progress: Callable[[int], None] | None = None,
-                 plant: Callable[[Scenario, Any], Any] | None = None,
+                 plant: Callable[[Scenario, Any], Plant] | None = None,
                  exchange: str = "gauss-seidel") -> list[ArmResult]:
     """Every arm of ``scenario`` (or those named in ``arms``), each on a fresh plant and regulator."""
     from scenarios.lang.plantio import load_plant_model

@@ -1,9 +1,8 @@
 """``--plant fmu``: the CassiePlant FMU in our master, behind the walker's interface.
 
-:class:`FmuPlant` offers what :func:`scenarios.cosim.master.run_arm` uses of
-:class:`plant.sim.CassieWalker` (``set_command``, ``set_pelvis_force``,
-``regulator_inputs``, ``telemetry``, ``set_offsets``, ``advance``, ``fell``,
-``fall_reason``, ``SIM_DT_S``), so the same loop runs the plant in-process or as an FMU
+:class:`FmuPlant` implements :class:`plant.interface.Plant`, what
+:func:`scenarios.cosim.master.run_arm` uses of a plant (as :class:`plant.sim.CassieWalker`
+does), so the same loop runs the plant in-process or as an FMU
 (through fmpy, every status checked, the FMU's messages in the error).  Inputs set
 between two ``advance`` calls are held over the next ``fmi2DoStep``; outputs are read
 after it.  The same scenario gives the same rows bit for bit with either plant: the
@@ -28,18 +27,33 @@ from scenarios.cosim.fmi_host import FmuInstance
 REGULATOR_NAMES = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
 
 
-def fmu_parameters(scenario, nominal_torso_mass_kg: float | None = None) -> dict:
-    """The CassiePlant parameters of ``scenario`` (its model and perturbation)."""
+def fmu_parameters(scenario, torso_mass_kg: float | None = None) -> dict:
+    """The CassiePlant parameters of ``scenario`` (its model and perturbation).
+
+    ``torso_mass_kg``: the torso mass the plant applied for this scenario (``plant.perturbation.
+    torso_mass_kg`` of its compiled model); if None, a ``torso_added_mass_kg`` is added to the
+    nominal torso mass of the models the FMU holds (``plant.constants.NOMINAL_TORSO_MASS_KG``).
+    """
+    import dataclasses
+
+    from plant.constants import NOMINAL_TORSO_MASS_KG
+    from plant.perturbation import Perturbation, resolved
     from scenarios.lang.plantio import build_perturbation
 
     if scenario.model not in MODEL_FILES:
         raise CosimError(f"model = {scenario.model!r}: the CassiePlant FMU holds {', '.join(MODEL_FILES)} only "
                          "(an MJCF path needs --plant inprocess)")
-    return values_from_perturbation(scenario.model, build_perturbation(scenario, nominal_torso_mass_kg))
+    pert = build_perturbation(scenario)
+    if torso_mass_kg is not None:
+        pert = dataclasses.replace(pert or Perturbation(), torso_mass_kg=torso_mass_kg, torso_added_mass_kg=None)
+    elif pert is not None:
+        pert = resolved(pert, NOMINAL_TORSO_MASS_KG)
+    return values_from_perturbation(scenario.model, pert)
 
 
 class FmuPlant(FmuInstance):
-    """The CassiePlant FMU as a walker (see the module docstring)."""
+    """The CassiePlant FMU as a :class:`plant.interface.Plant` (see the module docstring);
+    ``close`` (:class:`FmuInstance`) frees the instance and its extracted folder."""
 
     kind = "fmu-plant"
     SIM_DT_S = PLANT_STEP_S
@@ -49,7 +63,7 @@ class FmuPlant(FmuInstance):
         """``unpack_dir``: where the FMU is extracted (a fresh subfolder, removed by ``close``)."""
         super().__init__(fmu_path, instance_name, unpack_dir=unpack_dir)
         self._inputs = {n: 0.0 for n in INPUT_NAMES}
-        self.vx_des_mps = self.vy_des_mps = self.yaw_rate_des_radps = 0.0
+        self.vx_des = self.vy_des = self.yaw_rate_des = 0.0
         self.time_s = 0.0
         self.start(parameters, 0.0, 0.0)
 
@@ -93,10 +107,10 @@ class FmuPlant(FmuInstance):
         self.out = values
 
     # ---- the walker's interface
-    def set_command(self, vx_des_mps: float, vy_des_mps: float, yaw_rate_des_radps: float = 0.0) -> None:
-        self.vx_des_mps, self.vy_des_mps = float(vx_des_mps), float(vy_des_mps)
-        self.yaw_rate_des_radps = float(yaw_rate_des_radps)
-        self._inputs.update(vx_des=self.vx_des_mps, vy_des=self.vy_des_mps, yaw_rate_des=self.yaw_rate_des_radps)
+    def set_command(self, vx_des: float, vy_des: float, yaw_rate_des: float = 0.0) -> None:
+        self.vx_des, self.vy_des = float(vx_des), float(vy_des)
+        self.yaw_rate_des = float(yaw_rate_des)
+        self._inputs.update(vx_des=self.vx_des, vy_des=self.vy_des, yaw_rate_des=self.yaw_rate_des)
 
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
         unknown = [k for k in offsets if k not in OFFSET_NAMES]
@@ -131,8 +145,8 @@ class FmuPlant(FmuInstance):
                 "vx": o["pelvis_vx"], "vy": o["pelvis_vy"], "vx_step_avg": o["vx"], "vy_signal": o["vy"],
                 "pitch": o["pitch"], "roll": o["roll"], "stance": float(o["stance"]), "tau": o["gait_phase"],
                 "step_index": float(o["step_index"]), "left_foot_force": o["left_foot_force"],
-                "right_foot_force": o["right_foot_force"], "vx_des": self.vx_des_mps, "vy_des": self.vy_des_mps,
-                "yaw": o["yaw"], "yaw_rate": o["yaw_rate"], "yaw_rate_des": self.yaw_rate_des_radps}
+                "right_foot_force": o["right_foot_force"], "vx_des": self.vx_des, "vy_des": self.vy_des,
+                "yaw": o["yaw"], "yaw_rate": o["yaw_rate"], "yaw_rate_des": self.yaw_rate_des}
 
     def fell(self) -> bool:
         return bool(self.out["fell"])
@@ -147,12 +161,10 @@ class FmuPlant(FmuInstance):
 
 def plant_factory(fmu_path: str | Path, unpack_dir: str | Path | None = None):
     """A ``plant(scenario, model)`` for :func:`scenarios.cosim.master.run_arm` that runs the FMU
-    (extracted under ``unpack_dir``, the system temp folder if None)."""
+    (extracted under ``unpack_dir``, the system temp folder if None). ``model`` is the scenario's
+    plant compiled with its perturbation: the FMU gets the torso mass the plant applied on it."""
     def make(scenario, model) -> FmuPlant:
-        nominal = None
-        if scenario.torso_added_mass_kg is not None:
-            from plant.model import load_model, model_summary
+        from plant.perturbation import torso_mass_kg
 
-            nominal = model_summary(load_model(scenario.model))["pelvis_mass_kg"]
-        return FmuPlant(fmu_path, fmu_parameters(scenario, nominal), unpack_dir=unpack_dir)
+        return FmuPlant(fmu_path, fmu_parameters(scenario, torso_mass_kg(model)), unpack_dir=unpack_dir)
     return make

@@ -63,7 +63,7 @@ class InProcessRegulator(RegulatorPath):
         from fmu_src.core.avr_params import RegulatorInputs
         from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS
 
-        self._inputs = RegulatorInputs
+        self._inputs_type = RegulatorInputs
         self._input_types = [(s.name, FMI_CASTS[s.type]) for s in INPUT_SPECS]
         self._outputs = tuple(s.name for s in OUTPUT_SPECS)
         self._step_fn: Callable[[Any, float], dict] | None = None
@@ -85,7 +85,7 @@ class InProcessRegulator(RegulatorPath):
         self._step_fn = Regulator(params).step
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
-        reg_in = self._inputs(**{n: cast(inputs[n]) for n, cast in self._input_types})
+        reg_in = self._inputs_type(**{n: cast(inputs[n]) for n, cast in self._input_types})
         out = self._step_fn(reg_in, float(h))
         return {n: float(out[n]) for n in self._outputs}
 

@@ -20,16 +20,14 @@ if TYPE_CHECKING:  # pragma: no cover
 log = logging.getLogger(__name__)
 
 
-def build_perturbation(scenario: "Scenario", nominal_torso_mass_kg: float | None) -> "Perturbation | None":
-    """The plant Perturbation of ``scenario`` (None when the plant is nominal).
-
-    ``torso_added_mass_kg`` needs the model's own torso mass (``nominal_torso_mass_kg``);
-    when that is None (validation before loading) the plant's nominal pelvis mass is used.
-    """
+def build_perturbation(scenario: "Scenario") -> "Perturbation | None":
+    """The plant Perturbation of ``scenario`` (None when the plant is nominal). A
+    ``torso_added_mass_kg`` goes to the plant as it is: the plant adds it to its own model's
+    torso mass (:func:`plant.perturbation.apply_to_compiled`)."""
     t = scenario.terrain
     terrain = None if t is None else dataclasses.asdict(t)  # Terrain's fields are TerrainSpec's
     pert = _perturbation(scenario.torso_mass_kg, scenario.torso_added_mass_kg, scenario.torso_com_offset_m,
-                         scenario.joint_damping_scale, terrain, nominal_torso_mass_kg)
+                         scenario.joint_damping_scale, terrain)
     return None if pert.is_nominal else pert
 
 
@@ -37,24 +35,22 @@ def perturbation_problems(torso_mass_kg: float | None, torso_added_mass_kg: floa
                           torso_com_offset_m, joint_damping_scale: float,
                           terrain: dict[str, Any] | None) -> list[str]:
     """The plant's own problems with these perturbation values (``terrain``: the
-    TerrainSpec's fields), on the plant's nominal pelvis mass."""
+    TerrainSpec's fields), on the plant's nominal torso mass."""
+    from plant.constants import NOMINAL_TORSO_MASS_KG
+
     return _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale,
-                         terrain, None).problems()
+                         terrain).problems(NOMINAL_TORSO_MASS_KG)
 
 
-def _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale, terrain,
-                  nominal_torso_mass_kg) -> "Perturbation":
+def _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale,
+                  terrain) -> "Perturbation":
     """The one place that builds the plant's Perturbation (and TerrainSpec) from scenario values."""
-    from plant.constants import NOMINAL_PELVIS_MASS_KG
     from plant.perturbation import Perturbation
     from plant.terrain import TerrainSpec
 
-    mass = torso_mass_kg
-    if torso_added_mass_kg is not None:
-        base = NOMINAL_PELVIS_MASS_KG if nominal_torso_mass_kg is None else nominal_torso_mass_kg
-        mass = base + torso_added_mass_kg
     return Perturbation(
-        torso_mass_kg=mass,
+        torso_mass_kg=torso_mass_kg,
+        torso_added_mass_kg=torso_added_mass_kg,
         torso_com_offset_m=tuple(torso_com_offset_m),
         joint_damping_scale=joint_damping_scale,
         terrain=None if terrain is None else TerrainSpec(**terrain),
@@ -64,13 +60,14 @@ def _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_
 def check_plant(scenario: "Scenario") -> list[tuple[str, str]]:
     """``(field, problem)`` for everything loading the plant of ``scenario`` would fail on:
     the model must parse safely, compile and be a Cassie (:func:`plant.model.load_model`),
-    and the perturbation must be valid on that model (its own pelvis mass for
-    ``torso_added_mass_kg``). The compiled model is cached per process."""
+    and the perturbation must be valid on that model (its own torso mass for
+    ``torso_added_mass_kg``, which the check's compile reports). The compiled model is cached
+    per process."""
     mass, problem = _base_model_check(scenario.model, _file_stamp(scenario.model))
     if problem is not None:
         return [("model", problem)]
-    pert = build_perturbation(scenario, mass)
-    return [("perturbation", p) for p in (pert.problems() if pert is not None else [])]
+    pert = build_perturbation(scenario)
+    return [("perturbation", p) for p in (pert.problems(mass) if pert is not None else [])]
 
 
 def _file_stamp(model: str) -> tuple | None:
@@ -90,12 +87,13 @@ def _file_stamp(model: str) -> tuple | None:
 
 @functools.lru_cache(maxsize=16)
 def _base_model_check(model: str, stamp: tuple | None) -> tuple[float | None, str | None]:
-    """(pelvis mass, None) when ``model`` loads as a Cassie, else (None, the reason)."""
+    """(its torso mass, None) when ``model`` loads as a Cassie, else (None, the reason)."""
     from plant.errors import ModelError
-    from plant.model import load_model, model_summary
+    from plant.model import load_model
+    from plant.perturbation import torso_mass_kg
 
     try:
-        return model_summary(load_model(model))["pelvis_mass_kg"], None
+        return torso_mass_kg(load_model(model)), None
     except ModelError as exc:
         return None, str(exc)
 
@@ -107,30 +105,26 @@ def load_plant_model(scenario: "Scenario", *, shared: bool = False) -> tuple["mu
     perturbation) and then shared by every caller, who must only read it (a walker
     works on its own copy): the arms of a run's scenarios on one plant compile it once.
     """
-    from plant.model import load_model, model_summary
+    from plant.model import load_perturbed, model_summary
 
+    pert = build_perturbation(scenario)
     if shared:
         stamp = _file_stamp(scenario.model)
-        nominal_mass, problem = _base_model_check(scenario.model, stamp)
-        if problem is None:  # else compile below, which raises the model's error
-            model, summary = _shared_model(scenario.model, stamp, build_perturbation(scenario, nominal_mass))
+        if _base_model_check(scenario.model, stamp)[1] is None:  # else compile below, which raises the model's error
+            model, summary = _shared_model(scenario.model, stamp, pert)
             return model, dict(summary)
-    nominal_mass = None
-    if scenario.torso_added_mass_kg is not None:
-        nominal_mass = model_summary(load_model(scenario.model))["pelvis_mass_kg"]
-    pert = build_perturbation(scenario, nominal_mass)
-    model = load_model(scenario.model, pert)
+    model, applied = load_perturbed(scenario.model, pert)
     summary = model_summary(model)
-    log.info("scenario %s: model %s, perturbation %s", scenario.name, scenario.model, pert)
+    log.info("scenario %s: model %s, perturbation %s: %s", scenario.name, scenario.model, pert, applied)
     return model, summary
 
 
 @functools.lru_cache(maxsize=8)
 def _shared_model(model: str, stamp: tuple | None, pert: "Perturbation | None") -> tuple["mujoco.MjModel", dict]:
-    from plant.model import load_model, model_summary
+    from plant.model import load_perturbed, model_summary
 
-    compiled = load_model(model, pert)
-    log.info("model %s, perturbation %s: compiled (shared in this process)", model, pert)
+    compiled, applied = load_perturbed(model, pert)
+    log.info("model %s, perturbation %s: compiled (shared in this process): %s", model, pert, applied)
     return compiled, model_summary(compiled)
 
 
@@ -155,13 +149,16 @@ def plant_parameter_problems(torso_mass_kg: float | None, torso_added_mass_kg: f
                              terrain: dict[str, Any] | None) -> list[tuple[str, Any, str]]:
     """``(field, value, why)`` for every perturbation value outside the range the
     CassiePlant FMU declares for its parameter (``fmu_src.plant_fmu.fmu_core.PARAM_SPECS``, the one
-    source of those ranges; on the plant's nominal pelvis mass). For values the plant's
+    source of those ranges; on the plant's nominal torso mass). For values the plant's
     own checks (:func:`perturbation_problems`) accept: a scenario valid here runs on
     either plant."""
     from fmu_src.plant_fmu import fmu_core
 
-    pert = _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale, terrain,
-                         None)
+    from plant.constants import NOMINAL_TORSO_MASS_KG
+    from plant.perturbation import resolved
+
+    pert = resolved(_perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale,
+                                  terrain), NOMINAL_TORSO_MASS_KG)
     values = fmu_core.values_from_perturbation("menagerie", None if pert.is_nominal else pert)
     out: list[tuple[str, Any, str]] = []
     for spec in fmu_core.PARAM_SPECS:
@@ -206,7 +203,7 @@ def plant_fmu_problems(scenario: "Scenario") -> list[str]:
     if scenario.model not in fmu_core.MODEL_FILES:
         return [f"model = {scenario.model!r}: the CassiePlant FMU holds {', '.join(fmu_core.MODEL_FILES)} only; "
                 "an MJCF path needs --plant inprocess"]
-    pert = build_perturbation(scenario, None)
+    pert = build_perturbation(scenario)
     if pert is None or pert.terrain is None:
         return []
     carried = fmu_core.perturbation_from_values(fmu_core.values_from_perturbation(scenario.model, pert)).terrain

@@ -195,7 +195,7 @@ def pushes(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> tuple[Push, .
 # --------------------------------------------------------------------------- plant
 def perturbation(doc: Mapping[str, Any], probs: Problems) -> dict[str, Any]:
     """Torso mass (absolute or added), COM offset, joint damping and terrain; their ranges
-    are the plant's (checked here on the plant's nominal pelvis mass, and again on the
+    are the plant's (checked here on the plant's nominal torso mass, and again on the
     model's own by :func:`scenarios.lang.plantio.check_plant`)."""
     out = {
         "torso_mass_kg": number(doc, "torso_mass_kg", "torso_mass_kg", probs),
@@ -203,8 +203,6 @@ def perturbation(doc: Mapping[str, Any], probs: Problems) -> dict[str, Any]:
         "torso_com_offset_m": vec3(doc, "torso_com_offset_m", "torso_com_offset_m", probs, default=(0.0, 0.0, 0.0)),
         "joint_damping_scale": number(doc, "joint_damping_scale", "joint_damping_scale", probs, default=1.0),
     }
-    if "torso_mass_kg" in doc and "torso_added_mass_kg" in doc:
-        probs.note("torso_added_mass_kg", "give torso_mass_kg (absolute) or torso_added_mass_kg, not both")
     values, out["terrain"] = _terrain(doc, probs)
     unreadable = [f"terrain.{k}=" for k, v in values.items() if v is None]  # already reported
     plant_values = {k: v for k, v in out.items() if k != "terrain"}

@@ -85,14 +85,14 @@ def episode_return(weights: np.ndarray, seed_words, model_source: str = "menager
             if math.isclose(t, t_cmd):
                 walker.set_command(vx, vy)
         u = walker.regulator_inputs()
-        inputs = RegulatorInputs(vx_des=walker.vx_des_mps, vy_des=walker.vy_des_mps, **u)
+        inputs = RegulatorInputs(vx_des=walker.vx_des, vy_des=walker.vy_des, **u)
         walker.set_offsets(policy.step(inputs, COMM_STEP_S))
         walker.advance(PLANT_STEPS_PER_COMM)
         if t < REWARD_FROM_S:
             continue
         if walker.fell():
             break
-        e_vx, e_vy = u["vx"] - walker.vx_des_mps, u["vy"] - walker.vy_des_mps
+        e_vx, e_vy = u["vx"] - walker.vx_des, u["vy"] - walker.vy_des
         total += math.exp(-(e_vx / ERROR_SCALE_MPS) ** 2 - (e_vy / ERROR_SCALE_MPS) ** 2)
     return total / (n_steps - round(REWARD_FROM_S / COMM_STEP_S))
 

@@ -1,1 +1,3 @@
-"""Running scenarios: one session of ``python -m scenarios run`` (arms, jobs, resume) over the master."""
+"""Running scenarios: the ``run`` command (:mod:`scenarios.run.command`), its options
+(:mod:`scenarios.run.options`), one session of it (arms, jobs, resume:
+:mod:`scenarios.run.run_session`) and the arms' runner over the master (:mod:`scenarios.run.runner`)."""

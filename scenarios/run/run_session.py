@@ -2,6 +2,7 @@
 scenario's folder published once all its arms end, the table and the exit status."""
 from __future__ import annotations
 
+import dataclasses
 import logging
 import signal
 import sys
@@ -10,9 +11,12 @@ import time
 from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fmu_src.core.avr_errors import AvrError
+
+if TYPE_CHECKING:  # pragma: no cover
+    from scenarios.run.options import RunOptions
 
 log = logging.getLogger("scenarios")
 
@@ -20,10 +24,10 @@ log = logging.getLogger("scenarios")
 class RunSession:
     """One ``run``: the tasks, their outcomes, each scenario published once all its arms end."""
 
-    def __init__(self, args, results_dir, plan, fmu_path: str | None) -> None:
+    def __init__(self, options: "RunOptions", results_dir, plan) -> None:
         from scenarios.run.runner import StopFlag
 
-        self.args, self.results_dir, self.plan, self.fmu_path = args, results_dir, plan, fmu_path
+        self.options, self.results_dir, self.plan = options, results_dir, plan
         self.stop = StopFlag()
         self.outcomes: dict[str, dict[str, Any]] = {s.name: {} for s in plan.run}
         self.summaries: dict[str, dict[str, Any]] = {s["scenario"]: s for s in plan.kept}
@@ -37,7 +41,7 @@ class RunSession:
         from scenarios.run import runner
 
         tasks = [(s, a.name) for s in self.plan.run for a in s.arms]
-        jobs = min(self.args.jobs, max(1, len(tasks)))
+        jobs = min(self.options.jobs, max(1, len(tasks)))
         if jobs == 1:
             bar = tqdm(total=sum(s.n_comm_steps for s, _ in tasks), unit="step", desc="co-simulation",
                        disable=None, leave=False)
@@ -45,10 +49,8 @@ class RunSession:
             bar = tqdm(total=len(tasks), unit="arm", desc="co-simulation", disable=None, leave=False)
         wall0 = time.perf_counter()
         with bar, _sigint_sets(self.stop):
-            runner.run_tasks(tasks, regulator=self.args.regulator, fmu_path=self.fmu_path,
-                             unpack_dir=self.results_dir.fmu_dir, jobs=jobs, stop=self.stop,
-                             on_outcome=self.on_outcome, progress=bar.update, plant_fmu=self.args.plant_fmu,
-                             render=self.args.render)
+            runner.run_tasks(tasks, dataclasses.replace(self.options, jobs=jobs), stop=self.stop,
+                             on_outcome=self.on_outcome, progress=bar.update)
         self.wall_s = time.perf_counter() - wall0
 
     def on_outcome(self, scenario, outcome):
@@ -71,15 +73,15 @@ class RunSession:
         if replace and any(o.status != "complete" for o in outcomes):
             self.left_as_were.append(scenario.name)
             if not self.stop.requested:  # for the table and the exit status
-                self.summaries[scenario.name] = output.build_summary(scenario, self.args.regulator, outcomes)
+                self.summaries[scenario.name] = output.build_summary(scenario, self.options.regulator, outcomes)
             return None
         try:
             staged = self.results_dir.stage(scenario.name)
         except OSError as exc:
             self.write_errors.append(f"{scenario.name}: results not written: {exc}")
             return None
-        write = partial(output.write_results, plots=not self.args.no_plots, videos=self.args.render)
-        return runner.Job(write, (staged, scenario, self.args.regulator, outcomes),
+        write = partial(output.write_results, plots=self.options.plots, videos=self.options.render)
+        return runner.Job(write, (staged, scenario, self.options.regulator, outcomes),
                           partial(self.published, scenario.name, replace))
 
     def published(self, name: str, replace: bool, summary, error: BaseException | None) -> None:
@@ -116,12 +118,12 @@ class RunSession:
                   for m in self.summaries[s.name]["arms"].values())
         kept = f"{len(self.plan.kept)} kept as complete (--resume), " if self.plan.kept else ""
         print(f"\n{len(scenarios)} scenario(s), {kept}{n_arms} arm run(s), {sim:.1f} simulated s in "
-              f"{self.wall_s:.1f} s wall (--jobs {self.args.jobs}, regulator {self.args.regulator}); results in "
+              f"{self.wall_s:.1f} s wall (--jobs {self.options.jobs}, regulator {self.options.regulator}); results in "
               f"{out_root}/ (python -m scenarios report {out_root})")
         failed = self.write_errors or any(su["status"] != "complete" for su in ordered)
         if failed:
             return 1
-        if self.args.require_pass:
+        if self.options.require_pass:
             overall = {su["scenario"]: output.verdict(su).get("overall", "n/a") for su in ordered}
             short = [f"{name}: {v}" for name, v in overall.items() if v != "pass"]
             if short:

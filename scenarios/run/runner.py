@@ -32,11 +32,11 @@ import signal
 import time
 import traceback
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from scenarios.results.output import ArmOutcome
 from scenarios.lang.scenario import Scenario
+from scenarios.results.output import ArmOutcome
+from scenarios.run.options import RunOptions
 
 log = logging.getLogger(__name__)
 
@@ -78,13 +78,14 @@ class StopFlag:
         return self.requested
 
 
-def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None, unpack_dir: str | None,
-             stop: Callable[[], bool], progress: Callable[[int], None] | None = None,
-             origin: float | None = None, plant_fmu: str | None = None, render: bool = False) -> ArmOutcome:
-    """One scenario x arm (its own walker and regulator instance) as an outcome; the plant
-    in-process, or the CassiePlant FMU at ``plant_fmu`` (``--plant fmu``). A complete
-    arm's timings say when it ran (s since ``origin``, a ``perf_counter``). ``render``:
-    the result carries the states to render (:class:`scenarios.results.render.StateRecorder`)."""
+def run_task(scenario: Scenario, arm: str, options: RunOptions, stop: Callable[[], bool],
+             progress: Callable[[int], None] | None = None, origin: float | None = None) -> ArmOutcome:
+    """One scenario x arm (its own plant and regulator instance) as an outcome, run as
+    ``options`` say: the regulator (``regulator``, ``fmu``), the plant in-process or the
+    CassiePlant FMU at ``plant_fmu`` (``plant == "fmu"``), both extracted under ``unpack_dir``,
+    the ``exchange`` order, and with ``render`` the states to render in the result
+    (:class:`scenarios.results.render.StateRecorder`). A complete arm's timings say when it
+    ran (s since ``origin``, a ``perf_counter``)."""
     from scenarios.cosim.regulators import arm_regulator
     from scenarios.cosim.master import run_arm
     from scenarios.lang.plantio import load_plant_model
@@ -92,22 +93,24 @@ def run_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
     if stop():
         return ArmOutcome(arm, "interrupted", started=False)
     started, cpu0 = time.perf_counter(), time.process_time()
+    unpack = None if options.unpack_dir is None else str(options.unpack_dir)
     try:
         model, summary = load_plant_model(scenario, shared=True)
         model_s = time.perf_counter() - started
-        reg = arm_regulator(scenario.arm(arm), regulator, fmu_path, unpack_dir=unpack_dir)
+        fmu = None if options.fmu is None else str(options.fmu)
+        reg = arm_regulator(scenario.arm(arm), options.regulator, fmu, unpack_dir=unpack)
         plant = None
-        if plant_fmu is not None:
+        if options.plant == "fmu":
             from scenarios.cosim.plant_fmu import plant_factory
 
-            plant = plant_factory(plant_fmu, unpack_dir=unpack_dir)
+            plant = plant_factory(options.plant_fmu, unpack_dir=unpack)
         recorder = None
-        if render:
+        if options.render:
             from scenarios.results.render import StateRecorder
 
             recorder = StateRecorder(scenario.comm_step_s)
         result = run_arm(scenario, arm, reg, progress=progress, stop=stop, model=model, model_summary=summary,
-                         plant=plant, recorder=recorder)
+                         plant=plant, recorder=recorder, exchange=options.exchange)
     except KeyboardInterrupt:
         return ArmOutcome(arm, "interrupted")
     except Exception as exc:  # one arm's failure is reported, the run goes on
@@ -132,10 +135,8 @@ def _init_worker(event: Any, origin: float) -> None:
                           "worker_startup_cpu_s": time.process_time()}
 
 
-def _worker_task(scenario: Scenario, arm: str, regulator: str, fmu_path: str | None,
-                 unpack_dir: str | None, plant_fmu: str | None = None, render: bool = False) -> ArmOutcome:
-    out = run_task(scenario, arm, regulator, fmu_path, unpack_dir, _WORKER["stop"].is_set,
-                   origin=_WORKER["origin"], plant_fmu=plant_fmu, render=render)
+def _worker_task(scenario: Scenario, arm: str, options: RunOptions) -> ArmOutcome:
+    out = run_task(scenario, arm, options, _WORKER["stop"].is_set, origin=_WORKER["origin"])
     if out.status == "complete" and "startup" in _WORKER:  # reported once, with the first complete arm
         out.result.timings.update(_WORKER.pop("startup"))
     return out
@@ -157,25 +158,22 @@ class Job:
 OnOutcome = Callable[[Scenario, ArmOutcome], "Job | None"]
 
 
-def run_tasks(tasks: Sequence[Task], *, regulator: str, fmu_path: str | None, unpack_dir: Path | None, jobs: int,
-              stop: StopFlag, on_outcome: OnOutcome, progress: Callable[[int], None] | None = None,
-              plant_fmu: str | None = None, render: bool = False) -> None:
-    """Run every task (``jobs`` > 1: in that many spawned processes, longest first) and
-    hand each outcome to ``on_outcome`` in the calling thread, which may answer a
-    :class:`Job` to run; after a stop, the tasks not run are reported interrupted (not
+def run_tasks(tasks: Sequence[Task], options: RunOptions, *, stop: StopFlag, on_outcome: OnOutcome,
+              progress: Callable[[int], None] | None = None) -> None:
+    """Run every task as ``options`` say (``options.jobs`` > 1: in that many spawned processes,
+    longest first) and hand each outcome to ``on_outcome`` in the calling thread, which may
+    answer a :class:`Job` to run; after a stop, the tasks not run are reported interrupted (not
     started). ``progress(n)``: communication steps done (``jobs == 1``) or arms done
-    (``jobs > 1``). ``render``: each complete arm carries the states to render."""
-    unpack = None if unpack_dir is None else str(unpack_dir)
-    if jobs == 1:
+    (``jobs > 1``)."""
+    if options.jobs == 1:
         origin = time.perf_counter()
         for s, arm in tasks:
-            out = run_task(s, arm, regulator, fmu_path, unpack, stop, progress, origin, plant_fmu, render)
+            out = run_task(s, arm, options, stop, progress, origin)
             if progress is not None and out.status == "complete":
                 progress(s.n_comm_steps - len(out.result.rows))  # the steps a fall skipped
             _run_here(on_outcome(s, _first_line(s, out)))
         return
-    arm_args = (regulator, fmu_path, unpack, plant_fmu, render)
-    _Pool(jobs, stop, on_outcome, progress).run(longest_first(tasks), arm_args)
+    _Pool(options.jobs, stop, on_outcome, progress).run(longest_first(tasks), (options,))
 
 
 def _run_here(job: Job | None) -> None:

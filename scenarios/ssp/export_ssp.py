@@ -82,12 +82,7 @@ def parameter_values(scenario, arm_name: str) -> dict[str, dict]:
     """{instance: {parameter: value}}: the plant's from the scenario, the regulator's from the arm."""
     from scenarios.cosim.plant_fmu import fmu_parameters
 
-    nominal = None
-    if scenario.torso_added_mass_kg is not None:
-        from plant.model import load_model, model_summary
-
-        nominal = model_summary(load_model(scenario.model))["pelvis_mass_kg"]
-    return {system.PLANT: fmu_parameters(scenario, nominal),
+    return {system.PLANT: fmu_parameters(scenario),
             system.REGULATOR: scenario.arm(arm_name).overrides_dict()}
 
 

@@ -28,6 +28,7 @@ from scenarios.run import runner
 from scenarios.lang import spec
 from scenarios.cli import main as cli_main
 from scenarios.lang.plantio import load_plant_model
+from scenarios.run.options import RunOptions
 from scenarios.cosim.regulators import InProcessRegulator
 from scenarios.lang.scenario import CommandPoint, Push, Scenario
 
@@ -100,8 +101,8 @@ def test_jobs_run_in_the_workers_and_their_values_and_errors_come_back(tmp_path)
             return runner.Job(os.getpid, (), lambda value, error: got.update(pid=(value, error)))
         return runner.Job(os.listdir, (str(tmp_path / "missing"),), lambda value, error: got.update(ls=(value, error)))
 
-    runner.run_tasks([(s, "adaptive"), (s, "pd_only")], regulator="inprocess", fmu_path=None, unpack_dir=None,
-                     jobs=2, stop=runner.StopFlag(), on_outcome=on_outcome)
+    runner.run_tasks([(s, "adaptive"), (s, "pd_only")], RunOptions(regulator="inprocess", jobs=2),
+                     stop=runner.StopFlag(), on_outcome=on_outcome)
     pid, error = got["pid"]
     assert error is None and isinstance(pid, int) and pid != os.getpid()
     value, error = got["ls"]

@@ -59,13 +59,13 @@ def test_header_and_slave_blob_must_agree(which, fmu_dir, plant_fmu_dir, raw_hos
 
 
 WALKER_REASONS = {
-    "walker vx_des_mps = NaN": "walker vx_des_mps = nan: must be a finite number",
+    "walker vx_des = NaN": "walker vx_des = nan: must be a finite number",
     "controller mode = 'garbage'": "controller mode = 'garbage': must be one of 'stand', 'shift', 'walk'",
     "controller stance = 'up'": "controller stance = 'up': must be one of 'left', 'right'",
     "controller offsets NaN": "controller offsets['delta_swing_knee'] = nan: must be a finite number",
     "pelvis quaternion zero": "has norm 0.0: must be 1",
     "pelvis z = 1e300": "physics qpos[2] = 1e+300: must be finite, in [-1e+10, 1e+10]",
-    "commanded vx 5 m/s (input range [-3, 3])": "controller cmd_vx = 5.0: out of range [-3, 3]",
+    "commanded vx 5 m/s (input range [-3, 3])": "controller vx_des = 5.0: out of range [-3, 3]",
     "controller step times after the physics time": "must satisfy 0 <= t_step_start <= _last_t <= the simulated time",
 }
 

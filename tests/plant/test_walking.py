@@ -109,13 +109,13 @@ def test_push_while_walking(menagerie, force_x):
 def _terrain_walk(seed: int, duration_s: float):
     """The terrain_mass_com plant (+5 kg, COM +0.1 m, slopes <= 20 deg, heights <= 0.4 m)
     on terrain ``seed``, 0.5 m/s from rest with the adaptive core every 5 ms."""
-    from plant.constants import NOMINAL_PELVIS_MASS_KG
+    from plant.constants import NOMINAL_TORSO_MASS_KG
     from plant.sim import CassieWalker
     from scenarios.cosim.inprocess import apply_regulator
     from plant.terrain import TerrainSpec
 
     terrain = TerrainSpec(max_height_m=0.4, max_slope_deg=20.0, seed=seed, size_m=45.0)
-    pert = Perturbation(torso_mass_kg=NOMINAL_PELVIS_MASS_KG + 5.0, torso_com_offset_m=(0.1, 0.0, 0.0),
+    pert = Perturbation(torso_mass_kg=NOMINAL_TORSO_MASS_KG + 5.0, torso_com_offset_m=(0.1, 0.0, 0.0),
                         terrain=terrain)
     walker = CassieWalker(load_model("menagerie", pert))
     walker.set_command(0.5, 0.0)

@@ -195,7 +195,7 @@ def test_perturbation_checked_by_the_plant_and_terrain():
     assert any(p.startswith("perturbation: joint_damping_scale=20") and "[0, 10]" in p for p in probs)
     assert any(p.startswith("perturbation: terrain.max_slope_deg=50") and "(0, 45] deg" in p for p in probs)
     probs = problems_of("torso_added_mass_kg = -20.0\ntorso_com_offset_m = [0.6, 0, 0]\n" + GOOD)
-    assert any(p.startswith("perturbation: torso_mass_kg=") for p in probs)  # nominal pelvis - 20 kg < 0
+    assert any(p.startswith("perturbation: torso_added_mass_kg=-20.0 makes the torso mass") for p in probs)  # < 0 kg
     assert any(p.startswith("perturbation: torso_com_offset_m[x]=0.6") for p in probs)
     probs = problems_of(GOOD + "[terrain]\nmax_slope_deg = 50\nseed = -1\n")  # every problem at once
     assert "terrain.max_height_m: required" in probs

@@ -406,13 +406,13 @@ def _set_item(key, index, value):
 
 #: The plant's forged walker states: (what is forged, the edit of the walker state's JSON).
 WALKER_FORGERIES = {
-    "walker vx_des_mps = NaN": lambda s: s["walker"].update(vx_des_mps=math.nan),
+    "walker vx_des = NaN": lambda s: s["walker"].update(vx_des=math.nan),
     "controller mode = 'garbage'": lambda s: s["controller"].update(mode="garbage"),
     "controller stance = 'up'": lambda s: s["controller"].update(stance="up"),
     "controller offsets NaN": lambda s: s["controller"]["offsets"].update(delta_swing_knee=math.nan),
     "pelvis quaternion zero": lambda s: s["physics"].__setitem__(slice(4, 8), [0.0] * 4),  # time, x, y, z, quat
     "pelvis z = 1e300": _set_item("physics", 3, 1e300),
-    "commanded vx 5 m/s (input range [-3, 3])": lambda s: s["controller"].update(cmd_vx=5.0),
+    "commanded vx 5 m/s (input range [-3, 3])": lambda s: s["controller"].update(vx_des=5.0),
     "controller step times after the physics time": lambda s: s["controller"].update(_last_t=1e6),
 }
 

@@ -11,7 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).parents[2]))  # tests/: the support package
+TESTS = Path(__file__).parents[2]
+# tests/ (the support package) and the layers whose tables this script reuses
+sys.path[:0] = [str(TESTS), str(TESTS / "native"), str(TESTS / "fmu")]
 from fmpy.fmi1 import FMICallException  # noqa: E402
 from support.native_support import AnySlave, input_sequence  # noqa: E402
 from test_native_state import _corruptions  # noqa: E402
@@ -48,7 +50,7 @@ def command_source(fmu_dir, fmi):
     import shutil
     import tempfile
 
-    from command_source_driver import main as drive
+    from support.command_source_driver import main as drive
     from test_command_source import ERROR, H, ILLEGAL, OK, START
 
     get = ["get", list(range(6))]
