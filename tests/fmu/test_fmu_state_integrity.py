@@ -90,7 +90,7 @@ def test_a_state_with_other_fixed_parameters_is_refused_until_they_match(fmu_dir
 
 def inject_fault(fmu_dir) -> str:
     """Make the extracted FMU's slave raise in exit_initialization_mode: pythonfmu answers fmi2Fatal."""
-    slave = Path(fmu_dir) / "resources" / "avr_regulator_lib" / "fmu_src" / "avr_slave.py"
+    slave = Path(fmu_dir) / "resources" / "avr_regulator_lib" / "fmu_src" / "regulator_fmu" / "avr_slave.py"
     slave.write_text(slave.read_text() + "\n\ndef _injected_fault(self):\n"
                      "    raise RuntimeError('fault injected by the test')\n\n\n"
                      "AdaptiveVelocityRegulator.exit_initialization_mode = _injected_fault\n")
