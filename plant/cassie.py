@@ -249,7 +249,8 @@ class CassiePhysics:
             if kind not in (free, ball):
                 continue
             at = int(m.jnt_qposadr[j]) + (3 if kind == free else 0)
-            norm = float(np.linalg.norm(parts["qpos"][at:at + 4]))
+            qw, qx, qy, qz = parts["qpos"][at:at + 4].tolist()
+            norm = math.sqrt(qw * qw + qx * qx + qy * qy + qz * qz)  # fixed order, no BLAS
             if not abs(norm - 1.0) <= self.QUAT_NORM_TOL:
                 problems.append(f"physics qpos[{at}:{at + 4}] (quaternion of joint "
                                 f"{mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_JOINT, j) or j}) "
@@ -318,7 +319,9 @@ class CassiePhysics:
 
         Angles rad (ZYX Euler); vx, vy m/s and the rates rad/s in the heading frame.
         Same values as the individual accessors, computed without numpy temporaries
-        (the controller calls this at 1 kHz).
+        (the controller calls this at 1 kHz) and in scalar Python arithmetic in a fixed
+        order: every operation rounds once (no FMA contraction) and no BLAS kernel is
+        involved, so the bits do not depend on the BLAS kernel or numpy's SIMD dispatch.
         """
         d = self.data
         qa, da = self.free_qadr, self.free_dadr
@@ -341,13 +344,9 @@ class CassiePhysics:
 
     def angular_velocity_heading(self) -> np.ndarray:
         """Pelvis angular velocity in the heading frame (rad/s): (roll, pitch, yaw) rates."""
-        d = self.data
-        # Free-joint angular velocity is in the body frame; rotate to world, then heading.
-        wb = d.qvel[self.free_dadr + 3:self.free_dadr + 6]
-        ww = d.xmat[self.pelvis_body].reshape(3, 3) @ wb
-        yaw = self.heading_yaw()
-        c, s = math.cos(yaw), math.sin(yaw)
-        return np.array([c * ww[0] + s * ww[1], -s * ww[0] + c * ww[1], ww[2]])
+        # The same fixed-order scalar arithmetic as :meth:`heading_state` (no BLAS).
+        _, _, _, _, _, roll_rate, pitch_rate, yaw_rate = self.heading_state()
+        return np.array([roll_rate, pitch_rate, yaw_rate])
 
     def torso_pitch_rate(self) -> float:
         """Pitch rate (rad/s), heading-frame y component of the pelvis angular velocity."""

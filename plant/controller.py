@@ -194,7 +194,7 @@ class NominalController:
         self.foot_flat_sum = float(qpos[la["hip-pitch"]] + qpos[la["knee"]]
                                    + qpos[la["tarsus"]] + qpos[la["foot"]])
         # Ankle height above ground when standing (m).
-        self.ankle_height0 = float(np.mean([phys.foot_position(s)[2] for s in SIDES]))
+        self.ankle_height0 = 0.5 * (float(phys.foot_position("left")[2]) + float(phys.foot_position("right")[2]))
         self.offsets = {k: 0.0 for k in OFFSET_NAMES}
         self.gait = None
         #: Gait speed (m/s): the command through the rate limiter.

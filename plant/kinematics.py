@@ -42,8 +42,57 @@ def _horner(coeffs, x: float) -> float:
 
 
 def _fit(x, y) -> tuple[float, ...]:
-    """Coefficients (highest power first, Python floats) of the :data:`FIT_DEGREE` fit."""
-    return tuple(float(c) for c in np.polyfit(x, y, FIT_DEGREE))
+    """Coefficients (highest power first, Python floats) of the :data:`FIT_DEGREE` least-squares
+    polynomial through the points (x, y).
+
+    Householder QR of the Vandermonde matrix, its columns scaled to unit norm (as
+    ``numpy.polyfit`` does), in scalar Python arithmetic in a fixed order.  ``numpy.polyfit``
+    solves the same problem through LAPACK, whose last bits depend on the BLAS kernel OpenBLAS
+    picks for the CPU: the fitted leg geometry, and with it every trajectory, would differ
+    from one machine to the next.
+    """
+    xs = [float(v) for v in x]
+    ys = [float(v) for v in y]
+    m, n = len(xs), FIT_DEGREE + 1
+    if m < n:
+        raise ValueError(f"_fit: {m} points cannot determine a degree-{FIT_DEGREE} polynomial")
+    # Column k holds x^(FIT_DEGREE - k) (highest power first), scaled to unit norm; the
+    # powers by repeated multiplication (libm's pow has CPU-specific variants).
+    powers = [[1.0] * m]
+    for _ in range(FIT_DEGREE):
+        powers.append([p * xi for p, xi in zip(powers[-1], xs)])
+    cols = powers[::-1]
+    scale = [math.sqrt(_dot(c, c)) for c in cols]
+    cols = [[v / sc for v in c] for c, sc in zip(cols, scale)]
+    rhs = list(ys)
+    for k in range(n):  # Householder reflection zeroing column k below the diagonal
+        ck = cols[k]
+        alpha = math.sqrt(_dot(ck[k:], ck[k:]))
+        if ck[k] > 0.0:
+            alpha = -alpha
+        v = [0.0] * k + [ck[k] - alpha] + ck[k + 1:]
+        vv = _dot(v[k:], v[k:])
+        if vv == 0.0:
+            raise ValueError("_fit: the sample points are not distinct enough for the fit")
+        for c in cols[k:] + [rhs]:
+            f = 2.0 * _dot(v[k:], c[k:]) / vv
+            for i in range(k, m):
+                c[i] -= f * v[i]
+    coeffs = [0.0] * n
+    for k in reversed(range(n)):  # back substitution with the upper triangle R
+        acc = rhs[k]
+        for j in range(k + 1, n):
+            acc -= cols[j][k] * coeffs[j]
+        coeffs[k] = acc / cols[k][k]
+    return tuple(c / sc for c, sc in zip(coeffs, scale))
+
+
+def _dot(a, b) -> float:
+    """Sum of ``a[i] * b[i]`` accumulated left to right (a fixed order on every CPU)."""
+    acc = 0.0
+    for ai, bi in zip(a, b):
+        acc += ai * bi
+    return acc
 
 
 class LegKinematics:

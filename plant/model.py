@@ -103,7 +103,8 @@ def _add_home_key(spec: mujoco.MjSpec, model: mujoco.MjModel) -> None:
             elif typ == mujoco.mjtJoint.mjJNT_BALL:
                 qpos[adr:adr + 4] = HOME_PELVIS_QUAT
             elif typ == mujoco.mjtJoint.mjJNT_SLIDE:
-                qpos[adr] = float(np.dot(model.jnt_axis[j], HOME_PELVIS_POS_M))
+                ax, ay, az = model.jnt_axis[j].tolist()  # fixed-order sum, no BLAS
+                qpos[adr] = ax * HOME_PELVIS_POS_M[0] + ay * HOME_PELVIS_POS_M[1] + az * HOME_PELVIS_POS_M[2]
         elif name in HOME_JOINT_QPOS:
             vals = HOME_JOINT_QPOS[name]
             qpos[adr:adr + len(vals)] = vals

@@ -156,7 +156,13 @@ def generate_terrain(spec: TerrainSpec) -> np.ndarray:
     noise = rng.standard_normal((n, n))
     k = np.fft.fftfreq(n, d=spacing)  # cycles per metre
     kr = np.fft.rfftfreq(n, d=spacing)
-    gain = np.exp(-2.0 * (math.pi * feature) ** 2 * (k[:, None] ** 2 + kr[None, :] ** 2))
+    # The Gaussian's transfer function is separable, exp(c k^2) exp(c kr^2): one scalar
+    # math.exp per frequency instead of numpy's float64 exp, whose AVX-512 and AVX2 loops give
+    # other last bits than its baseline loop (the terrain would depend on the CPU).
+    w = math.pi * feature
+    c = -2.0 * (w * w)
+    gain = np.multiply.outer(np.array([math.exp(c * (f * f)) for f in k.tolist()]),
+                             np.array([math.exp(c * (f * f)) for f in kr.tolist()]))
     field = np.fft.irfft2(np.fft.rfft2(noise) * gain, s=(n, n))
     lo, hi = float(field.min()), float(field.max())
     h = (field - lo) / (hi - lo) * spec.max_height_m if hi > lo else np.zeros((n, n))

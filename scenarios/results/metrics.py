@@ -158,7 +158,9 @@ def steady_state_error_yaw_rate(rows: np.ndarray, *, window_s: float = STEADY_WI
     t = np.asarray(rows["t"][sel], dtype=float)
     yaw = np.unwrap(np.asarray(rows["tel_yaw"][sel], dtype=float))
     tc = t - t.mean()
-    slope = float(np.dot(tc, yaw - yaw.mean()) / np.dot(tc, tc))
+    # Elementwise products and numpy's pairwise sum (a fixed order on every CPU); np.dot
+    # would go through the BLAS kernel OpenBLAS picks for the CPU.
+    slope = float(np.sum(tc * (yaw - yaw.mean())) / np.sum(tc * tc))
     commanded = float(np.mean(np.asarray(rows["cmd_yaw_rate_des"][sel], dtype=float)))
     return abs(slope - commanded)
 

@@ -5,7 +5,8 @@ the same inputs as the adaptive regulator, scaled by fixed constants, and a bias
 
     features = [vx - vx_des, vy - vy_des, vx_des, vy_des, pitch, roll,
                 pitch_rate, roll_rate] / scales  ++  [1]
-    delta    = clip(W @ features, -DELTA_LIMIT_RAD, DELTA_LIMIT_RAD)       (rad, 6 outputs)
+    delta    = clip(W @ features, -DELTA_LIMIT_RAD, DELTA_LIMIT_RAD)       (rad, 6 outputs;
+               each row's sum taken left to right in scalar arithmetic, no BLAS)
 
 sampled when a new walking step starts (``step_index`` changes) and held during the step,
 as the regulator's PD terms are.  ``W`` (6 x 9) is learned offline on the nominal model and
@@ -57,8 +58,19 @@ class HzdPolicy:
         self._held = np.zeros(shape[0])
 
     def action(self, inputs) -> np.ndarray:
-        """The six offsets (rad) for these inputs, without holding."""
-        return np.clip(self.weights @ features(inputs), -DELTA_LIMIT_RAD, DELTA_LIMIT_RAD)
+        """The six offsets (rad) for these inputs, without holding.
+
+        ``W @ features`` is summed feature by feature, left to right, in scalar arithmetic:
+        a numpy matrix product goes through the BLAS kernel OpenBLAS picks for the CPU,
+        whose summation order (and FMA use) differs from one CPU to another."""
+        f = features(inputs).tolist()
+        out = []
+        for row in self.weights.tolist():
+            acc = 0.0
+            for w, x in zip(row, f):
+                acc += w * x
+            out.append(min(max(acc, -DELTA_LIMIT_RAD), DELTA_LIMIT_RAD))
+        return np.array(out)
 
     def step(self, inputs, dt: float) -> dict[str, float]:
         """One call: a new action at each new walking step, held in between."""
