@@ -160,6 +160,19 @@ def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
     return crosscheck.add_reference(fmu_path)
 
 
+def build_native_plant_fmu(fmi_version: int = 2, out_dir: Path = DEFAULT_OUT) -> Path:
+    """Build ``<out_dir>/CassiePlantNative_fmi2.fmu``: the CassiePlant FMU in C, no Python
+    (``fmu_src/plant_fmu/native/build_native_plant.py``; FMI 2.0, linux64)."""
+    from fmu_src.plant_fmu.native import build_native_plant
+
+    if fmi_version != 2:
+        raise ValueError(f"fmi_version = {fmi_version!r}: the native CassiePlant FMU is built for FMI 2.0 only (2)")
+    fmu_path = Path(out_dir) / build_native_plant.fmu_name(fmi_version)
+    write_zip(build_native_plant.fmu_entries(PLANT_UNITS), fmu_path)
+    log.info("built %s", fmu_path)
+    return fmu_path
+
+
 def _plant_entries(tmp: Path) -> tuple[pack.Packed, dict[str, bytes]]:
     """pythonfmu's CassiePlant FMU with the plant's package, data and models in resources/, linux64 only."""
     def data(lib: Path) -> None:

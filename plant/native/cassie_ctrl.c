@@ -293,6 +293,38 @@ int cc_controller_size(void) { return (int)sizeof(CcController); }
 CcMemory *cc_memory_ptr(CcController *c) { return &c->mem; }
 CcTargets *cc_targets_ptr(CcController *c) { return &c->targets; }
 
+/* GroundHeight.__init__: the terrain hfield, or the first world-body plane's height. */
+static void ground_setup(CcFixed *f, const mjModel *m) {
+    int gid = mj_name2id(m, mjOBJ_GEOM, "terrain");
+    f->has_terrain = gid >= 0;
+    if (f->has_terrain) {
+        int hid = m->geom_dataid[gid];
+        f->hf_nrow = m->hfield_nrow[hid];
+        f->hf_ncol = m->hfield_ncol[hid];
+        f->hf_data = m->hfield_data + m->hfield_adr[hid];
+        f->hf_sx = m->hfield_size[4 * hid];
+        f->hf_sy = m->hfield_size[4 * hid + 1];
+        f->hf_sz = m->hfield_size[4 * hid + 2];
+        f->hf_gx = m->geom_pos[3 * gid];
+        f->hf_gy = m->geom_pos[3 * gid + 1];
+        f->hf_gz = m->geom_pos[3 * gid + 2];
+    } else {
+        f->flat_m = 0.0;
+        for (int g = 0; g < m->ngeom; g++)
+            if (m->geom_type[g] == mjGEOM_PLANE && m->geom_bodyid[g] == 0) {
+                f->flat_m = m->geom_pos[3 * g + 2];
+                break;
+            }
+    }
+}
+
+double cc_model_ground_height(const mjModel *m, double x, double y) {
+    CcController c;
+    memset(&c, 0, sizeof c);
+    ground_setup(&c.fx, m);
+    return cc_ground_height(&c, x, y);
+}
+
 static int resolve_ids(CcController *c, int passive[CC_NSIDES][2], char *err, int errlen) {
     const mjModel *m = c->m;
     CcFixed *f = &c->fx;
@@ -348,28 +380,7 @@ static int resolve_ids(CcController *c, int passive[CC_NSIDES][2], char *err, in
             return -1;
         }
     }
-    /* the ground: plant.terrain.GroundHeight */
-    int gid = mj_name2id(m, mjOBJ_GEOM, "terrain");
-    f->has_terrain = gid >= 0;
-    if (f->has_terrain) {
-        int hid = m->geom_dataid[gid];
-        f->hf_nrow = m->hfield_nrow[hid];
-        f->hf_ncol = m->hfield_ncol[hid];
-        f->hf_data = m->hfield_data + m->hfield_adr[hid];
-        f->hf_sx = m->hfield_size[4 * hid];
-        f->hf_sy = m->hfield_size[4 * hid + 1];
-        f->hf_sz = m->hfield_size[4 * hid + 2];
-        f->hf_gx = m->geom_pos[3 * gid];
-        f->hf_gy = m->geom_pos[3 * gid + 1];
-        f->hf_gz = m->geom_pos[3 * gid + 2];
-    } else {
-        f->flat_m = 0.0;
-        for (int g = 0; g < m->ngeom; g++)
-            if (m->geom_type[g] == mjGEOM_PLANE && m->geom_bodyid[g] == 0) {
-                f->flat_m = m->geom_pos[3 * g + 2];
-                break;
-            }
-    }
+    ground_setup(f, m);
     return 0;
 }
 

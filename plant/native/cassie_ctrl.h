@@ -99,6 +99,9 @@ CC_API void cc_update(CcController *c);
 CC_API void cc_memory_restored(CcController *c);
 /* The ground height under (x, y), m (plant.terrain.GroundHeight). */
 CC_API double cc_ground_height(const CcController *c, double x, double y);
+/* The ground height under (x, y) of a model, m, without a controller (set-up only: it reads the
+ * model's ground each call). */
+CC_API double cc_model_ground_height(const mjModel *m, double x, double y);
 /* Contact normal force on the (left, right) foot, N (CassiePhysics.foot_normal_forces_n). */
 CC_API void cc_foot_forces(const CcController *c, double out[2]);
 /* CassiePhysics.heading_state: yaw, pitch, roll, vx, vy, roll_rate, pitch_rate, yaw_rate. */

@@ -1,0 +1,253 @@
+"""The native CassiePlant FMU (C, no Python): what it links, the same outputs as the Python
+plant bit for bit, the closed loop in a plain C host with an empty environment, its refusals.
+
+The reference is the pythonfmu plant FMU's own core (``fmu_src/plant_fmu/fmu_core.py``: the
+walker with the Python controller) driven in-process with the same inputs; the native FMU
+runs the C controller (plant/native/) on the same MuJoCo library, so every output must carry
+the same bits (compared through their IEEE bytes, tolerance zero).
+"""
+from __future__ import annotations
+
+import ctypes
+import struct
+import subprocess
+import zipfile
+from pathlib import Path
+
+import pytest
+from fmpy import extract, read_model_description
+from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+from fmpy.logging import addLoggerProxy
+
+from fmu_src.plant_fmu import fmu_core
+from plant.constants import OFFSET_NAMES
+from support.native_support import CC, FMI2_INCLUDE, NATIVE_DIR, compile_c
+
+#: Communication step of the loops (s): the suite's regulator period.
+H = 0.01
+#: The regulator's inputs the plant provides (the Integer step_index last).
+LOOP_SIGNALS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate")
+
+
+@pytest.fixture(scope="module")
+def plant_fmu(tmp_path_factory, build_module):
+    return build_module.build_native_plant_fmu(2, tmp_path_factory.mktemp("native_plant"))
+
+
+@pytest.fixture(scope="module")
+def plant_dir(plant_fmu, tmp_path_factory):
+    return Path(extract(str(plant_fmu), unzipdir=str(tmp_path_factory.mktemp("native_plant_unzipped"))))
+
+
+@pytest.fixture(scope="module")
+def regulator_fmu(tmp_path_factory, build_module):
+    return build_module.build_native_fmu(2, tmp_path_factory.mktemp("native_regulator"))
+
+
+def _bits(x) -> bytes:
+    return struct.pack("<d", float(x))
+
+
+class _Plant:
+    """The native plant through fmpy, with the refusals it logs."""
+
+    def __init__(self, fmu: Path, unzipped: Path, params: dict | None = None):
+        self.md = read_model_description(str(fmu))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.types = {v.name: v.type for v in self.md.modelVariables}
+        self.messages = []
+
+        def logger(_env, _name, status, _category, message):
+            self.messages.append((status, message.decode()))
+
+        self.callbacks = fmi2CallbackFunctions()  # kept: the FMU holds its pointers
+        self.callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+        self.callbacks.allocateMemory = defaultCallbacks.allocateMemory
+        self.callbacks.freeMemory = defaultCallbacks.freeMemory
+        addLoggerProxy(ctypes.byref(self.callbacks))  # formats the "%s" varargs in C
+        self.s = FMU2Slave(guid=self.md.guid, unzipDirectory=str(unzipped), modelIdentifier="CassiePlantNative",
+                           instanceName="plant")
+        self.s.instantiate(loggingOn=False, callbacks=self.callbacks)
+        self.s.setupExperiment(startTime=0.0)
+        self.s.enterInitializationMode()
+        for name, value in (params or {}).items():
+            if self.types[name] == "String":
+                self.s.setString([self.vr[name]], [value])
+            elif self.types[name] == "Integer":
+                self.s.setInteger([self.vr[name]], [value])
+            else:
+                self.s.setReal([self.vr[name]], [value])
+
+    def outputs(self) -> dict:
+        out = {}
+        for spec in fmu_core.OUTPUT_SPECS:
+            vr = [self.vr[spec.name]]
+            out[spec.name] = {"Real": lambda: self.s.getReal(vr)[0], "Integer": lambda: self.s.getInteger(vr)[0],
+                              "Boolean": lambda: bool(self.s.getBoolean(vr)[0])}[spec.type]()
+        return out
+
+    def step(self, t: float, inputs: dict) -> dict:
+        names = list(inputs)
+        self.s.setReal([self.vr[n] for n in names], [inputs[n] for n in names])
+        self.s.doStep(t, H)
+        return self.outputs()
+
+
+def _compare(got: dict, want: dict, t: float) -> None:
+    bad = [n for n in want if _bits(got[n]) != _bits(want[n])]
+    assert not bad, f"t = {t:.3f} s: " + ", ".join(f"{n}: native {got[n]!r} python {want[n]!r}" for n in bad)
+
+
+#: Parameter sets: nominal, every perturbation the native plant takes, the OSU model.
+PARAMS = {
+    "nominal": {},
+    "perturbed": {"torso_mass_kg": 16.0, "torso_com_offset_x_m": 0.02, "torso_com_offset_z_m": 0.03,
+                  "joint_damping_scale": 1.5},
+    "osu": {"cassie_model": "osu"},
+}
+
+
+@pytest.mark.parametrize("name", PARAMS)
+def test_same_outputs_as_the_python_plant_bit_for_bit(plant_fmu, plant_dir, name):
+    """3 s with a command change and a push: every output equals the Python plant's, every step."""
+    params = PARAMS[name]
+    plant = _Plant(plant_fmu, plant_dir, params)
+    plant.s.exitInitializationMode()
+    walker = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS, **params))
+    _compare(plant.outputs(), fmu_core.outputs(walker), 0.0)
+    inputs = {n: 0.0 for n in fmu_core.INPUT_NAMES}
+    t = 0.0
+    for k in range(300):
+        inputs["vx_des"] = 0.5 if k < 150 else 0.8
+        inputs["yaw_rate_des"] = 0.0 if k < 200 else 0.2
+        inputs["push_fy"] = 40.0 if 220 <= k < 240 else 0.0
+        for i, n in enumerate(OFFSET_NAMES):  # small offsets, as a regulator sends
+            inputs[n] = 0.01 * ((k + i) % 5 - 2) if k > 100 else 0.0
+        got = plant.step(t, inputs)
+        want = fmu_core.advance(walker, inputs, 20)
+        t += H
+        _compare(got, want, t)
+    assert want["step_index"] >= 5 and not want["fell"]
+    plant.s.terminate()
+    plant.s.freeInstance()
+
+
+def test_links_no_python_and_carries_mujoco(plant_dir):
+    """The binary needs libmujoco (beside it, found through $ORIGIN), libm and libc only."""
+    lib = plant_dir / "binaries" / "linux64" / "CassiePlantNative.so"
+    dump = subprocess.run(["objdump", "-p", str(lib)], capture_output=True, text=True, check=True).stdout
+    needed = sorted(line.split()[1] for line in dump.splitlines() if line.strip().startswith("NEEDED"))
+    assert needed == ["libc.so.6", "libm.so.6", "libmujoco.so.4.0.0"] or all(
+        n.startswith(("libc.", "libm.", "libmujoco.")) for n in needed), needed
+    assert "RUNPATH              $ORIGIN" in dump or "RPATH                $ORIGIN" in dump
+    ldd = subprocess.run(["ldd", str(lib)], capture_output=True, text=True, env={}).stdout
+    assert "python" not in ldd and "numpy" not in ldd and "not found" not in ldd, ldd
+    assert f"{plant_dir / 'binaries' / 'linux64' / 'libmujoco.so.4.0.0'}" in ldd
+    assert (plant_dir / "binaries" / "linux64" / "MUJOCO_LICENSE").is_file()
+    for model in ("menagerie", "osu"):
+        assert (plant_dir / "resources" / "models" / model / "LICENSE").is_file()
+
+
+def _loop_script(plant_fmu, plant_dir, reg_fmu, reg_dir, steps: int, vx_des: float) -> tuple[str, list[str]]:
+    """The fmi2_loop_host script: the regulator (FMU 0) and the plant (FMU 1) in a loop."""
+    pmd, rmd = read_model_description(str(plant_fmu)), read_model_description(str(reg_fmu))
+    pv = {v.name: v for v in pmd.modelVariables}
+    rv = {v.name: v for v in rmd.modelVariables}
+    lines = [f"F {reg_dir / 'binaries/linux64' / (rmd.coSimulation.modelIdentifier + '.so')} {rmd.guid} file:///",
+             f"F {plant_dir / 'binaries/linux64/CassiePlantNative.so'} {pmd.guid} {(plant_dir / 'resources').as_uri()}",
+             f"P 0 R {rv['vx_des'].valueReference} {vx_des!r}", f"P 1 R {pv['vx_des'].valueReference} {vx_des!r}"]
+    lines += [f"L 1 R {pv[n].valueReference} 0 {rv[n].valueReference}" for n in LOOP_SIGNALS]
+    lines.append(f"L 1 I {pv['step_index'].valueReference} 0 {rv['step_index'].valueReference}")
+    lines += [f"L 0 R {rv[n].valueReference} 1 {pv[n].valueReference}" for n in OFFSET_NAMES]
+    printed = [s.name for s in fmu_core.OUTPUT_SPECS]
+    lines += [f"O 1 {pv[n].type[0]} {pv[n].valueReference}" for n in printed]
+    lines.append(f"T {H!r} {steps}")
+    return "\n".join(lines) + "\n", printed
+
+
+def test_loop_walks_in_a_c_host_with_an_empty_environment(plant_fmu, plant_dir, regulator_fmu, tmp_path):
+    """10 s at 0.5 m/s, native regulator and native plant in a plain C host under ``env -i``;
+    on linux64 every plant output of every step equals the Python plant's in the same loop."""
+    host = compile_c(CC, [NATIVE_DIR / "fmi2_loop_host.c"], tmp_path / "fmi2_loop_host", "-std=c99", "-O1",
+                     f"-I{FMI2_INCLUDE}", "-ldl")
+    reg_dir = Path(extract(str(regulator_fmu), unzipdir=str(tmp_path / "regulator")))
+    steps, vx_des = 1000, 0.5
+    script, printed = _loop_script(plant_fmu, plant_dir, regulator_fmu, reg_dir, steps, vx_des)
+    (tmp_path / "loop.txt").write_text(script)
+    proc = subprocess.run(["env", "-i", str(host), str(tmp_path / "loop.txt")], capture_output=True, text=True,
+                          timeout=600)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rows = [[float(x) for x in line.split()] for line in proc.stdout.splitlines()]
+    assert len(rows) == steps
+    last = dict(zip(printed, rows[-1]))
+    assert last["fell"] == 0.0 and last["step_index"] >= 25 and last["pelvis_x"] > 3.5, last
+
+    # The same loop with the Python plant (fmu_core, in-process) and the same regulator FMU.
+    rmd = read_model_description(str(regulator_fmu))
+    rv = {v.name: v.valueReference for v in rmd.modelVariables}
+    reg = FMU2Slave(guid=rmd.guid, unzipDirectory=str(reg_dir), modelIdentifier=rmd.coSimulation.modelIdentifier,
+                    instanceName="regulator")
+    reg.instantiate()
+    reg.setupExperiment(startTime=0.0)
+    reg.enterInitializationMode()
+    reg.setReal([rv["vx_des"]], [vx_des])
+    reg.exitInitializationMode()
+    walker = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS))
+    out = fmu_core.outputs(walker)
+    inputs = dict({n: 0.0 for n in fmu_core.INPUT_NAMES}, vx_des=vx_des)
+    for k in range(steps):
+        reg.setReal([rv[n] for n in LOOP_SIGNALS], [out[n] for n in LOOP_SIGNALS])
+        reg.setInteger([rv["step_index"]], [out["step_index"]])
+        reg.doStep(k * H, H)
+        inputs.update(zip(OFFSET_NAMES, reg.getReal([rv[n] for n in OFFSET_NAMES])))
+        out = fmu_core.advance(walker, inputs, 20)
+        got = dict(zip(printed, rows[k]))
+        bad = [n for n in printed if _bits(got[n]) != _bits(out[n])]
+        assert not bad, f"step {k}: " + ", ".join(f"{n}: C host {got[n]!r} python {out[n]!r}" for n in bad)
+    reg.terminate()
+    reg.freeInstance()
+
+
+def _refused(plant, call, *args) -> str:
+    plant.messages.clear()
+    with pytest.raises(Exception, match=r"status 3 \(error\)"):
+        call(*args)
+    assert plant.messages, "a refusal must log why"
+    return plant.messages[-1][1]
+
+
+def test_refusals_name_the_field_and_change_nothing(plant_fmu, plant_dir):
+    plant = _Plant(plant_fmu, plant_dir)
+    vr = plant.vr
+    assert "cassie_model = 'atlas'" in _refused(plant, plant.s.setString, [vr["cassie_model"]], ["atlas"])
+    assert "vx_des = 3.5" in _refused(plant, plant.s.setReal, [vr["vx_des"]], [3.5])
+    assert "torso_mass_kg = nan" in _refused(plant, plant.s.setReal, [vr["torso_mass_kg"]], [float("nan")])
+    assert "is an output" in _refused(plant, plant.s.setReal, [vr["pitch"]], [0.1])
+    plant.s.setReal([vr["terrain_max_height_m"]], [0.05])
+    assert "terrain_max_height_m" in _refused(plant, plant.s.exitInitializationMode)
+    plant.s.setReal([vr["terrain_max_height_m"]], [0.0])
+    plant.s.exitInitializationMode()  # still in initialization mode after the refusal: now it starts
+    assert "fixed parameter" in _refused(plant, plant.s.setReal, [vr["torso_mass_kg"]], [12.0])
+    assert "whole multiple of the plant step" in _refused(plant, plant.s.doStep, 0.0, 0.0007)
+    assert "exceeds the maximum communication step" in _refused(plant, plant.s.doStep, 0.0, 10.5)
+    assert "must equal the end of the last step" in _refused(plant, plant.s.doStep, 1.0, 0.01)
+    assert "not provided" in _refused(plant, plant.s.getFMUstate)
+    assert plant.s.getReal([vr["plant_time"]])[0] == 0.0  # nothing stepped
+    plant.s.doStep(0.0, 0.01)
+    assert plant.s.getReal([vr["plant_time"]])[0] == pytest.approx(0.01, abs=1e-12)  # sum of 20 x 0.5 ms
+    plant.s.terminate()
+    plant.s.freeInstance()
+
+
+def test_model_description_matches_the_pythonfmu_plant(plant_fmu):
+    """Same variables, value references, types, causalities, variabilities, starts and ranges as
+    fmu_core.SPECS (the pythonfmu plant's table)."""
+    md = read_model_description(str(plant_fmu), validate=True)
+    assert [v.name for v in md.modelVariables] == [s.name for s in fmu_core.SPECS]
+    for v, s in zip(md.modelVariables, fmu_core.SPECS):
+        assert (v.type, v.causality, v.variability) == (s.type, s.causality, s.variability), s.name
+        if s.type in ("Real", "Integer") and s.min is not None:
+            assert float(v.min) == s.min and float(v.max) == s.max, s.name
+    with zipfile.ZipFile(plant_fmu) as z:
+        names = z.namelist()
+    assert "binaries/linux64/CassiePlantNative.so" in names and "sources/cassie_ctrl.c" in names
