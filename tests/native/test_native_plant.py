@@ -9,9 +9,11 @@ the same bits (compared through their IEEE bytes, tolerance zero).
 from __future__ import annotations
 
 import ctypes
+import itertools
 import struct
 import subprocess
 import zipfile
+import zlib
 from pathlib import Path
 
 import pytest
@@ -48,6 +50,19 @@ def _bits(x) -> bytes:
     return struct.pack("<d", float(x))
 
 
+_NAMES = itertools.count()
+#: Each instance's log messages by instance name: fmpy's logger proxy (which formats the "%s"
+#: varargs in C) keeps one Python logger for the process, so one logger routes by name.
+_MESSAGES: dict[str, list] = {}
+
+
+def _route(_env, name, status, _category, message):
+    _MESSAGES.setdefault(name.decode(), []).append((status, message.decode()))
+
+
+_LOGGER = fmi2CallbackLoggerTYPE(_route)
+
+
 class _Plant:
     """The native plant through fmpy, with the refusals it logs."""
 
@@ -56,17 +71,16 @@ class _Plant:
         self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
         self.types = {v.name: v.type for v in self.md.modelVariables}
         self.messages = []
-
-        def logger(_env, _name, status, _category, message):
-            self.messages.append((status, message.decode()))
+        name = f"plant-{next(_NAMES)}"
+        _MESSAGES[name] = self.messages
 
         self.callbacks = fmi2CallbackFunctions()  # kept: the FMU holds its pointers
-        self.callbacks.logger = fmi2CallbackLoggerTYPE(logger)
+        self.callbacks.logger = _LOGGER
         self.callbacks.allocateMemory = defaultCallbacks.allocateMemory
         self.callbacks.freeMemory = defaultCallbacks.freeMemory
         addLoggerProxy(ctypes.byref(self.callbacks))  # formats the "%s" varargs in C
         self.s = FMU2Slave(guid=self.md.guid, unzipDirectory=str(unzipped), modelIdentifier="CassiePlantNative",
-                           instanceName="plant")
+                           instanceName=name)
         self.s.instantiate(loggingOn=False, callbacks=self.callbacks)
         self.s.setupExperiment(startTime=0.0)
         self.s.enterInitializationMode()
@@ -231,12 +245,89 @@ def test_refusals_name_the_field_and_change_nothing(plant_fmu, plant_dir):
     assert "whole multiple of the plant step" in _refused(plant, plant.s.doStep, 0.0, 0.0007)
     assert "exceeds the maximum communication step" in _refused(plant, plant.s.doStep, 0.0, 10.5)
     assert "must equal the end of the last step" in _refused(plant, plant.s.doStep, 1.0, 0.01)
-    assert "not provided" in _refused(plant, plant.s.getFMUstate)
+    assert "not provided" in _refused(plant, plant.s.getDirectionalDerivative, [vr["vx"]], [vr["vx_des"]], [1.0])
     assert plant.s.getReal([vr["plant_time"]])[0] == 0.0  # nothing stepped
     plant.s.doStep(0.0, 0.01)
     assert plant.s.getReal([vr["plant_time"]])[0] == pytest.approx(0.01, abs=1e-12)  # sum of 20 x 0.5 ms
     plant.s.terminate()
     plant.s.freeInstance()
+
+
+def _walk(plant, t: float, steps: int) -> tuple[float, list[dict]]:
+    inputs = dict({n: 0.0 for n in fmu_core.INPUT_NAMES}, vx_des=0.5)
+    rows = []
+    for k in range(steps):
+        inputs["delta_swing_hip_pitch"] = 0.02 * ((k % 7) - 3) / 3
+        rows.append(plant.step(t, inputs))
+        t += H
+    return t, rows
+
+
+#: The blob layout (cp_instance.c): header, phase, has-walker flag, time, the values, then the walker.
+HEADER = 4 + 4 + 4 + 40
+VALUES_AT = HEADER + 4 + 4 + 8
+WALKER_AT = VALUES_AT + 8 * len(fmu_core.SPECS)
+#: Within the walker: substep, fell, fall reason, three commands, then the controller memory.
+MEMORY_AT = WALKER_AT + 4 + 4 + 160 + 3 * 8
+#: tau: after the six offsets, six speeds/rates, mode, stance, step_index, t_step_start.
+TAU_AT = MEMORY_AT + 12 * 8 + 4 + 4 + 8 + 8
+#: The MuJoCo state: its length, then time, then qpos (the pelvis quaternion at qpos[3:7]).
+MJSTATE_AT = TAU_AT + 8 * 10
+QUAT_AT = MJSTATE_AT + 4 + 8 + 3 * 8
+
+
+def _forge(blob: bytes, at: int, fmt: str, value) -> bytes:
+    """``blob`` with one field replaced and its CRC-32 made valid again."""
+    body = bytearray(blob[:-4])
+    struct.pack_into(fmt, body, at, value)
+    return bytes(body) + struct.pack("<I", zlib.crc32(bytes(body)))
+
+
+def test_fmu_state_restores_the_run_exactly(plant_fmu, plant_dir):
+    """A state taken while walking restores (in the same instance, and serialized into a fresh
+    one) the exact continuation: every output of the next 100 steps carries the same bits."""
+    plant = _Plant(plant_fmu, plant_dir, PARAMS["perturbed"])
+    plant.s.exitInitializationMode()
+    t, _ = _walk(plant, 0.0, 150)
+    state = plant.s.getFMUState()
+    blob = plant.s.serializeFMUState(state)
+    _, first = _walk(plant, t, 100)
+    plant.s.setFMUState(state)
+    _, again = _walk(plant, t, 100)
+    assert [{n: _bits(v) for n, v in r.items()} for r in again] == [{n: _bits(v) for n, v in r.items()} for r in first]
+    other = _Plant(plant_fmu, plant_dir, PARAMS["perturbed"])  # never initialized: the state builds its walker
+    restored = other.s.deserializeFMUState(blob)
+    other.s.setFMUState(restored)
+    _, fresh = _walk(other, t, 100)
+    assert [{n: _bits(v) for n, v in r.items()} for r in fresh] == [{n: _bits(v) for n, v in r.items()} for r in first]
+    assert first[-1]["step_index"] > 5
+
+    # Corrupt or unreachable states are refused; the instance keeps walking as before.
+    nominal = _Plant(plant_fmu, plant_dir)
+    forged = {
+        "CRC-32": blob[:100] + bytes([blob[100] ^ 1]) + blob[101:],
+        "fixed parameter torso_mass_kg": _forge(blob, VALUES_AT + 8 * plant.vr["torso_mass_kg"], "<d", 17.0),
+        "vx_des = 7": _forge(blob, VALUES_AT + 8 * plant.vr["vx_des"], "<d", 7.0),
+        "tau": _forge(blob, TAU_AT, "<d", 5.0),
+        "norm": _forge(blob, QUAT_AT, "<d", 2.0),
+        "substep": _forge(blob, WALKER_AT, "<I", 4),
+        "is from another FMU": blob[:12] + b"{x" + blob[14:-4] + struct.pack("<I", zlib.crc32(blob[:12] + b"{x" + blob[14:-4])),
+    }
+    for why, bad in forged.items():
+        plant.messages.clear()
+        try:
+            bad_state = plant.s.deserializeFMUState(bad)
+        except Exception:  # noqa: BLE001 - refused already at deserialization
+            assert why in plant.messages[-1][1], (why, plant.messages)
+            continue
+        message = _refused(plant, plant.s.setFMUState, bad_state)
+        assert why in message, (why, message)
+    assert "differs from this instance" in _refused(nominal, nominal.s.setFMUState, nominal.s.deserializeFMUState(blob))
+    plant.s.setFMUState(state)
+    _, after = _walk(plant, t, 100)
+    assert [{n: _bits(v) for n, v in r.items()} for r in after] == [{n: _bits(v) for n, v in r.items()} for r in first]
+    for p in (plant, other, nominal):
+        p.s.freeInstance()
 
 
 def test_model_description_matches_the_pythonfmu_plant(plant_fmu):

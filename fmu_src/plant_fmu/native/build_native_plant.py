@@ -39,8 +39,8 @@ HERE = Path(__file__).resolve().parent
 MODEL_IDENTIFIER = "CassiePlantNative"
 FMI2_HEADERS_DIR = HERE.parents[1] / "native" / "third_party" / "fmi2"
 FMI2_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
-PLANT_SOURCES = ("cassie_plant.c", "fmi2_plant.c")
-PLANT_HEADERS = ("cassie_plant.h",)
+PLANT_SOURCES = ("cassie_plant.c", "cp_instance.c", "fmi2_plant.c")
+PLANT_HEADERS = ("cassie_plant.h", "cp_instance.h")
 #: Optimized; no FMA contraction (the sources say so by pragma too); never fast-math.
 CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror", "-fvisibility=hidden")
 LOG_CATEGORIES = (("logStatusError", "Refused calls and errors (always logged)"),
@@ -130,7 +130,7 @@ def _skeleton(fmi_version: int) -> bytes:
     ET.SubElement(root, "CoSimulation", modelIdentifier=MODEL_IDENTIFIER, needsExecutionTool="false",
                   canHandleVariableCommunicationStepSize="true", canInterpolateInputs="false",
                   canBeInstantiatedOnlyOncePerProcess="false", canNotUseMemoryManagementFunctions="true",
-                  canGetAndSetFMUstate="false", canSerializeFMUstate="false",
+                  canGetAndSetFMUstate="true", canSerializeFMUstate="true",
                   providesDirectionalDerivative="false")
     categories = ET.SubElement(root, "LogCategories")
     for name, text in LOG_CATEGORIES:
