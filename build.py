@@ -161,14 +161,12 @@ def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
 
 
 def build_native_plant_fmu(fmi_version: int = 2, out_dir: Path = DEFAULT_OUT) -> Path:
-    """Build ``<out_dir>/CassiePlantNative_fmi2.fmu``: the CassiePlant FMU in C, no Python
-    (``fmu_src/plant_fmu/native/build_native_plant.py``; FMI 2.0, linux64)."""
+    """Build ``<out_dir>/CassiePlantNative_fmi<2|3>.fmu``: the CassiePlant FMU in C, no Python
+    (``fmu_src/plant_fmu/native/build_native_plant.py``), for Linux and Windows x86-64."""
     from fmu_src.plant_fmu.native import build_native_plant
 
-    if fmi_version != 2:
-        raise ValueError(f"fmi_version = {fmi_version!r}: the native CassiePlant FMU is built for FMI 2.0 only (2)")
     fmu_path = Path(out_dir) / build_native_plant.fmu_name(fmi_version)
-    write_zip(build_native_plant.fmu_entries(PLANT_UNITS), fmu_path)
+    write_zip(build_native_plant.fmu_entries(fmi_version, PLANT_UNITS), fmu_path)
     log.info("built %s", fmu_path)
     return fmu_path
 

@@ -14,6 +14,7 @@
 
 #include "cc_params.h"
 #include <mujoco/mujoco.h>
+#include "mj_dyn.h"
 
 #define CC_NSIDES 2
 #define CC_NMOTOR 5

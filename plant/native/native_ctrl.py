@@ -31,8 +31,8 @@ from plant.kinematics import FIT_DEGREE, KNEE_GRID_POINTS, KNEE_GRID_RAD
 log = logging.getLogger(__name__)
 
 NATIVE_DIR = Path(__file__).resolve().parent
-C_SOURCES = ("cassie_ctrl.c",)
-HEADERS = ("cassie_ctrl.h",)
+C_SOURCES = ("cassie_ctrl.c", "mj_dyn.c")
+HEADERS = ("cassie_ctrl.h", "mj_dyn.h")
 #: Largest gait grid per axis and Bezier order the C structs hold.
 MAX_GRID = 32
 MAX_BEZIER = 16

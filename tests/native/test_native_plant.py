@@ -18,12 +18,13 @@ from pathlib import Path
 
 import pytest
 from fmpy import extract, read_model_description
+from fmpy.fmi3 import FMU3Slave
 from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
 from fmpy.logging import addLoggerProxy
 
 from fmu_src.plant_fmu import fmu_core
 from plant.constants import OFFSET_NAMES
-from support.native_support import CC, FMI2_INCLUDE, NATIVE_DIR, compile_c
+from support.native_support import CC, FMI2_INCLUDE, MINGW_CC, NATIVE_DIR, WINE, compile_c, require
 
 #: Communication step of the loops (s): the suite's regulator period.
 H = 0.01
@@ -32,8 +33,15 @@ LOOP_SIGNALS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate")
 
 
 @pytest.fixture(scope="module")
-def plant_fmu(tmp_path_factory, build_module):
-    return build_module.build_native_plant_fmu(2, tmp_path_factory.mktemp("native_plant"))
+def plant_fmus(tmp_path_factory, build_module):
+    """{2: path, 3: path}: both native plant FMUs as build.py builds them."""
+    out = tmp_path_factory.mktemp("native_plant")
+    return {v: build_module.build_native_plant_fmu(v, out) for v in (2, 3)}
+
+
+@pytest.fixture(scope="module")
+def plant_fmu(plant_fmus):
+    return plant_fmus[2]
 
 
 @pytest.fixture(scope="module")
@@ -162,13 +170,18 @@ def test_links_no_python_and_carries_mujoco(plant_dir):
         assert (plant_dir / "resources" / "models" / model / "LICENSE").is_file()
 
 
-def _loop_script(plant_fmu, plant_dir, reg_fmu, reg_dir, steps: int, vx_des: float) -> tuple[str, list[str]]:
-    """The fmi2_loop_host script: the regulator (FMU 0) and the plant (FMU 1) in a loop."""
+def _loop_script(plant_fmu, plant_dir, reg_fmu, reg_dir, steps: int, vx_des: float,
+                 windows: bool = False) -> tuple[str, list[str]]:
+    """The fmi2_loop_host script: the regulator (FMU 0) and the plant (FMU 1) in a loop; with
+    ``windows`` the win64 libraries, their paths as Wine sees them (drive Z: is /)."""
     pmd, rmd = read_model_description(str(plant_fmu)), read_model_description(str(reg_fmu))
     pv = {v.name: v for v in pmd.modelVariables}
     rv = {v.name: v for v in rmd.modelVariables}
-    lines = [f"F {reg_dir / 'binaries/linux64' / (rmd.coSimulation.modelIdentifier + '.so')} {rmd.guid} file:///",
-             f"F {plant_dir / 'binaries/linux64/CassiePlantNative.so'} {pmd.guid} {(plant_dir / 'resources').as_uri()}",
+    folder, suffix, drive = ("win64", ".dll", "Z:") if windows else ("linux64", ".so", "")
+    reg_lib = reg_dir / "binaries" / folder / (rmd.coSimulation.modelIdentifier + suffix)
+    plant_lib = plant_dir / "binaries" / folder / ("CassiePlantNative" + suffix)
+    lines = [f"F {drive}{reg_lib} {rmd.guid} file:///",
+             f"F {drive}{plant_lib} {pmd.guid} file://{'/' + drive if drive else ''}{(plant_dir / 'resources').as_posix()}",
              f"P 0 R {rv['vx_des'].valueReference} {vx_des!r}", f"P 1 R {pv['vx_des'].valueReference} {vx_des!r}"]
     lines += [f"L 1 R {pv[n].valueReference} 0 {rv[n].valueReference}" for n in LOOP_SIGNALS]
     lines.append(f"L 1 I {pv['step_index'].valueReference} 0 {rv['step_index'].valueReference}")
@@ -220,6 +233,71 @@ def test_loop_walks_in_a_c_host_with_an_empty_environment(plant_fmu, plant_dir, 
         assert not bad, f"step {k}: " + ", ".join(f"{n}: C host {got[n]!r} python {out[n]!r}" for n in bad)
     reg.terminate()
     reg.freeInstance()
+
+
+@pytest.mark.wine
+def test_win64_loop_walks_under_wine(plant_fmu, plant_dir, regulator_fmu, tmp_path):
+    """The win64 pair (native regulator, native plant with its mujoco.dll) in the C host built with
+    MinGW-w64, under Wine with an empty environment besides Wine's own: 10 s at 0.5 m/s.  (Not the
+    Linux bits: Windows' libm and the MSVC-built mujoco.dll round differently in the last place.)"""
+    host = compile_c(require(MINGW_CC), [NATIVE_DIR / "fmi2_loop_host.c"], tmp_path / "fmi2_loop_host.exe",
+                     "-std=c99", "-O1", f"-I{FMI2_INCLUDE}", "-static")
+    reg_dir = Path(extract(str(regulator_fmu), unzipdir=str(tmp_path / "regulator")))
+    script, printed = _loop_script(plant_fmu, plant_dir, regulator_fmu, reg_dir, 1000, 0.5, windows=True)
+    (tmp_path / "loop.txt").write_text(script)
+    env = {"WINEPREFIX": str(tmp_path / "wineprefix"), "WINEDEBUG": "-all", "HOME": str(tmp_path),
+           "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin"}
+    proc = subprocess.run([str(require(WINE)), str(host), str(tmp_path / "loop.txt")], env=env, capture_output=True,
+                          text=True, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    rows = [[float(x) for x in line.split()] for line in proc.stdout.splitlines()]
+    assert len(rows) == 1000
+    last = dict(zip(printed, rows[-1]))
+    assert last["fell"] == 0.0 and last["step_index"] >= 25 and last["pelvis_x"] > 3.5, last
+    assert abs(last["plant_time"] - 10.0) < 1e-9
+
+
+def test_fmi3_same_outputs_and_state(plant_fmus, tmp_path):
+    """The FMI 3.0 FMU (the same C source): the Python plant's outputs bit for bit for 2 s of
+    walking on the OSU model, and a state that restores the exact continuation."""
+    fmu = plant_fmus[3]
+    md = read_model_description(str(fmu), validate=True)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    assert [v.name for v in md.modelVariables] == [s.name for s in fmu_core.SPECS] + ["time"]
+    s = FMU3Slave(guid=md.guid, unzipDirectory=str(extract(str(fmu), unzipdir=str(tmp_path / "fmu"))),
+                  modelIdentifier="CassiePlantNative", instanceName="plant3")
+    s.instantiate()
+    s.enterInitializationMode(startTime=0.0)
+    s.setString([vr["cassie_model"]], ["osu"])
+    s.exitInitializationMode()
+    walker = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS, cassie_model="osu"))
+    inputs = dict({n: 0.0 for n in fmu_core.INPUT_NAMES}, vx_des=0.5)
+    real = [o.name for o in fmu_core.OUTPUT_SPECS if o.type == "Real"]
+    t, state, saved = 0.0, None, []
+    for k in range(200):
+        names = list(inputs)
+        s.setFloat64([vr[n] for n in names], [inputs[n] for n in names])
+        s.doStep(t, H)
+        t += H
+        want = fmu_core.advance(walker, inputs, 20)
+        got = dict(zip(real, s.getFloat64([vr[n] for n in real])))
+        got["step_index"] = s.getInt32([vr["step_index"]])[0]
+        got["fell"] = bool(s.getBoolean([vr["fell"]])[0])
+        _compare(got, {n: want[n] for n in got}, t)
+        if k == 150:
+            state, t_saved = s.getFMUState(), t
+        elif k > 150:
+            saved.append(got)
+    assert s.getFloat64([len(fmu_core.SPECS)])[0] == t  # the independent variable time
+    s.setFMUState(state)
+    t = t_saved
+    for k, want in enumerate(saved):
+        s.doStep(t, H)
+        t += H
+        got = dict(zip(real, s.getFloat64([vr[n] for n in real])))
+        assert all(_bits(got[n]) == _bits(want[n]) for n in real), k
+    s.terminate()
+    s.freeInstance()
 
 
 def _refused(plant, call, *args) -> str:

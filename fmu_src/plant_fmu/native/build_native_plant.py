@@ -37,10 +37,21 @@ log = logging.getLogger("avr_build")
 
 HERE = Path(__file__).resolve().parent
 MODEL_IDENTIFIER = "CassiePlantNative"
-FMI2_HEADERS_DIR = HERE.parents[1] / "native" / "third_party" / "fmi2"
-FMI2_HEADERS = ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h")
-PLANT_SOURCES = ("cassie_plant.c", "cp_instance.c", "fmi2_plant.c")
+THIRD_PARTY = HERE.parents[1] / "native" / "third_party"
+#: The FMI standard headers (third_party/fmi<version>/, with their license) each FMU ships.
+FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
+               3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
+PLANT_SOURCES = ("cassie_plant.c", "cp_instance.c")
+API_SOURCES = {2: ("fmi2_plant.c",), 3: ("fmi3_plant.c",)}
 PLANT_HEADERS = ("cassie_plant.h", "cp_instance.h")
+#: FMI platform folder -> compiler target, per FMI version.
+PLATFORMS = {2: {"linux64": "linux", "win64": "windows"}, 3: {"x86_64-linux": "linux", "x86_64-windows": "windows"}}
+LIBRARY_SUFFIX = {"linux": ".so", "windows": ".dll"}
+#: The wheel that carries MuJoCo's C library (``mujoco`` depends on it), and its Windows tag.
+MUJOCO_CORE = "mujoco-core"
+WINDOWS_WHEEL_TAG = "win_amd64"
+#: A Windows mujoco-core wheel to use instead of downloading one (its path).
+WINDOWS_WHEEL_ENV = "CASSIE_MUJOCO_WIN_WHEEL"
 #: Optimized; no FMA contraction (the sources say so by pragma too); never fast-math.
 CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror", "-fvisibility=hidden")
 LOG_CATEGORIES = (("logStatusError", "Refused calls and errors (always logged)"),
@@ -49,7 +60,7 @@ _TYPES = {"Real": "CP_REAL", "Integer": "CP_INTEGER", "Boolean": "CP_BOOLEAN", "
 _CAUSALITY = {"parameter": "CP_PARAMETER", "input": "CP_INPUT", "output": "CP_OUTPUT"}
 
 
-def fmu_name(fmi_version: int = 2) -> str:
+def fmu_name(fmi_version: int) -> str:
     return f"{MODEL_IDENTIFIER}_fmi{fmi_version}.fmu"
 
 
@@ -117,76 +128,185 @@ def vars_header(guid: str) -> str:
     return "\n".join(lines)
 
 
-def _skeleton(fmi_version: int) -> bytes:
-    """The model description before :func:`model_description` completes it (units, ranges,
-    model structure, default experiment, placeholder GUID)."""
-    root = ET.Element("fmiModelDescription", {
-        "fmiVersion": "2.0", "modelName": MODEL_IDENTIFIER, "guid": PLACEHOLDER_GUID,
-        "description": ("MuJoCo Cassie biped with its nominal walking controller, native C (no Python): the "
-                        "CassiePlant FMU's variables and behaviour; 0.5 ms plant step"),
-        "author": "cassie-avr project", "version": "0.1.0",
-        "license": "MIT (MuJoCo: Apache-2.0, binaries/*/MUJOCO_LICENSE; models: resources/models/*/LICENSE)",
+DESCRIPTION = ("MuJoCo Cassie biped with its nominal walking controller, native C (no Python): the CassiePlant "
+               "FMU's variables and behaviour; 0.5 ms plant step")
+LICENSE_TEXT = "MIT (MuJoCo: Apache-2.0, binaries/*/MUJOCO_LICENSE; models: resources/models/*/LICENSE)"
+
+
+def _root(fmi_version: int, token: str) -> ET.Element:
+    key = "guid" if fmi_version == 2 else "instantiationToken"
+    return ET.Element("fmiModelDescription", {
+        "fmiVersion": f"{fmi_version}.0", "modelName": MODEL_IDENTIFIER, key: token, "description": DESCRIPTION,
+        "author": "cassie-avr project", "version": "0.1.0", "license": LICENSE_TEXT,
         "generationTool": "cassie-avr build.py", "variableNamingConvention": "flat"})
+
+
+def _skeleton2() -> bytes:
+    """The FMI 2.0 model description before :func:`model_description` completes it (units,
+    ranges, model structure, default experiment), as pythonfmu writes it for the Python plant."""
+    root = _root(2, PLACEHOLDER_GUID)
     ET.SubElement(root, "CoSimulation", modelIdentifier=MODEL_IDENTIFIER, needsExecutionTool="false",
                   canHandleVariableCommunicationStepSize="true", canInterpolateInputs="false",
                   canBeInstantiatedOnlyOncePerProcess="false", canNotUseMemoryManagementFunctions="true",
-                  canGetAndSetFMUstate="true", canSerializeFMUstate="true",
-                  providesDirectionalDerivative="false")
+                  canGetAndSetFMUstate="true", canSerializeFMUstate="true", providesDirectionalDerivative="false")
     categories = ET.SubElement(root, "LogCategories")
     for name, text in LOG_CATEGORIES:
         ET.SubElement(categories, "Category", name=name, description=text)
     variables = ET.SubElement(root, "ModelVariables")
     for vr, s in enumerate(fmu_core.SPECS):
-        attrs = {"name": s.name, "valueReference": str(vr), "description": s.description,
-                 "causality": s.causality, "variability": s.variability}
-        if s.causality != "input":
-            attrs["initial"] = "exact"
-        var = ET.SubElement(variables, "ScalarVariable", attrs)
-        start = s.default
-        ET.SubElement(var, s.type, start=("true" if start else "false") if s.type == "Boolean" else
-                      (repr(float(start)) if s.type == "Real" else str(start)))
+        var = ET.SubElement(variables, "ScalarVariable", _variable_attributes(s, vr))
+        ET.SubElement(var, s.type, start=_xml_start(s))
     return ET.tostring(root, encoding="UTF-8")
 
 
-def _model_description(units: dict, guid: str) -> bytes:
-    tree = model_description(_skeleton(2), fmu_core.SPECS, units, initial_unknowns=PLANT_INITIAL_UNKNOWNS)
+def _xml_start(spec) -> str:
+    if spec.type == "Boolean":
+        return "true" if spec.default else "false"
+    return repr(float(spec.default)) if spec.type == "Real" else str(spec.default)
+
+
+def _variable_attributes(spec, vr: int) -> dict:
+    attrs = {"name": spec.name, "valueReference": str(vr), "description": spec.description,
+             "causality": spec.causality, "variability": spec.variability}
+    if spec.causality != "input":  # FMI: no `initial` on inputs
+        attrs["initial"] = "exact"
+    return attrs
+
+
+_FMI3_TYPES = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean", "String": "String"}
+
+
+def _model_description3(units: dict, token: str) -> bytes:
+    """The FMI 3.0 model description from the same specs: the same units, ranges, starts and
+    initialization dependencies as the FMI 2.0 one (``PLANT_INITIAL_UNKNOWNS``), plus the
+    independent variable ``time`` (valueReference = the number of variables)."""
+    from fmu_src.packing.describe import DEFAULT_EXPERIMENT, UNITS, add_units
+
+    root = _root(3, token)
+    ET.SubElement(root, "CoSimulation", modelIdentifier=MODEL_IDENTIFIER, needsExecutionTool="false",
+                  canHandleVariableCommunicationStepSize="true", canBeInstantiatedOnlyOncePerProcess="false",
+                  canGetAndSetFMUState="true", canSerializeFMUState="true", hasEventMode="false",
+                  providesIntermediateUpdate="false")
+    all_units = {**UNITS, **units}
+    add_units(ET.SubElement(root, "UnitDefinitions"), all_units)
+    categories = ET.SubElement(root, "LogCategories")
+    for name, text in LOG_CATEGORIES:
+        ET.SubElement(categories, "Category", name=name, description=text)
+    ET.SubElement(root, "DefaultExperiment", DEFAULT_EXPERIMENT)
+    variables = ET.SubElement(root, "ModelVariables")
+    specs = fmu_core.SPECS
+    vr_of = {s.name: vr for vr, s in enumerate(specs)}
+    for vr, s in enumerate(specs):
+        attrs = _variable_attributes(s, vr)
+        calculated = s.name in PLANT_INITIAL_UNKNOWNS
+        if calculated:
+            attrs["initial"] = "calculated"
+        elif s.type != "String":
+            attrs["start"] = _xml_start(s)
+        if s.type in ("Real", "Integer"):
+            if s.min is not None:
+                attrs["min"] = repr(s.min) if isinstance(s.min, float) else str(s.min)
+                attrs["max"] = repr(s.max) if isinstance(s.max, float) else str(s.max)
+        if s.type == "Real" and s.unit in all_units:
+            attrs["unit"] = s.unit
+        var = ET.SubElement(variables, _FMI3_TYPES[s.type], attrs)
+        if s.type == "String":
+            ET.SubElement(var, "Start", value=str(s.default))
+    ET.SubElement(variables, "Float64", name="time", valueReference=str(len(specs)), causality="independent",
+                  variability="continuous", unit="s", description="Simulation time, s")
+    structure = ET.SubElement(root, "ModelStructure")
+    for vr, s in enumerate(specs):
+        if s.causality == "output":
+            ET.SubElement(structure, "Output", valueReference=str(vr), dependencies="")
+    for vr, s in enumerate(specs):
+        if s.name in PLANT_INITIAL_UNKNOWNS:
+            deps = " ".join(str(v) for v in sorted(vr_of[k] for k in PLANT_INITIAL_UNKNOWNS[s.name]))
+            ET.SubElement(structure, "InitialUnknown", valueReference=str(vr), dependencies=deps)
+    ET.indent(root)
+    return ET.tostring(root, encoding="UTF-8", xml_declaration=True)
+
+
+def _model_description(fmi_version: int, units: dict, guid: str) -> bytes:
+    if fmi_version == 3:
+        return _model_description3(units, guid)
+    tree = model_description(_skeleton2(), fmu_core.SPECS, units, initial_unknowns=PLANT_INITIAL_UNKNOWNS)
     tree.getroot().set("guid", guid)
     return ET.tostring(tree.getroot(), encoding="UTF-8", xml_declaration=True)
 
 
-def source_entries(guid: str) -> dict[str, bytes]:
+def c_files(fmi_version: int) -> tuple[str, ...]:
+    return (*native_ctrl.C_SOURCES, "cc_data.c", *PLANT_SOURCES, *API_SOURCES[fmi_version])
+
+
+def source_entries(fmi_version: int, guid: str) -> dict[str, bytes]:
     """``sources/``: every C file and header the library is built from (generated ones included)."""
     files = {name: (native_ctrl.NATIVE_DIR / name).read_bytes() for name in native_ctrl.C_SOURCES + native_ctrl.HEADERS}
     files["cc_params.h"] = native_ctrl.params_header().encode()
     files["cc_data.c"] = native_ctrl.data_source().encode()
-    files.update({name: (HERE / name).read_bytes() for name in PLANT_SOURCES + PLANT_HEADERS})
-    files.update({name: (FMI2_HEADERS_DIR / name).read_bytes() for name in FMI2_HEADERS})
+    files.update({name: (HERE / name).read_bytes()
+                  for name in PLANT_SOURCES + API_SOURCES[fmi_version] + PLANT_HEADERS})
+    folder = THIRD_PARTY / f"fmi{fmi_version}"
+    files.update({name: (folder / name).read_bytes() for name in FMI_HEADERS[fmi_version]})
     files["cp_vars.h"] = vars_header(guid).encode()
     return {f"sources/{name}": data for name, data in files.items()}
 
 
-C_FILES = (*native_ctrl.C_SOURCES, "cc_data.c", *PLANT_SOURCES)
-
-
-def compile_linux(src: Path, out: Path, extra_flags=()) -> Path:
-    """The linux64 library from the sources in ``src``, linked against the wheel's libmujoco,
-    found at run time in the library's own folder (``$ORIGIN``)."""
-    mujoco_lib = native_ctrl.mujoco_library()
-    cc = compiler.host_compiler("for the native CassiePlant FMU")
-    cmd = [cc, *CFLAGS, *extra_flags, "-shared", "-fPIC", "-Wl,--build-id=none", "-I.",
-           f"-I{native_ctrl.mujoco_dir() / 'include'}", *C_FILES, "-o", out.name, str(mujoco_lib),
-           "-Wl,-rpath,$ORIGIN", "-lm"]
-    compiler.run(cmd, "the native CassiePlant FMU", cwd=src)
+def compile_library(src: Path, fmi_version: int, target: str, mujoco: Path, out: Path, extra_flags=()) -> Path:
+    """The library for ``target`` ("linux" or "windows") from the sources in ``src``.  Linux: linked
+    against ``mujoco`` (the wheel's libmujoco.so.*), found at run time beside the library
+    (``$ORIGIN``).  Windows: ``mujoco`` is the folder of the Windows wheel's headers; mujoco.dll is
+    loaded at run time from beside the library (``mj_dyn.c``)."""
+    cc = compiler.compiler_for(target, "of the native CassiePlant FMU")
+    if target == "linux":
+        cmd = [cc, *CFLAGS, *extra_flags, "-shared", "-fPIC", "-Wl,--build-id=none", "-I.",
+               f"-I{native_ctrl.mujoco_dir() / 'include'}", *c_files(fmi_version), "-o", out.name, str(mujoco),
+               "-Wl,-rpath,$ORIGIN", "-lm"]
+    else:
+        cmd = [cc, *CFLAGS, *extra_flags, "-DMJ_STATIC", "-shared", "-static-libgcc", "-Wl,--no-insert-timestamp",
+               "-I.", f"-I{mujoco / 'include'}", *c_files(fmi_version), "-o", out.name]
+    compiler.run(cmd, f"the native CassiePlant FMU for {target}", cwd=src)
     shutil.move(str(src / out.name), out)
     return out
 
 
-def mujoco_license_entries(platform: str) -> dict[str, bytes]:
+def mujoco_license_entries(folder: str) -> dict[str, bytes]:
     """The MuJoCo wheel's license files beside its library."""
     import mujoco
 
-    dist = next(Path(mujoco.__file__).resolve().parent.parent.glob(f"mujoco-{mujoco.__version__}.dist-info"))
-    return {f"binaries/{platform}/MUJOCO_{p.name}": p.read_bytes() for p in sorted((dist / "licenses").iterdir())}
+    site = Path(mujoco.__file__).resolve().parent.parent
+    dist = next(site.glob(f"{MUJOCO_CORE.replace('-', '_')}-*.dist-info"), None) or next(site.glob("mujoco-*.dist-info"))
+    return {f"binaries/{folder}/MUJOCO_{p.name}": p.read_bytes() for p in sorted((dist / "licenses").iterdir())}
+
+
+def windows_mujoco(tmp: Path) -> Path | None:
+    """The Windows wheel of ``mujoco-core`` (the version of the installed ``mujoco``), unpacked in
+    ``tmp``: ``CASSIE_MUJOCO_WIN_WHEEL`` if set, else ``pip download`` (pip's cache makes it one
+    download per machine).  None, with a warning, when it cannot be had: the Windows binaries are
+    then skipped."""
+    import os
+    import subprocess
+    import sys
+    import zipfile
+
+    import mujoco
+
+    wheel = os.environ.get(WINDOWS_WHEEL_ENV)
+    if not wheel:
+        wheels = tmp / "wheels"
+        cmd = [sys.executable, "-m", "pip", "download", f"{MUJOCO_CORE}=={mujoco.__version__}", "--platform",
+               WINDOWS_WHEEL_TAG, "--only-binary=:all:", "--no-deps", "--quiet", "-d", str(wheels)]
+        result = subprocess.run(cmd, capture_output=True, text=True)
+        found = sorted(wheels.glob("*.whl")) if result.returncode == 0 else []
+        if not found:
+            log.warning("skipped the Windows binaries of %s: cannot get the %s %s wheel for %s (%s); set %s to "
+                        "such a wheel", MODEL_IDENTIFIER, MUJOCO_CORE, mujoco.__version__, WINDOWS_WHEEL_TAG,
+                        result.stderr.strip()[-300:], WINDOWS_WHEEL_ENV)
+            return None
+        wheel = found[0]
+    out = tmp / "mujoco_windows"
+    with zipfile.ZipFile(wheel) as z:
+        z.extractall(out)
+    return out / "mujoco"
 
 
 def model_entries(tmp: Path) -> dict[str, bytes]:
@@ -197,27 +317,42 @@ def model_entries(tmp: Path) -> dict[str, bytes]:
             for p in sorted(models.rglob("*")) if p.is_file()}
 
 
-def fmu_entries(units: dict, extra_flags=()) -> dict[str, bytes]:
-    """Every file of the FMI 2.0 FMU (linux64).  The GUID is a hash of everything but the
-    binaries and the header holding it."""
+def fmu_entries(fmi_version: int, units: dict, extra_flags=()) -> dict[str, bytes]:
+    """Every file of the FMI ``fmi_version`` FMU, with the binaries of every platform that can be
+    built here (Windows: the MinGW-w64 cross compiler and the Windows MuJoCo wheel).  The GUID is a
+    hash of everything but the binaries, the model description and the header holding it."""
+    if fmi_version not in PLATFORMS:
+        raise ValueError(f"fmi_version = {fmi_version!r}: must be 2 or 3")
     with tempfile.TemporaryDirectory(prefix="cassie_plant_native_") as tmp:
         tmp = Path(tmp)
         resources = model_entries(tmp)
 
         def text_entries(guid: str) -> dict[str, bytes]:
-            return {"modelDescription.xml": _model_description(units, guid), **source_entries(guid), **resources}
+            return {"modelDescription.xml": _model_description(fmi_version, units, guid),
+                    **source_entries(fmi_version, guid), **resources}
 
-        guid = content_guid(hashlib.sha256(b"native CassiePlant fmi2\0"), text_entries(PLACEHOLDER_GUID),
-                            skip={"sources/cp_vars.h", "modelDescription.xml"})
+        guid = content_guid(hashlib.sha256(f"native CassiePlant fmi{fmi_version}\0".encode()),
+                            text_entries(PLACEHOLDER_GUID), skip={"sources/cp_vars.h", "modelDescription.xml"})
         entries = text_entries(guid)
         src = tmp / "src"
         src.mkdir()
         for name, data in entries.items():
             if name.startswith("sources/"):
                 (src / name[len("sources/"):]).write_bytes(data)
-        lib = compile_linux(src, tmp / f"{MODEL_IDENTIFIER}.so", extra_flags)
-        entries[f"binaries/linux64/{lib.name}"] = lib.read_bytes()
-        mujoco_lib = native_ctrl.mujoco_library()
-        entries[f"binaries/linux64/{mujoco_lib.name}"] = mujoco_lib.read_bytes()
-        entries.update(mujoco_license_entries("linux64"))
+        for folder, target in PLATFORMS[fmi_version].items():
+            if target == "linux":
+                mujoco_lib = native_ctrl.mujoco_library()
+                lib = compile_library(src, fmi_version, target, mujoco_lib, tmp / f"{MODEL_IDENTIFIER}.so", extra_flags)
+                entries[f"binaries/{folder}/{mujoco_lib.name}"] = mujoco_lib.read_bytes()
+            else:
+                if compiler.cross_compiler(target) is None:
+                    log.warning(compiler.skip_message(target, fmu_name(fmi_version)))
+                    continue
+                mujoco_win = windows_mujoco(tmp)
+                if mujoco_win is None:
+                    continue
+                lib = compile_library(src, fmi_version, target, mujoco_win, tmp / f"{MODEL_IDENTIFIER}.dll")
+                entries[f"binaries/{folder}/mujoco.dll"] = (mujoco_win / "mujoco.dll").read_bytes()
+            entries[f"binaries/{folder}/{lib.name}"] = lib.read_bytes()
+            entries.update(mujoco_license_entries(folder))
     return entries

@@ -98,6 +98,11 @@ CpInstance *cp_instantiate(const char *name, const char *token, const char *reso
                   CP_GUID);
         return NULL;
     }
+    char why[300];
+    if (cp_mujoco_load(why, sizeof why)) {
+        cp_refuse(&probe, "instantiate", "%s", why);
+        return NULL;
+    }
     if (resources == NULL || !resources[0]) {
         cp_refuse(&probe, "instantiate", "no resource location: the FMU needs its resources (the Cassie models)");
         return NULL;
