@@ -234,6 +234,39 @@ def _model_description(fmi_version: int, units: dict, guid: str) -> bytes:
     return ET.tostring(tree.getroot(), encoding="UTF-8", xml_declaration=True)
 
 
+def documentation(fmi_version: int, platforms) -> bytes:
+    """``documentation/index.html``: the plant, what it needs (nothing), its FMI behaviour, the variables."""
+    from fmu_src.packing.describe import variables_table
+
+    names = {"linux64": "Linux x86-64", "win64": "Windows x86-64", "x86_64-linux": "Linux x86-64",
+             "x86_64-windows": "Windows x86-64"}
+    binaries = "".join(f"<li><code>binaries/{p}/</code>: {names[p]}</li>" for p in platforms)
+    call = "fmi2" if fmi_version == 2 else "fmi3"
+    return f"""<!DOCTYPE html>
+<html><head><meta charset="utf-8"><title>{MODEL_IDENTIFIER} (FMI {fmi_version}.0)</title></head><body>
+<h1>{MODEL_IDENTIFIER} (FMI {fmi_version}.0 co-simulation, native C)</h1>
+<p>The CassiePlant FMU without Python: MuJoCo Cassie (Menagerie's agility_cassie or Oregon State's model, in
+<code>resources/models/</code> with their licenses) with the nominal walking controller compiled in C (the
+project's Python controller operation for operation: on Linux x86-64 the same outputs, bit for bit, as the
+pythonfmu CassiePlant). Same variables, value references, units, ranges, fixed parameters and refusals as
+CassiePlant; connect the AdaptiveVelocityRegulator FMUs name to name.</p>
+<h2>Platforms</h2><ul>{binaries}</ul>
+<p>Each folder carries MuJoCo's library (Apache-2.0, <code>MUJOCO_LICENSE</code>) beside the FMU's; the FMU
+finds it there (Linux: run path <code>$ORIGIN</code>; Windows: loaded from the FMU library's folder). Nothing
+else is needed: no Python, no numpy.</p>
+<h2>FMI behaviour</h2>
+<p>Communication steps: whole multiples of 0.5 ms, at most {fmu_core.MAX_STEP_S:g} s. Calls the state machine
+forbids, sets of outputs or of fixed parameters after initialization, NaN/inf or out-of-range values:
+{call} Error, logged with the variable and its range, no effect. Uneven terrain
+(<code>terrain_max_height_m</code> &gt; 0) is not available in this FMU (the terrain generator is numpy's):
+{call}ExitInitializationMode refuses it and stays in initialization mode. FMU state: MuJoCo's integration
+state, the servo gains, the controller's memory; restore-then-continue is bit-identical; corrupt states (CRC-32,
+GUID) and ones no run can reach (out-of-range values, non-unit quaternions, unordered step times, other fixed
+parameters) are refused naming the field.</p>
+{variables_table(fmu_core.SPECS)}</body></html>
+""".encode()
+
+
 def c_files(fmi_version: int) -> tuple[str, ...]:
     return (*native_ctrl.C_SOURCES, "cc_data.c", *PLANT_SOURCES, *API_SOURCES[fmi_version])
 
@@ -355,4 +388,6 @@ def fmu_entries(fmi_version: int, units: dict, extra_flags=()) -> dict[str, byte
                 entries[f"binaries/{folder}/mujoco.dll"] = (mujoco_win / "mujoco.dll").read_bytes()
             entries[f"binaries/{folder}/{lib.name}"] = lib.read_bytes()
             entries.update(mujoco_license_entries(folder))
+        platforms = sorted({name.split("/")[1] for name in entries if name.startswith("binaries/")})
+        entries["documentation/index.html"] = documentation(fmi_version, platforms)
     return entries
