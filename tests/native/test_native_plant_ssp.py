@@ -22,7 +22,7 @@ MASTERS_S = 4.0
 
 @pytest.fixture(scope="module")
 def systems(tmp_path_factory, build_module, built_fmu):
-    """(CassieAVR.ssp, CassieAVRNative.ssp, the native plant FMI 2.0 and 3.0 FMUs)."""
+    """(CassieAVR.ssp, CassieAVRNative.ssp, the native plant FMI 2.0 and 3.0 FMUs, the native regulator)."""
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
 
     log_output_level(CosimLogLevel.ERROR)
@@ -31,7 +31,7 @@ def systems(tmp_path_factory, build_module, built_fmu):
     plants = [build_module.build_native_plant_fmu(v, out) for v in (2, 3)]
     regulator = build_module.build_native_fmu(2, out)
     native = build_module.build_native_ssp(out, plants[0], regulator, python_dir / "CommandSource_fmi2.fmu")
-    return python_dir / f"{system.SYSTEM_NAME}.ssp", native, plants
+    return python_dir / f"{system.SYSTEM_NAME}.ssp", native, plants, regulator
 
 
 def _in_fresh_temp(tmp_path, run, *args):
@@ -49,7 +49,7 @@ def _in_fresh_temp(tmp_path, run, *args):
 
 
 def test_the_native_ssp_holds_no_python(systems):
-    _, native, _ = systems
+    _, native, _, _ = systems
     with zipfile.ZipFile(native) as z:
         fmus = sorted(n for n in z.namelist() if n.endswith(".fmu"))
     assert fmus == ["resources/AdaptiveVelocityRegulatorNative_fmi2.fmu", "resources/CassiePlantNative_fmi2.fmu",
@@ -58,7 +58,7 @@ def test_the_native_ssp_holds_no_python(systems):
 
 @pytest.mark.parametrize("master", ["libcosim", "fmpy", "ecos"])
 def test_native_ssp_walks_in_each_master(systems, master, tmp_path):
-    _, native, _ = systems
+    _, native, _, _ = systems
     run = {"libcosim": system_run.run_libcosim, "fmpy": system_run.run_fmpy, "ecos": system_run.run_ecos}[master]
     rows = _in_fresh_temp(tmp_path / "tmp", run, native, MASTERS_S)
     assert len(rows) == round(MASTERS_S / system.STEP_S)
@@ -67,7 +67,7 @@ def test_native_ssp_walks_in_each_master(systems, master, tmp_path):
 
 
 def test_native_ssp_is_the_python_ssp_bit_for_bit_in_libcosim(systems, tmp_path):
-    python_ssp, native, _ = systems
+    python_ssp, native, _, _ = systems
     want = _in_fresh_temp(tmp_path / "a", system_run.run_libcosim, python_ssp, MASTERS_S)
     got = _in_fresh_temp(tmp_path / "b", system_run.run_libcosim, native, MASTERS_S)
     for column in want.dtype.names:
@@ -77,7 +77,7 @@ def test_native_ssp_is_the_python_ssp_bit_for_bit_in_libcosim(systems, tmp_path)
 def test_native_plants_reference_results_are_the_pythonfmu_plants(systems, tmp_path_factory, build_module):
     """build.py simulates each FMU with FMPy on the same experiment (fmu_src/packing/crosscheck.py):
     the native plants' results are the pythonfmu plant's, byte for byte."""
-    _, _, plants = systems
+    _, _, plants, _ = systems
     python_plant = built_plant_fmu(tmp_path_factory, build_module)
     ref = "extra/org.fmi-standard.fmi-ls-ref/{}_ref.csv"
     with zipfile.ZipFile(python_plant) as z:
@@ -85,3 +85,21 @@ def test_native_plants_reference_results_are_the_pythonfmu_plants(systems, tmp_p
     for plant in plants:
         with zipfile.ZipFile(plant) as z:
             assert z.read(ref.format("CassiePlantNative")) == want, plant.name
+
+
+def test_our_master_runs_a_scenario_on_the_native_plant_as_on_the_pythonfmu_plant(systems, tmp_path_factory,
+                                                                                   build_module):
+    """``--plant fmu`` with the native plant FMU: mass_20kg's adaptive arm, 4 s, the same rows as
+    with the pythonfmu CassiePlant (the master drives any FMU with CassiePlant's variables)."""
+    from scenarios.cosim import master
+    from scenarios.cosim.plant_fmu import plant_factory
+    from scenarios.lang import spec
+
+    _, _, plants, regulator = systems
+    scenario = spec.override(spec.resolve_targets(["mass_20kg"])[0], duration_s=MASTERS_S)
+    runs = [master.run_scenario(scenario, "fmu", fmu_path=regulator, arms=("adaptive",), plant=plant_factory(p))[0]
+            for p in (built_plant_fmu(tmp_path_factory, build_module), plants[0])]
+    want, got = (r.rows for r in runs)
+    assert len(got) == round(MASTERS_S / 0.005) and not any(r.fell for r in runs)
+    for column in want.dtype.names:
+        assert np.array_equal(got[column], want[column]), column
