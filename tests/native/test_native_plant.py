@@ -49,11 +49,6 @@ def plant_dir(plant_fmu, tmp_path_factory):
     return Path(extract(str(plant_fmu), unzipdir=str(tmp_path_factory.mktemp("native_plant_unzipped"))))
 
 
-@pytest.fixture(scope="module")
-def regulator_fmu(tmp_path_factory, build_module):
-    return build_module.build_native_fmu(2, tmp_path_factory.mktemp("native_regulator"))
-
-
 def _bits(x) -> bytes:
     return struct.pack("<d", float(x))
 
@@ -170,44 +165,79 @@ def test_links_no_python_and_carries_mujoco(plant_dir):
         assert (plant_dir / "resources" / "models" / model / "LICENSE").is_file()
 
 
+#: Per FMI version: the C loop host, its FMI headers, the binary folders (Linux, Windows).
+LOOP_HOSTS = {2: ("fmi2_loop_host.c", FMI2_INCLUDE, ("linux64", "win64")),
+              3: ("fmi3_loop_host.c", FMI2_INCLUDE.parent / "fmi3", ("x86_64-linux", "x86_64-windows"))}
+
+
+def _loop_host(compiler, fmi: int, out: Path) -> Path:
+    source, include, _ = LOOP_HOSTS[fmi]
+    flags = ("-static",) if compiler == MINGW_CC else ("-ldl",)
+    return compile_c(compiler, [NATIVE_DIR / source], out, "-std=c99", "-O1", f"-I{include}", *flags)
+
+
 def _loop_script(plant_fmu, plant_dir, reg_fmu, reg_dir, steps: int, vx_des: float,
-                 windows: bool = False) -> tuple[str, list[str]]:
-    """The fmi2_loop_host script: the regulator (FMU 0) and the plant (FMU 1) in a loop; with
-    ``windows`` the win64 libraries, their paths as Wine sees them (drive Z: is /)."""
+                 windows: bool = False, fmi: int = 2) -> tuple[str, list[str]]:
+    """The fmi<fmi>_loop_host script: the regulator (FMU 0) and the plant (FMU 1) in a loop; with
+    ``windows`` the Windows libraries, their paths as Wine sees them (drive Z: is /)."""
     pmd, rmd = read_model_description(str(plant_fmu)), read_model_description(str(reg_fmu))
     pv = {v.name: v for v in pmd.modelVariables}
     rv = {v.name: v for v in rmd.modelVariables}
-    folder, suffix, drive = ("win64", ".dll", "Z:") if windows else ("linux64", ".so", "")
+    folder = LOOP_HOSTS[fmi][2][windows]
+    suffix, drive = (".dll", "Z:") if windows else (".so", "")
     reg_lib = reg_dir / "binaries" / folder / (rmd.coSimulation.modelIdentifier + suffix)
     plant_lib = plant_dir / "binaries" / folder / ("CassiePlantNative" + suffix)
-    lines = [f"F {drive}{reg_lib} {rmd.guid} file:///",
-             f"F {drive}{plant_lib} {pmd.guid} file://{'/' + drive if drive else ''}{(plant_dir / 'resources').as_posix()}",
+    resources = (plant_dir / "resources").as_posix()
+    if fmi == 2:  # a file URI
+        plant_res, reg_res = f"file://{'/' + drive if drive else ''}{resources}", "file:///"
+    else:  # a path ending in a separator
+        plant_res, reg_res = f"{drive}{resources}/", "-"
+    lines = [f"F {drive}{reg_lib} {rmd.guid} {reg_res}", f"F {drive}{plant_lib} {pmd.guid} {plant_res}",
              f"P 0 R {rv['vx_des'].valueReference} {vx_des!r}", f"P 1 R {pv['vx_des'].valueReference} {vx_des!r}"]
     lines += [f"L 1 R {pv[n].valueReference} 0 {rv[n].valueReference}" for n in LOOP_SIGNALS]
     lines.append(f"L 1 I {pv['step_index'].valueReference} 0 {rv['step_index'].valueReference}")
     lines += [f"L 0 R {rv[n].valueReference} 1 {pv[n].valueReference}" for n in OFFSET_NAMES]
     printed = [s.name for s in fmu_core.OUTPUT_SPECS]
-    lines += [f"O 1 {pv[n].type[0]} {pv[n].valueReference}" for n in printed]
+    type_letter = {"Real": "R", "Float64": "R", "Integer": "I", "Int32": "I", "Boolean": "B"}
+    lines += [f"O 1 {type_letter[pv[n].type]} {pv[n].valueReference}" for n in printed]
     lines.append(f"T {H!r} {steps}")
     return "\n".join(lines) + "\n", printed
 
 
-def test_loop_walks_in_a_c_host_with_an_empty_environment(plant_fmu, plant_dir, regulator_fmu, tmp_path):
-    """10 s at 0.5 m/s, native regulator and native plant in a plain C host under ``env -i``;
-    on linux64 every plant output of every step equals the Python plant's in the same loop."""
-    host = compile_c(CC, [NATIVE_DIR / "fmi2_loop_host.c"], tmp_path / "fmi2_loop_host", "-std=c99", "-O1",
-                     f"-I{FMI2_INCLUDE}", "-ldl")
-    reg_dir = Path(extract(str(regulator_fmu), unzipdir=str(tmp_path / "regulator")))
-    steps, vx_des = 1000, 0.5
-    script, printed = _loop_script(plant_fmu, plant_dir, regulator_fmu, reg_dir, steps, vx_des)
-    (tmp_path / "loop.txt").write_text(script)
-    proc = subprocess.run(["env", "-i", str(host), str(tmp_path / "loop.txt")], capture_output=True, text=True,
-                          timeout=600)
+def _run_loop(host: Path, script: str, folder: Path, env_prefix=("env", "-i"), env=None) -> list[list[float]]:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "loop.txt").write_text(script)
+    proc = subprocess.run([*env_prefix, str(host), str(folder / "loop.txt")], capture_output=True, text=True,
+                          timeout=900, env=env)
     assert proc.returncode == 0, proc.stderr[-3000:]
-    rows = [[float(x) for x in line.split()] for line in proc.stdout.splitlines()]
+    return [[float(x) for x in line.split()] for line in proc.stdout.splitlines()]
+
+
+@pytest.fixture(scope="module")
+def regulator_fmus(tmp_path_factory, build_module):
+    out = tmp_path_factory.mktemp("native_regulators")
+    return {v: build_module.build_native_fmu(v, out) for v in (2, 3)}
+
+
+def test_loop_walks_in_a_c_host_with_an_empty_environment(plant_fmus, plant_dir, regulator_fmus, tmp_path):
+    """10 s at 0.5 m/s, native regulator and native plant in a plain C host under ``env -i``, FMI 2.0
+    and FMI 3.0; on linux64 every plant output of every step equals the Python plant's in the same
+    loop, in both versions."""
+    steps, vx_des = 1000, 0.5
+    loops = {}
+    for fmi in (2, 3):
+        host = _loop_host(CC, fmi, tmp_path / f"fmi{fmi}_loop_host")
+        reg_dir = Path(extract(str(regulator_fmus[fmi]), unzipdir=str(tmp_path / f"regulator{fmi}")))
+        unzipped = plant_dir if fmi == 2 else Path(extract(str(plant_fmus[3]), unzipdir=str(tmp_path / "plant3")))
+        script, printed = _loop_script(plant_fmus[fmi], unzipped, regulator_fmus[fmi], reg_dir, steps, vx_des, fmi=fmi)
+        loops[fmi] = _run_loop(host, script, tmp_path / f"run{fmi}")
+    rows = loops[2]
     assert len(rows) == steps
     last = dict(zip(printed, rows[-1]))
     assert last["fell"] == 0.0 and last["step_index"] >= 25 and last["pelvis_x"] > 3.5, last
+    assert loops[3] == rows  # %.17g round-trips: the same doubles
+    regulator_fmu = regulator_fmus[2]
+    reg_dir = tmp_path / "regulator2"
 
     # The same loop with the Python plant (fmu_core, in-process) and the same regulator FMU.
     rmd = read_model_description(str(regulator_fmu))
@@ -236,25 +266,24 @@ def test_loop_walks_in_a_c_host_with_an_empty_environment(plant_fmu, plant_dir, 
 
 
 @pytest.mark.wine
-def test_win64_loop_walks_under_wine(plant_fmu, plant_dir, regulator_fmu, tmp_path):
-    """The win64 pair (native regulator, native plant with its mujoco.dll) in the C host built with
-    MinGW-w64, under Wine with an empty environment besides Wine's own: 10 s at 0.5 m/s.  (Not the
-    Linux bits: Windows' libm and the MSVC-built mujoco.dll round differently in the last place.)"""
-    host = compile_c(require(MINGW_CC), [NATIVE_DIR / "fmi2_loop_host.c"], tmp_path / "fmi2_loop_host.exe",
-                     "-std=c99", "-O1", f"-I{FMI2_INCLUDE}", "-static")
-    reg_dir = Path(extract(str(regulator_fmu), unzipdir=str(tmp_path / "regulator")))
-    script, printed = _loop_script(plant_fmu, plant_dir, regulator_fmu, reg_dir, 1000, 0.5, windows=True)
-    (tmp_path / "loop.txt").write_text(script)
+def test_win64_loop_walks_under_wine(plant_fmus, regulator_fmus, tmp_path):
+    """The Windows pair (native regulator, native plant with its mujoco.dll), FMI 2.0 and 3.0, in the
+    C host built with MinGW-w64, under Wine with nothing in the environment but Wine's own: 10 s at
+    0.5 m/s.  (Not the Linux bits: Windows' libm and the MSVC-built mujoco.dll round differently
+    in the last place.)"""
     env = {"WINEPREFIX": str(tmp_path / "wineprefix"), "WINEDEBUG": "-all", "HOME": str(tmp_path),
            "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin"}
-    proc = subprocess.run([str(require(WINE)), str(host), str(tmp_path / "loop.txt")], env=env, capture_output=True,
-                          text=True, timeout=900)
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    rows = [[float(x) for x in line.split()] for line in proc.stdout.splitlines()]
-    assert len(rows) == 1000
-    last = dict(zip(printed, rows[-1]))
-    assert last["fell"] == 0.0 and last["step_index"] >= 25 and last["pelvis_x"] > 3.5, last
-    assert abs(last["plant_time"] - 10.0) < 1e-9
+    for fmi in (2, 3):
+        host = _loop_host(require(MINGW_CC), fmi, tmp_path / f"fmi{fmi}_loop_host.exe")
+        reg_dir = Path(extract(str(regulator_fmus[fmi]), unzipdir=str(tmp_path / f"regulator{fmi}")))
+        plant_dir = Path(extract(str(plant_fmus[fmi]), unzipdir=str(tmp_path / f"plant{fmi}")))
+        script, printed = _loop_script(plant_fmus[fmi], plant_dir, regulator_fmus[fmi], reg_dir, 1000, 0.5,
+                                       windows=True, fmi=fmi)
+        rows = _run_loop(host, script, tmp_path / f"run{fmi}", env_prefix=(str(require(WINE)),), env=env)
+        assert len(rows) == 1000
+        last = dict(zip(printed, rows[-1]))
+        assert last["fell"] == 0.0 and last["step_index"] >= 25 and last["pelvis_x"] > 3.5, (fmi, last)
+        assert abs(last["plant_time"] - 10.0) < 1e-9
 
 
 def test_fmi3_same_outputs_and_state(plant_fmus, tmp_path):
