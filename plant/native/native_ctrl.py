@@ -17,6 +17,7 @@ import ctypes
 import dataclasses
 import logging
 import math
+import os
 import shutil
 import subprocess
 from pathlib import Path
@@ -174,7 +175,10 @@ def build_library(out_dir: Path) -> Path:
     src = write_sources(Path(out_dir) / "src")
     out = Path(out_dir) / "libcassie_ctrl.so"
     lib = mujoco_library()
-    cmd = ["gcc", *CFLAGS, "-shared", "-fPIC", f"-I{mujoco_dir() / 'include'}", f"-I{src[0].parent}",
+    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    if cc is None:
+        raise RuntimeError("building the C controller needs a C compiler (cc or gcc; set CC)")
+    cmd = [cc, *CFLAGS, "-shared", "-fPIC", f"-I{mujoco_dir() / 'include'}", f"-I{src[0].parent}",
            *map(str, src), "-o", str(out), str(lib), f"-Wl,-rpath,{lib.parent}", "-lm"]
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode:
