@@ -4,8 +4,10 @@
 ``AdaptiveVelocityRegulatorNative_fmi2.fmu`` / ``_fmi3.fmu`` (the same regulator in C,
 FMI 2.0 and FMI 3.0 from one source, Linux and Windows x86-64 binaries, FMI 3.0 also Linux
 aarch64, plus sources), the ``CassiePlant.fmu``, the ``CommandSource_fmi2.fmu`` (native C:
-the command and pushes over time, from its ``resources/schedule.csv``) and the CassieAVR
-system wiring the three (SSP archive and OSP folder).  The native FMUs' Windows and aarch64
+the command and pushes over time, from its ``resources/schedule.csv``), the CassieAVR
+system wiring the three (SSP archive and OSP folder), the ``CassiePlantNative_fmi2.fmu`` /
+``_fmi3.fmu`` (the plant in C over MuJoCo's C API, no Python) and ``CassieAVRNative.ssp`` (the
+system of native FMUs only).  The native FMUs' Windows and aarch64
 binaries need cross compilers (Debian ``gcc-mingw-w64-x86-64``, ``gcc-aarch64-linux-gnu``);
 without one, its platform is skipped with a warning naming the package, and the build goes on.
 
@@ -160,6 +162,17 @@ def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
     return crosscheck.add_reference(fmu_path)
 
 
+def build_native_plant_fmu(fmi_version: int = 2, out_dir: Path = DEFAULT_OUT) -> Path:
+    """Build ``<out_dir>/CassiePlantNative_fmi<2|3>.fmu``: the CassiePlant FMU in C, no Python
+    (``fmu_src/plant_fmu/native/build_native_plant.py``), for Linux and Windows x86-64."""
+    from fmu_src.plant_fmu.native import build_native_plant
+
+    fmu_path = Path(out_dir) / build_native_plant.fmu_name(fmi_version)
+    write_zip(build_native_plant.fmu_entries(fmi_version, PLANT_UNITS), fmu_path)
+    log.info("built %s", fmu_path)
+    return crosscheck.add_reference(fmu_path)
+
+
 def _plant_entries(tmp: Path) -> tuple[pack.Packed, dict[str, bytes]]:
     """pythonfmu's CassiePlant FMU with the plant's package, data and models in resources/, linux64 only."""
     def data(lib: Path) -> None:
@@ -220,6 +233,20 @@ def build_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: 
     return path
 
 
+def build_native_ssp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: Path) -> Path:
+    """Write ``<out_dir>/CassieAVRNative.ssp``: the system of ``build_ssp`` made of native FMUs only
+    (the native plant, the native regulator, the command source: FMI 2.0, no Python anywhere)."""
+    from scenarios.ssp import system
+
+    path = Path(out_dir) / f"{system.SYSTEM_NAME}Native.ssp"
+    write_zip(system.ssp_entries(Path(plant_fmu), Path(regulator_fmu), Path(command_fmu),
+                                 system_name=f"{system.SYSTEM_NAME}Native",
+                                 description="MuJoCo Cassie closed around the adaptive velocity regulator, native "
+                                             "FMUs only (no Python), the command and pushes from the command source"),
+              path)
+    return path
+
+
 def build_osp(out_dir: Path, plant_fmu: Path, regulator_fmu: Path, command_fmu: Path | None = None) -> Path:
     """Write the folder ``<out_dir>/CassieAVR_osp/``: OspSystemStructure.xml beside copies of the three FMUs."""
     import shutil
@@ -249,22 +276,27 @@ def fmu_entry(path: Path, implementation: str) -> dict:
 
 def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Path]:
     """Build every FMU (the pythonfmu regulator, both native regulators, the CassiePlant
-    FMU, the CommandSource FMUs, FMI 2.0 and 3.0), each with its reference results inside, the FMI cross-check vendor tree
+    FMU, the CommandSource FMUs, FMI 2.0 and 3.0, the native CassiePlantNative FMUs, FMI 2.0 and 3.0),
+    each with its reference results inside, the FMI cross-check vendor tree
     ``<out_dir>/cross-check/`` (``fmu_src/packing/crosscheck.py``), ``<out_dir>/fmus.json``
-    listing the FMUs, and the CassieAVR system (SSP and OSP)."""
+    listing the FMUs, the CassieAVR system (SSP and OSP) and the Python-free CassieAVRNative SSP."""
     regulator = build_fmu(out_dir, sanitize=sanitize)
-    built = [(regulator, "python")] + [(build_native_fmu(v, out_dir), "native") for v in (2, 3)]
+    native_regulators = [build_native_fmu(v, out_dir) for v in (2, 3)]
+    built = [(regulator, "python")] + [(path, "native") for path in native_regulators]
     plant = build_plant_fmu(out_dir)
     built.append((plant, "python"))
     command, command3 = (build_command_source(v, out_dir) for v in (2, 3))
     built += [(command, "native"), (command3, "native")]
+    native_plants = [build_native_plant_fmu(v, out_dir) for v in (2, 3)]
+    built += [(path, "native") for path in native_plants]
     crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], build_native.describe.VERSION)
     listing = {"fmus": [fmu_entry(path, kind) for path, kind in built]}
     tmp = Path(out_dir) / (FMUS_JSON + ".tmp")
     tmp.write_text(json.dumps(listing, indent=2) + "\n")
     tmp.replace(Path(out_dir) / FMUS_JSON)
     return [path for path, _ in built] + [build_ssp(out_dir, plant, regulator, command),
-                                          build_osp(out_dir, plant, regulator, command)]
+                                          build_osp(out_dir, plant, regulator, command),
+                                          build_native_ssp(out_dir, native_plants[0], native_regulators[0], command)]
 
 
 def main(argv=None) -> int:

@@ -138,6 +138,8 @@ EXPERIMENTS = {
     "CassiePlant": Experiment("2 s from the home pose: stepping in place, then 0.3 m/s forward", 400, 0.005, 10,
                               _plant_inputs),
 }
+#: The native plant (C, no Python) has the pythonfmu plant's experiment: the same results, bit for bit.
+EXPERIMENTS["CassiePlantNative"] = EXPERIMENTS["CassiePlant"]
 
 
 def _number(value) -> str:

@@ -123,7 +123,9 @@ def test_an_fmu_built_alone_is_build_alls(dist, built_fmu, native_fmus, tmp_path
              "AdaptiveVelocityRegulatorNative_fmi3.fmu": native_fmus[3],
              "CassiePlant.fmu": built_plant_fmu(tmp_path_factory, build_module),
              **{f"CommandSource_fmi{v}.fmu": build_module.build_command_source(v, tmp_path_factory.mktemp("command"))
-                for v in (2, 3)}}
+                for v in (2, 3)},
+             **{f"CassiePlantNative_fmi{v}.fmu": build_module.build_native_plant_fmu(
+                 v, tmp_path_factory.mktemp("native_plant")) for v in (2, 3)}}
     assert sorted(alone) == sorted(fmu.name for fmu in fmus_of(dist))
     for name, fmu in alone.items():
         assert experiment_of(Path(fmu))[2] == experiment_of(dist / name)[2], name

@@ -31,6 +31,9 @@ EVERY_FMU = ("AdaptiveVelocityRegulator.fmu", "AdaptiveVelocityRegulatorNative_f
              "CommandSource_fmi3.fmu",
              *(f"{system}/{fmu}" for system in ("CassieAVR.ssp/resources", "CassieAVR_osp")
                for fmu in ("AdaptiveVelocityRegulator.fmu", "CassiePlant.fmu", "CommandSource_fmi2.fmu")),
+             "CassiePlantNative_fmi2.fmu", "CassiePlantNative_fmi3.fmu",
+             *(f"CassieAVRNative.ssp/resources/{fmu}" for fmu in (
+                 "AdaptiveVelocityRegulatorNative_fmi2.fmu", "CassiePlantNative_fmi2.fmu", "CommandSource_fmi2.fmu")),
              *CROSS_CHECK_FMUS)
 #: Every XML document build.py writes that an official schema describes, with its schema kind.
 DOCUMENTS = {
@@ -53,6 +56,13 @@ DOCUMENTS = {
     "CassieAVR.ssp/resources/CommandSource_fmi2.fmu/modelDescription.xml": "fmi2-model",
     "CassieAVR_osp/CommandSource_fmi2.fmu/modelDescription.xml": "fmi2-model",
     **{f"{fmu}/modelDescription.xml": "fmi2-model" for fmu in CROSS_CHECK_FMUS},
+    "CassiePlantNative_fmi2.fmu/modelDescription.xml": "fmi2-model",
+    "CassiePlantNative_fmi3.fmu/modelDescription.xml": "fmi3-model",
+    "CassieAVRNative.ssp/SystemStructure.ssd": "ssd",
+    "CassieAVRNative.ssp/resources/avr_nominal.ssv": "ssv",
+    "CassieAVRNative.ssp/resources/plant_nominal.ssv": "ssv",
+    **{f"CassieAVRNative.ssp/resources/{fmu}/modelDescription.xml": "fmi2-model" for fmu in (
+        "AdaptiveVelocityRegulatorNative_fmi2.fmu", "CassiePlantNative_fmi2.fmu", "CommandSource_fmi2.fmu")},
     **{f"{fmu}/{LS_REF_MANIFEST}": "fmi-ls-ref" for fmu in EVERY_FMU},
 }
 #: The plant FMU's MuJoCo model files (MJCF: MuJoCo defines no XML schema), wherever the plant FMU is.
@@ -60,6 +70,10 @@ MJCF_IN_PLANT = ("resources/cassie_plant_lib/models/menagerie/agility_cassie/cas
                  "resources/cassie_plant_lib/models/menagerie/agility_cassie/scene.xml",
                  "resources/cassie_plant_lib/models/osu/cassie.xml")
 PLANT_FMUS = ("CassiePlant.fmu", "CassieAVR.ssp/resources/CassiePlant.fmu", "CassieAVR_osp/CassiePlant.fmu")
+#: The same model files in the native plant FMUs (resources/models/, no package folder).
+MJCF_IN_NATIVE_PLANT = tuple(name.replace("cassie_plant_lib/", "") for name in MJCF_IN_PLANT)
+NATIVE_PLANT_FMUS = ("CassiePlantNative_fmi2.fmu", "CassiePlantNative_fmi3.fmu",
+                     "CassieAVRNative.ssp/resources/CassiePlantNative_fmi2.fmu")
 #: Per schema kind, a break its schema must reject: (attribute, bad value; None removes it) on the
 #: first element that has the attribute.
 BREAKS = {
@@ -85,7 +99,8 @@ def test_the_build_writes_exactly_these_xml_documents(documents):
     with_schema = {label: kind_of(data) for label, data in documents.items() if kind_of(data) is not None}
     assert with_schema == DOCUMENTS
     without = sorted(label for label in documents if label not in with_schema)
-    assert without == sorted(f"{fmu}/{name}" for fmu in PLANT_FMUS for name in MJCF_IN_PLANT)
+    assert without == sorted([f"{fmu}/{name}" for fmu in PLANT_FMUS for name in MJCF_IN_PLANT]
+                             + [f"{fmu}/{name}" for fmu in NATIVE_PLANT_FMUS for name in MJCF_IN_NATIVE_PLANT])
 
 
 def _test_id(label: str) -> str:

@@ -39,7 +39,7 @@ def test_build_all_writes_fmus_json_listing_every_fmu_built(build_module, tmp_pa
     require(MINGW_CC), require(AARCH64_CC)  # without them build.py skips their platforms (test_build_platforms.py)
     built = build_module.build_all(tmp_path)
     paths = [p for p in built if p.suffix == ".fmu"]
-    assert {p.name for p in built} - {p.name for p in paths} == {"CassieAVR.ssp", "CassieAVR_osp"}
+    assert {p.name for p in built} - {p.name for p in paths} == {"CassieAVR.ssp", "CassieAVR_osp", "CassieAVRNative.ssp"}
     listing = json.loads((tmp_path / "fmus.json").read_text())["fmus"]
     assert [e["file"] for e in listing] == [p.name for p in paths] and all(p.is_file() for p in paths)
     assert [(e["fmiVersion"], e["modelIdentifier"], e["implementation"], e["platforms"]) for e in listing] == [
@@ -48,5 +48,7 @@ def test_build_all_writes_fmus_json_listing_every_fmu_built(build_module, tmp_pa
         ("3.0", "AdaptiveVelocityRegulatorNative", "native", ["aarch64-linux", "x86_64-linux", "x86_64-windows"]),
         ("2.0", "CassiePlant", "python", ["linux64"]),
         ("2.0", "CommandSource", "native", ["linux64", "win64"]),
-        ("3.0", "CommandSource", "native", ["aarch64-linux", "x86_64-linux", "x86_64-windows"])]
+        ("3.0", "CommandSource", "native", ["aarch64-linux", "x86_64-linux", "x86_64-windows"]),
+        ("2.0", "CassiePlantNative", "native", ["linux64", "win64"]),
+        ("3.0", "CassiePlantNative", "native", ["x86_64-linux", "x86_64-windows"])]
     assert all(e["sha256"] == hashlib.sha256(p.read_bytes()).hexdigest() for e, p in zip(listing, paths))

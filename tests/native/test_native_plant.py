@@ -1,0 +1,451 @@
+"""The native CassiePlant FMU (C, no Python): what it links, the same outputs as the Python
+plant bit for bit, the closed loop in a plain C host with an empty environment, its refusals.
+
+The reference is the pythonfmu plant FMU's own core (``fmu_src/plant_fmu/fmu_core.py``: the
+walker with the Python controller) driven in-process with the same inputs; the native FMU
+runs the C controller (plant/native/) on the same MuJoCo library, so every output must carry
+the same bits (compared through their IEEE bytes, tolerance zero).
+"""
+from __future__ import annotations
+
+import ctypes
+import itertools
+import struct
+import subprocess
+import zipfile
+import zlib
+from pathlib import Path
+
+import pytest
+from fmpy import extract, read_model_description
+from fmpy.fmi3 import FMU3Slave
+from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+from fmpy.logging import addLoggerProxy
+
+from fmu_src.plant_fmu import fmu_core
+from plant.constants import OFFSET_NAMES
+from support.native_support import CC, FMI2_INCLUDE, MINGW_CC, NATIVE_DIR, WINE, compile_c, require
+
+#: Communication step of the loops (s): the suite's regulator period.
+H = 0.01
+#: The regulator's inputs the plant provides (the Integer step_index last).
+LOOP_SIGNALS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate")
+
+
+@pytest.fixture(scope="module")
+def plant_fmus(tmp_path_factory, build_module):
+    """{2: path, 3: path}: both native plant FMUs as build.py builds them."""
+    out = tmp_path_factory.mktemp("native_plant")
+    return {v: build_module.build_native_plant_fmu(v, out) for v in (2, 3)}
+
+
+@pytest.fixture(scope="module")
+def plant_fmu(plant_fmus):
+    return plant_fmus[2]
+
+
+@pytest.fixture(scope="module")
+def plant_dir(plant_fmu, tmp_path_factory):
+    return Path(extract(str(plant_fmu), unzipdir=str(tmp_path_factory.mktemp("native_plant_unzipped"))))
+
+
+def _bits(x) -> bytes:
+    return struct.pack("<d", float(x))
+
+
+_NAMES = itertools.count()
+#: Each instance's log messages by instance name: fmpy's logger proxy (which formats the "%s"
+#: varargs in C) keeps one Python logger for the process, so one logger routes by name.
+_MESSAGES: dict[str, list] = {}
+
+
+def _route(_env, name, status, _category, message):
+    _MESSAGES.setdefault(name.decode(), []).append((status, message.decode()))
+
+
+_LOGGER = fmi2CallbackLoggerTYPE(_route)
+
+
+class _Plant:
+    """The native plant through fmpy, with the refusals it logs."""
+
+    def __init__(self, fmu: Path, unzipped: Path, params: dict | None = None):
+        self.md = read_model_description(str(fmu))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.types = {v.name: v.type for v in self.md.modelVariables}
+        self.messages = []
+        name = f"plant-{next(_NAMES)}"
+        _MESSAGES[name] = self.messages
+
+        self.callbacks = fmi2CallbackFunctions()  # kept: the FMU holds its pointers
+        self.callbacks.logger = _LOGGER
+        self.callbacks.allocateMemory = defaultCallbacks.allocateMemory
+        self.callbacks.freeMemory = defaultCallbacks.freeMemory
+        addLoggerProxy(ctypes.byref(self.callbacks))  # formats the "%s" varargs in C
+        self.s = FMU2Slave(guid=self.md.guid, unzipDirectory=str(unzipped), modelIdentifier="CassiePlantNative",
+                           instanceName=name)
+        self.s.instantiate(loggingOn=False, callbacks=self.callbacks)
+        self.s.setupExperiment(startTime=0.0)
+        self.s.enterInitializationMode()
+        for name, value in (params or {}).items():
+            if self.types[name] == "String":
+                self.s.setString([self.vr[name]], [value])
+            elif self.types[name] == "Integer":
+                self.s.setInteger([self.vr[name]], [value])
+            else:
+                self.s.setReal([self.vr[name]], [value])
+
+    def outputs(self) -> dict:
+        out = {}
+        for spec in fmu_core.OUTPUT_SPECS:
+            vr = [self.vr[spec.name]]
+            out[spec.name] = {"Real": lambda: self.s.getReal(vr)[0], "Integer": lambda: self.s.getInteger(vr)[0],
+                              "Boolean": lambda: bool(self.s.getBoolean(vr)[0])}[spec.type]()
+        return out
+
+    def step(self, t: float, inputs: dict) -> dict:
+        names = list(inputs)
+        self.s.setReal([self.vr[n] for n in names], [inputs[n] for n in names])
+        self.s.doStep(t, H)
+        return self.outputs()
+
+
+def _compare(got: dict, want: dict, t: float) -> None:
+    bad = [n for n in want if _bits(got[n]) != _bits(want[n])]
+    assert not bad, f"t = {t:.3f} s: " + ", ".join(f"{n}: native {got[n]!r} python {want[n]!r}" for n in bad)
+
+
+#: Parameter sets: nominal, every perturbation the native plant takes, the OSU model.
+PARAMS = {
+    "nominal": {},
+    "perturbed": {"torso_mass_kg": 16.0, "torso_com_offset_x_m": 0.02, "torso_com_offset_z_m": 0.03,
+                  "joint_damping_scale": 1.5},
+    "osu": {"cassie_model": "osu"},
+}
+
+
+@pytest.mark.parametrize("name", PARAMS)
+def test_same_outputs_as_the_python_plant_bit_for_bit(plant_fmu, plant_dir, name):
+    """3 s with a command change and a push: every output equals the Python plant's, every step."""
+    params = PARAMS[name]
+    plant = _Plant(plant_fmu, plant_dir, params)
+    plant.s.exitInitializationMode()
+    walker = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS, **params))
+    _compare(plant.outputs(), fmu_core.outputs(walker), 0.0)
+    inputs = {n: 0.0 for n in fmu_core.INPUT_NAMES}
+    t = 0.0
+    for k in range(300):
+        inputs["vx_des"] = 0.5 if k < 150 else 0.8
+        inputs["yaw_rate_des"] = 0.0 if k < 200 else 0.2
+        inputs["push_fy"] = 40.0 if 220 <= k < 240 else 0.0
+        for i, n in enumerate(OFFSET_NAMES):  # small offsets, as a regulator sends
+            inputs[n] = 0.01 * ((k + i) % 5 - 2) if k > 100 else 0.0
+        got = plant.step(t, inputs)
+        want = fmu_core.advance(walker, inputs, 20)
+        t += H
+        _compare(got, want, t)
+    assert want["step_index"] >= 5 and not want["fell"]
+    plant.s.terminate()
+    plant.s.freeInstance()
+
+
+def test_links_no_python_and_carries_mujoco(plant_dir):
+    """The binary needs libmujoco (beside it, found through $ORIGIN), libm and libc only."""
+    lib = plant_dir / "binaries" / "linux64" / "CassiePlantNative.so"
+    dump = subprocess.run(["objdump", "-p", str(lib)], capture_output=True, text=True, check=True).stdout
+    needed = sorted(line.split()[1] for line in dump.splitlines() if line.strip().startswith("NEEDED"))
+    assert needed == ["libc.so.6", "libm.so.6", "libmujoco.so.4.0.0"] or all(
+        n.startswith(("libc.", "libm.", "libmujoco.")) for n in needed), needed
+    assert "RUNPATH              $ORIGIN" in dump or "RPATH                $ORIGIN" in dump
+    ldd = subprocess.run(["ldd", str(lib)], capture_output=True, text=True, env={}).stdout
+    assert "python" not in ldd and "numpy" not in ldd and "not found" not in ldd, ldd
+    assert f"{plant_dir / 'binaries' / 'linux64' / 'libmujoco.so.4.0.0'}" in ldd
+    assert (plant_dir / "binaries" / "linux64" / "MUJOCO_LICENSE").is_file()
+    for model in ("menagerie", "osu"):
+        assert (plant_dir / "resources" / "models" / model / "LICENSE").is_file()
+
+
+#: Per FMI version: the C loop host, its FMI headers, the binary folders (Linux, Windows).
+LOOP_HOSTS = {2: ("fmi2_loop_host.c", FMI2_INCLUDE, ("linux64", "win64")),
+              3: ("fmi3_loop_host.c", FMI2_INCLUDE.parent / "fmi3", ("x86_64-linux", "x86_64-windows"))}
+
+
+def _loop_host(compiler, fmi: int, out: Path) -> Path:
+    source, include, _ = LOOP_HOSTS[fmi]
+    flags = ("-static",) if compiler == MINGW_CC else ("-ldl",)
+    return compile_c(compiler, [NATIVE_DIR / source], out, "-std=c99", "-O1", f"-I{include}", *flags)
+
+
+def _loop_script(plant_fmu, plant_dir, reg_fmu, reg_dir, steps: int, vx_des: float,
+                 windows: bool = False, fmi: int = 2) -> tuple[str, list[str]]:
+    """The fmi<fmi>_loop_host script: the regulator (FMU 0) and the plant (FMU 1) in a loop; with
+    ``windows`` the Windows libraries, their paths as Wine sees them (drive Z: is /)."""
+    pmd, rmd = read_model_description(str(plant_fmu)), read_model_description(str(reg_fmu))
+    pv = {v.name: v for v in pmd.modelVariables}
+    rv = {v.name: v for v in rmd.modelVariables}
+    folder = LOOP_HOSTS[fmi][2][windows]
+    suffix, drive = (".dll", "Z:") if windows else (".so", "")
+    reg_lib = reg_dir / "binaries" / folder / (rmd.coSimulation.modelIdentifier + suffix)
+    plant_lib = plant_dir / "binaries" / folder / ("CassiePlantNative" + suffix)
+    resources = (plant_dir / "resources").as_posix()
+    if fmi == 2:  # a file URI
+        plant_res, reg_res = f"file://{'/' + drive if drive else ''}{resources}", "file:///"
+    else:  # a path ending in a separator
+        plant_res, reg_res = f"{drive}{resources}/", "-"
+    lines = [f"F {drive}{reg_lib} {rmd.guid} {reg_res}", f"F {drive}{plant_lib} {pmd.guid} {plant_res}",
+             f"P 0 R {rv['vx_des'].valueReference} {vx_des!r}", f"P 1 R {pv['vx_des'].valueReference} {vx_des!r}"]
+    lines += [f"L 1 R {pv[n].valueReference} 0 {rv[n].valueReference}" for n in LOOP_SIGNALS]
+    lines.append(f"L 1 I {pv['step_index'].valueReference} 0 {rv['step_index'].valueReference}")
+    lines += [f"L 0 R {rv[n].valueReference} 1 {pv[n].valueReference}" for n in OFFSET_NAMES]
+    printed = [s.name for s in fmu_core.OUTPUT_SPECS]
+    type_letter = {"Real": "R", "Float64": "R", "Integer": "I", "Int32": "I", "Boolean": "B"}
+    lines += [f"O 1 {type_letter[pv[n].type]} {pv[n].valueReference}" for n in printed]
+    lines.append(f"T {H!r} {steps}")
+    return "\n".join(lines) + "\n", printed
+
+
+def _run_loop(host: Path, script: str, folder: Path, env_prefix=("env", "-i"), env=None) -> list[list[float]]:
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / "loop.txt").write_text(script)
+    proc = subprocess.run([*env_prefix, str(host), str(folder / "loop.txt")], capture_output=True, text=True,
+                          timeout=900, env=env)
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return [[float(x) for x in line.split()] for line in proc.stdout.splitlines()]
+
+
+@pytest.fixture(scope="module")
+def regulator_fmus(tmp_path_factory, build_module):
+    out = tmp_path_factory.mktemp("native_regulators")
+    return {v: build_module.build_native_fmu(v, out) for v in (2, 3)}
+
+
+def test_loop_walks_in_a_c_host_with_an_empty_environment(plant_fmus, plant_dir, regulator_fmus, tmp_path):
+    """10 s at 0.5 m/s, native regulator and native plant in a plain C host under ``env -i``, FMI 2.0
+    and FMI 3.0; on linux64 every plant output of every step equals the Python plant's in the same
+    loop, in both versions."""
+    steps, vx_des = 1000, 0.5
+    loops = {}
+    for fmi in (2, 3):
+        host = _loop_host(CC, fmi, tmp_path / f"fmi{fmi}_loop_host")
+        reg_dir = Path(extract(str(regulator_fmus[fmi]), unzipdir=str(tmp_path / f"regulator{fmi}")))
+        unzipped = plant_dir if fmi == 2 else Path(extract(str(plant_fmus[3]), unzipdir=str(tmp_path / "plant3")))
+        script, printed = _loop_script(plant_fmus[fmi], unzipped, regulator_fmus[fmi], reg_dir, steps, vx_des, fmi=fmi)
+        loops[fmi] = _run_loop(host, script, tmp_path / f"run{fmi}")
+    rows = loops[2]
+    assert len(rows) == steps
+    last = dict(zip(printed, rows[-1]))
+    assert last["fell"] == 0.0 and last["step_index"] >= 25 and last["pelvis_x"] > 3.5, last
+    assert loops[3] == rows  # %.17g round-trips: the same doubles
+    regulator_fmu = regulator_fmus[2]
+    reg_dir = tmp_path / "regulator2"
+
+    # The same loop with the Python plant (fmu_core, in-process) and the same regulator FMU.
+    rmd = read_model_description(str(regulator_fmu))
+    rv = {v.name: v.valueReference for v in rmd.modelVariables}
+    reg = FMU2Slave(guid=rmd.guid, unzipDirectory=str(reg_dir), modelIdentifier=rmd.coSimulation.modelIdentifier,
+                    instanceName="regulator")
+    reg.instantiate()
+    reg.setupExperiment(startTime=0.0)
+    reg.enterInitializationMode()
+    reg.setReal([rv["vx_des"]], [vx_des])
+    reg.exitInitializationMode()
+    walker = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS))
+    out = fmu_core.outputs(walker)
+    inputs = dict({n: 0.0 for n in fmu_core.INPUT_NAMES}, vx_des=vx_des)
+    for k in range(steps):
+        reg.setReal([rv[n] for n in LOOP_SIGNALS], [out[n] for n in LOOP_SIGNALS])
+        reg.setInteger([rv["step_index"]], [out["step_index"]])
+        reg.doStep(k * H, H)
+        inputs.update(zip(OFFSET_NAMES, reg.getReal([rv[n] for n in OFFSET_NAMES])))
+        out = fmu_core.advance(walker, inputs, 20)
+        got = dict(zip(printed, rows[k]))
+        bad = [n for n in printed if _bits(got[n]) != _bits(out[n])]
+        assert not bad, f"step {k}: " + ", ".join(f"{n}: C host {got[n]!r} python {out[n]!r}" for n in bad)
+    reg.terminate()
+    reg.freeInstance()
+
+
+@pytest.mark.wine
+def test_win64_loop_walks_under_wine(plant_fmus, regulator_fmus, tmp_path):
+    """The Windows pair (native regulator, native plant with its mujoco.dll), FMI 2.0 and 3.0, in the
+    C host built with MinGW-w64, under Wine with nothing in the environment but Wine's own: 10 s at
+    0.5 m/s.  (Not the Linux bits: Windows' libm and the MSVC-built mujoco.dll round differently
+    in the last place.)"""
+    env = {"WINEPREFIX": str(tmp_path / "wineprefix"), "WINEDEBUG": "-all", "HOME": str(tmp_path),
+           "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin"}
+    for fmi in (2, 3):
+        host = _loop_host(require(MINGW_CC), fmi, tmp_path / f"fmi{fmi}_loop_host.exe")
+        reg_dir = Path(extract(str(regulator_fmus[fmi]), unzipdir=str(tmp_path / f"regulator{fmi}")))
+        plant_dir = Path(extract(str(plant_fmus[fmi]), unzipdir=str(tmp_path / f"plant{fmi}")))
+        script, printed = _loop_script(plant_fmus[fmi], plant_dir, regulator_fmus[fmi], reg_dir, 1000, 0.5,
+                                       windows=True, fmi=fmi)
+        rows = _run_loop(host, script, tmp_path / f"run{fmi}", env_prefix=(str(require(WINE)),), env=env)
+        assert len(rows) == 1000
+        last = dict(zip(printed, rows[-1]))
+        assert last["fell"] == 0.0 and last["step_index"] >= 25 and last["pelvis_x"] > 3.5, (fmi, last)
+        assert abs(last["plant_time"] - 10.0) < 1e-9
+
+
+def test_fmi3_same_outputs_and_state(plant_fmus, tmp_path):
+    """The FMI 3.0 FMU (the same C source): the Python plant's outputs bit for bit for 2 s of
+    walking on the OSU model, and a state that restores the exact continuation."""
+    fmu = plant_fmus[3]
+    md = read_model_description(str(fmu), validate=True)
+    vr = {v.name: v.valueReference for v in md.modelVariables}
+    assert [v.name for v in md.modelVariables] == [s.name for s in fmu_core.SPECS] + ["time"]
+    s = FMU3Slave(guid=md.guid, unzipDirectory=str(extract(str(fmu), unzipdir=str(tmp_path / "fmu"))),
+                  modelIdentifier="CassiePlantNative", instanceName="plant3")
+    s.instantiate()
+    s.enterInitializationMode(startTime=0.0)
+    s.setString([vr["cassie_model"]], ["osu"])
+    s.exitInitializationMode()
+    walker = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS, cassie_model="osu"))
+    inputs = dict({n: 0.0 for n in fmu_core.INPUT_NAMES}, vx_des=0.5)
+    real = [o.name for o in fmu_core.OUTPUT_SPECS if o.type == "Real"]
+    t, state, saved = 0.0, None, []
+    for k in range(200):
+        names = list(inputs)
+        s.setFloat64([vr[n] for n in names], [inputs[n] for n in names])
+        s.doStep(t, H)
+        t += H
+        want = fmu_core.advance(walker, inputs, 20)
+        got = dict(zip(real, s.getFloat64([vr[n] for n in real])))
+        got["step_index"] = s.getInt32([vr["step_index"]])[0]
+        got["fell"] = bool(s.getBoolean([vr["fell"]])[0])
+        _compare(got, {n: want[n] for n in got}, t)
+        if k == 150:
+            state, t_saved = s.getFMUState(), t
+        elif k > 150:
+            saved.append(got)
+    assert s.getFloat64([len(fmu_core.SPECS)])[0] == t  # the independent variable time
+    s.setFMUState(state)
+    t = t_saved
+    for k, want in enumerate(saved):
+        s.doStep(t, H)
+        t += H
+        got = dict(zip(real, s.getFloat64([vr[n] for n in real])))
+        assert all(_bits(got[n]) == _bits(want[n]) for n in real), k
+    s.terminate()
+    s.freeInstance()
+
+
+def _refused(plant, call, *args) -> str:
+    plant.messages.clear()
+    with pytest.raises(Exception, match=r"status 3 \(error\)"):
+        call(*args)
+    assert plant.messages, "a refusal must log why"
+    return plant.messages[-1][1]
+
+
+def test_refusals_name_the_field_and_change_nothing(plant_fmu, plant_dir):
+    plant = _Plant(plant_fmu, plant_dir)
+    vr = plant.vr
+    assert "cassie_model = 'atlas'" in _refused(plant, plant.s.setString, [vr["cassie_model"]], ["atlas"])
+    assert "vx_des = 3.5" in _refused(plant, plant.s.setReal, [vr["vx_des"]], [3.5])
+    assert "torso_mass_kg = nan" in _refused(plant, plant.s.setReal, [vr["torso_mass_kg"]], [float("nan")])
+    assert "is an output" in _refused(plant, plant.s.setReal, [vr["pitch"]], [0.1])
+    plant.s.setReal([vr["terrain_max_height_m"]], [0.05])
+    assert "terrain_max_height_m" in _refused(plant, plant.s.exitInitializationMode)
+    plant.s.setReal([vr["terrain_max_height_m"]], [0.0])
+    plant.s.exitInitializationMode()  # still in initialization mode after the refusal: now it starts
+    assert "fixed parameter" in _refused(plant, plant.s.setReal, [vr["torso_mass_kg"]], [12.0])
+    assert "whole multiple of the plant step" in _refused(plant, plant.s.doStep, 0.0, 0.0007)
+    assert "exceeds the maximum communication step" in _refused(plant, plant.s.doStep, 0.0, 10.5)
+    assert "must equal the end of the last step" in _refused(plant, plant.s.doStep, 1.0, 0.01)
+    assert "not provided" in _refused(plant, plant.s.getDirectionalDerivative, [vr["vx"]], [vr["vx_des"]], [1.0])
+    assert plant.s.getReal([vr["plant_time"]])[0] == 0.0  # nothing stepped
+    plant.s.doStep(0.0, 0.01)
+    assert plant.s.getReal([vr["plant_time"]])[0] == pytest.approx(0.01, abs=1e-12)  # sum of 20 x 0.5 ms
+    plant.s.terminate()
+    plant.s.freeInstance()
+
+
+def _walk(plant, t: float, steps: int) -> tuple[float, list[dict]]:
+    inputs = dict({n: 0.0 for n in fmu_core.INPUT_NAMES}, vx_des=0.5)
+    rows = []
+    for k in range(steps):
+        inputs["delta_swing_hip_pitch"] = 0.02 * ((k % 7) - 3) / 3
+        rows.append(plant.step(t, inputs))
+        t += H
+    return t, rows
+
+
+#: The blob layout (cp_instance.c): header, phase, has-walker flag, time, the values, then the walker.
+HEADER = 4 + 4 + 4 + 40
+VALUES_AT = HEADER + 4 + 4 + 8
+WALKER_AT = VALUES_AT + 8 * len(fmu_core.SPECS)
+#: Within the walker: substep, fell, fall reason, three commands, then the controller memory.
+MEMORY_AT = WALKER_AT + 4 + 4 + 160 + 3 * 8
+#: tau: after the six offsets, six speeds/rates, mode, stance, step_index, t_step_start.
+TAU_AT = MEMORY_AT + 12 * 8 + 4 + 4 + 8 + 8
+#: The MuJoCo state: its length, then time, then qpos (the pelvis quaternion at qpos[3:7]).
+MJSTATE_AT = TAU_AT + 8 * 10
+QUAT_AT = MJSTATE_AT + 4 + 8 + 3 * 8
+
+
+def _forge(blob: bytes, at: int, fmt: str, value) -> bytes:
+    """``blob`` with one field replaced and its CRC-32 made valid again."""
+    body = bytearray(blob[:-4])
+    struct.pack_into(fmt, body, at, value)
+    return bytes(body) + struct.pack("<I", zlib.crc32(bytes(body)))
+
+
+def test_fmu_state_restores_the_run_exactly(plant_fmu, plant_dir):
+    """A state taken while walking restores (in the same instance, and serialized into a fresh
+    one) the exact continuation: every output of the next 100 steps carries the same bits."""
+    plant = _Plant(plant_fmu, plant_dir, PARAMS["perturbed"])
+    plant.s.exitInitializationMode()
+    t, _ = _walk(plant, 0.0, 150)
+    state = plant.s.getFMUState()
+    blob = plant.s.serializeFMUState(state)
+    _, first = _walk(plant, t, 100)
+    plant.s.setFMUState(state)
+    _, again = _walk(plant, t, 100)
+    assert [{n: _bits(v) for n, v in r.items()} for r in again] == [{n: _bits(v) for n, v in r.items()} for r in first]
+    other = _Plant(plant_fmu, plant_dir, PARAMS["perturbed"])  # never initialized: the state builds its walker
+    restored = other.s.deserializeFMUState(blob)
+    other.s.setFMUState(restored)
+    _, fresh = _walk(other, t, 100)
+    assert [{n: _bits(v) for n, v in r.items()} for r in fresh] == [{n: _bits(v) for n, v in r.items()} for r in first]
+    assert first[-1]["step_index"] > 5
+
+    # Corrupt or unreachable states are refused; the instance keeps walking as before.
+    nominal = _Plant(plant_fmu, plant_dir)
+    forged = {
+        "CRC-32": blob[:100] + bytes([blob[100] ^ 1]) + blob[101:],
+        "fixed parameter torso_mass_kg": _forge(blob, VALUES_AT + 8 * plant.vr["torso_mass_kg"], "<d", 17.0),
+        "vx_des = 7": _forge(blob, VALUES_AT + 8 * plant.vr["vx_des"], "<d", 7.0),
+        "tau": _forge(blob, TAU_AT, "<d", 5.0),
+        "norm": _forge(blob, QUAT_AT, "<d", 2.0),
+        "substep": _forge(blob, WALKER_AT, "<I", 4),
+        "is from another FMU": blob[:12] + b"{x" + blob[14:-4] + struct.pack("<I", zlib.crc32(blob[:12] + b"{x" + blob[14:-4])),
+    }
+    for why, bad in forged.items():
+        plant.messages.clear()
+        try:
+            bad_state = plant.s.deserializeFMUState(bad)
+        except Exception:  # noqa: BLE001 - refused already at deserialization
+            assert why in plant.messages[-1][1], (why, plant.messages)
+            continue
+        message = _refused(plant, plant.s.setFMUState, bad_state)
+        assert why in message, (why, message)
+    assert "differs from this instance" in _refused(nominal, nominal.s.setFMUState, nominal.s.deserializeFMUState(blob))
+    plant.s.setFMUState(state)
+    _, after = _walk(plant, t, 100)
+    assert [{n: _bits(v) for n, v in r.items()} for r in after] == [{n: _bits(v) for n, v in r.items()} for r in first]
+    for p in (plant, other, nominal):
+        p.s.freeInstance()
+
+
+def test_model_description_matches_the_pythonfmu_plant(plant_fmu):
+    """Same variables, value references, types, causalities, variabilities, starts and ranges as
+    fmu_core.SPECS (the pythonfmu plant's table)."""
+    md = read_model_description(str(plant_fmu), validate=True)
+    assert [v.name for v in md.modelVariables] == [s.name for s in fmu_core.SPECS]
+    for v, s in zip(md.modelVariables, fmu_core.SPECS):
+        assert (v.type, v.causality, v.variability) == (s.type, s.causality, s.variability), s.name
+        if s.type in ("Real", "Integer") and s.min is not None:
+            assert float(v.min) == s.min and float(v.max) == s.max, s.name
+    with zipfile.ZipFile(plant_fmu) as z:
+        names = z.namelist()
+    assert "binaries/linux64/CassiePlantNative.so" in names and "sources/cassie_ctrl.c" in names

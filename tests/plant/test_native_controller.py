@@ -1,0 +1,148 @@
+"""The C controller (plant/native/) gives the Python controller's servo commands bit for bit.
+
+Both controllers run on one MuJoCo simulation: at every control step (every 4 plant steps)
+the Python controller updates and its commands (ctrl and the servo gains in biasprm) are
+kept, then the C controller updates from the same state and must write the same bytes; its
+memory (step-averaged speed, filtered speeds, phase, stance, step count, heading) must equal
+the Python controller's too.  The regulator core (PD only) closes the loop every 10 ms.
+Scenarios: nominal walking, a heavy torso, uneven terrain, command changes (speed, lateral
+speed, turning), a push, and the OSU model.
+"""
+from __future__ import annotations
+
+import math
+import struct
+
+import numpy as np
+import pytest
+
+from fmu_src.core.avr_core import Regulator
+from fmu_src.core.avr_params import RegulatorParams
+from plant.constants import OFFSET_NAMES, SIDES
+from plant.model import load_model
+from plant.native.native_ctrl import MODES, NativeController, NativeLibrary, build_library
+from plant.perturbation import Perturbation
+from plant.sim import CassieWalker
+from plant.terrain import TerrainSpec
+from scenarios.cosim.inprocess import apply_regulator
+
+#: Simulated seconds per scenario: standing (0.3 s), the weight shift (0.5 s), then at
+#: least 8 walking steps.
+WALK_S = 4.0
+#: Plant steps per regulator call (10 ms).
+REGULATOR_STEPS = 20
+
+
+@pytest.fixture(scope="module")
+def native(tmp_path_factory):
+    return NativeLibrary(build_library(tmp_path_factory.mktemp("cassie_ctrl")))
+
+
+def _commands(walker):
+    ids = walker.controller._act_ids
+    return (walker.data.ctrl[ids].tobytes() + walker.model.actuator_biasprm[ids, 1:3].tobytes())
+
+
+def _memory_pairs(py, c):
+    m = c.memory
+    pairs = [("vx_step_avg", py.vx_step_avg, m.vx_step_avg), ("vy_filt", py.vy_filt, m.vy_filt),
+             ("vx_filt", py.vx_filt, m.vx_filt), ("tau", py.tau, m.tau), ("yaw_ref", py.yaw_ref, m.yaw_ref),
+             ("vx_des", py.vx_des, m.vx_des), ("vy_des", py.vy_des, m.vy_des),
+             ("yaw_rate_des", py.yaw_rate_des, m.yaw_rate_des), ("t_step_start", py.t_step_start, m.t_step_start),
+             ("swing_start0", py._swing_start[0], m.swing_start[0]),
+             ("swing_start1", py._swing_start[1], m.swing_start[1])]
+    return [(n, struct.pack("<d", a), struct.pack("<d", b)) for n, a, b in pairs] + [
+        ("step_index", py.step_index, m.step_index), ("stance", py.stance, SIDES[m.stance]),
+        ("mode", py.mode, MODES[m.mode])]
+
+
+def _run(native, model, events, seconds=WALK_S):
+    """Walk ``seconds`` with both controllers on one simulation; ``events`` maps a time (s)
+    to a function of the walker and the C controller.  Returns (control steps, steps walked)."""
+    walker = CassieWalker(model)
+    py = walker.controller
+    init_commands = _commands(walker)
+    c = NativeController(native, walker.physics, walker.params)
+    assert _commands(walker) == init_commands, "the first update (at construction) differs"
+    walker.set_command(0.5, 0.0)
+    c.set_command(0.5, 0.0, walker.gaits)
+    regulator = Regulator(RegulatorParams(adaptation_enabled=False))
+    sub, phys = walker.params.control_substeps, walker.physics
+    n_steps, checked = int(round(seconds / walker.SIM_DT_S)), 0
+    pending = sorted(events.items())
+    for k in range(n_steps):
+        if k % REGULATOR_STEPS == 0:
+            while pending and pending[0][0] <= walker.time_s + 1e-9:
+                pending.pop(0)[1](walker, c)
+            offsets = apply_regulator(walker, regulator, REGULATOR_STEPS * walker.SIM_DT_S)
+            c.set_offsets(offsets)
+        phys.step(1)
+        if (k + 1) % sub == 0:
+            py.update()
+            expected = _commands(walker)
+            c.update()
+            got = _commands(walker)
+            if got != expected:
+                e = np.frombuffer(expected, float)
+                g = np.frombuffer(got, float)
+                bad = np.flatnonzero(e != g)
+                pytest.fail(f"t={walker.time_s:.4f} s: C commands differ at {bad.tolist()}: "
+                            f"python {e[bad].tolist()} C {g[bad].tolist()}")
+            for name, a, b in _memory_pairs(py, c):
+                assert a == b, f"t={walker.time_s:.4f} s: controller {name} differs: python {a!r} C {b!r}"
+            checked += 1
+    assert not walker.fell(), walker.fall_reason
+    return checked, py.step_index
+
+
+def _set_command(vx, vy, yaw_rate=0.0):
+    def event(walker, c):
+        walker.set_command(vx, vy, yaw_rate)
+        c.set_command(vx, vy, walker.gaits, yaw_rate)
+    return event
+
+
+def _push(force):
+    return lambda walker, c: walker.set_pelvis_force(force)
+
+
+SCENARIOS = {
+    "nominal": ("menagerie", None, {}),
+    "heavy_torso": ("menagerie", Perturbation(torso_mass_kg=18.0, torso_com_offset_m=(0.02, 0.0, 0.03)), {}),
+    "terrain": ("menagerie", Perturbation(terrain=TerrainSpec(max_height_m=0.06, max_slope_deg=8.0, seed=3)), {}),
+    "command_change": ("menagerie", None, {2.0: _set_command(0.8, 0.1, 0.3), 3.0: _set_command(0.3, -0.1, -0.2)}),
+    "push": ("menagerie", Perturbation(joint_damping_scale=1.5),
+             {2.0: _push([60.0, 30.0, 0.0]), 2.2: _push([0.0, 0.0, 0.0])}),
+    "osu": ("osu", None, {}),
+}
+
+
+@pytest.mark.parametrize("name", SCENARIOS)
+def test_c_controller_matches_python_bit_for_bit(native, name):
+    source, perturbation, events = SCENARIOS[name]
+    checked, steps = _run(native, load_model(source, perturbation), events)
+    assert checked == int(WALK_S / 0.002)
+    assert steps >= 8, f"only {steps} walking steps: the comparison must cover walking"
+
+
+def test_ground_height_is_the_plant_s(native):
+    """The C terrain lookup returns the plant's GroundHeight bits, inside, at and beyond the edge."""
+    model = load_model("menagerie", Perturbation(terrain=TerrainSpec(max_height_m=0.2, max_slope_deg=12.0,
+                                                                     seed=11, size_m=4.0)))
+    walker = CassieWalker(model)
+    c = NativeController(native, walker.physics, walker.params)
+    rng = np.random.default_rng(0)
+    points = [*rng.uniform(-5.0, 5.0, (2000, 2)).tolist(), (4.0, 4.0), (-4.0, -4.0), (0.0, 0.0)]
+    for x, y in points:
+        assert struct.pack("<d", c.ground_height_m(x, y)) == struct.pack("<d", walker.physics.ground_height_m(x, y))
+    assert math.isnan(c.ground_height_m(math.nan, 0.0))
+
+
+def test_offsets_must_be_finite(native):
+    walker = CassieWalker(load_model("menagerie"))
+    c = NativeController(native, walker.physics, walker.params)
+    with pytest.raises(ValueError, match="delta_swing_knee must be finite"):
+        c.set_offsets({"delta_swing_knee": math.inf})
+    with pytest.raises(KeyError, match="allowed: " + ", ".join(OFFSET_NAMES)):
+        c.set_offsets({"delta_knee": 0.0})
+    assert list(c.memory.offsets) == [0.0] * 6
