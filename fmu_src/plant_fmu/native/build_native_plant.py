@@ -24,7 +24,7 @@ import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
-from fmu_src.native.header import c_double, c_string
+from fmu_src.regulator_fmu.native.header import c_double, c_string
 from fmu_src.packing import compiler
 from fmu_src.packing.archive import PLACEHOLDER_GUID, content_guid
 from fmu_src.packing.describe import PLANT_INITIAL_UNKNOWNS, model_description
@@ -37,7 +37,7 @@ log = logging.getLogger("avr_build")
 
 HERE = Path(__file__).resolve().parent
 MODEL_IDENTIFIER = "CassiePlantNative"
-THIRD_PARTY = HERE.parents[1] / "native" / "third_party"
+THIRD_PARTY = HERE.parents[1] / "fmi" / "third_party"
 #: The FMI standard headers (third_party/fmi<version>/, with their license) each FMU ships.
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}

@@ -2,7 +2,7 @@
  * One CassiePlantNative instance, independent of the FMI version: the variable values, the
  * FMI phase, the walker, and every check both FMI layers share (phases, variables and their
  * ranges, step arguments, FMU states).  fmi2_plant.c and fmi3_plant.c are thin layers over it
- * (the pattern of fmu_src/native/avr_instance.c and the Reference-FMUs): each converts its
+ * (the pattern of fmu_src/regulator_fmu/native/avr_instance.c and the Reference-FMUs): each converts its
  * types to and from the doubles kept here.
  *
  * Every refused call logs a message naming the call, the variable and its allowed range,

@@ -2,7 +2,7 @@
  * FMI 2.0 co-simulation API of the native CassiePlant FMU: a thin layer over the
  * version-independent instance (cp_instance.c).  Every function starts with the one prologue
  * BEGIN, which refuses a call outside the phases of its mask (FMI 2.0.4 section 4.2.4), as
- * fmu_src/native/fmi2_api.c does for the regulator.
+ * fmu_src/regulator_fmu/native/fmi2_api.c does for the regulator.
  */
 #include "cp_instance.h" /* first: the floating-point contract */
 
