@@ -37,7 +37,7 @@ from plant.constants import (
 )
 from plant.errors import ModelError, PerturbationError
 from plant.mjcf import spec_from_file
-from plant.perturbation import Perturbation, apply_to_compiled
+from plant.perturbation import Perturbation, apply_environment, apply_to_compiled
 from plant.terrain import (
     add_terrain, terrain_summary,
 )
@@ -181,6 +181,7 @@ def load_model(source: str | os.PathLike = "menagerie",
 
     if perturbation is not None:
         apply_to_compiled(model, perturbation)
+        apply_environment(model, perturbation)
     if log.isEnabledFor(logging.INFO):
         log.info("loaded Cassie model %r: %s", src, model_summary(model))
     return model

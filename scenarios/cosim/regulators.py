@@ -60,11 +60,13 @@ class InProcessRegulator(RegulatorPath):
     kind = "inprocess"
 
     def __init__(self) -> None:
-        from fmu_src.core import avr_core
+        from fmu_src.core import avr_core, avr_params, avr_specs
 
         self._core = avr_core
-        self._input_types = [(s.name, FMI_CASTS[s.type]) for s in self._core.INPUT_SPECS]
-        self._outputs = tuple(s.name for s in self._core.OUTPUT_SPECS)
+        self._params = avr_params
+        self._specs = avr_specs
+        self._input_types = [(s.name, FMI_CASTS[s.type]) for s in avr_specs.INPUT_SPECS]
+        self._outputs = tuple(s.name for s in avr_specs.OUTPUT_SPECS)
         self._step_fn: Callable[[Any, float], dict] | None = None
 
     def output_names(self) -> tuple[str, ...]:
@@ -72,16 +74,16 @@ class InProcessRegulator(RegulatorPath):
 
     def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
         core = self._core
-        types = {s.name: FMI_CASTS[s.type] for s in core.PARAM_SPECS}
+        types = {s.name: FMI_CASTS[s.type] for s in self._specs.PARAM_SPECS}
         unknown = sorted(set(parameters) - set(types))
         if unknown:
             raise CosimError(f"unknown regulator parameter(s): {', '.join(unknown)}")
         # cast as the FMU's setters do, then the core's own defaults and checks
-        params = core.params_from_overrides({n: types[n](v) for n, v in parameters.items()})
+        params = self._params.params_from_overrides({n: types[n](v) for n, v in parameters.items()})
         self._step_fn = core.Regulator(params).step
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
-        reg_in = self._core.RegulatorInputs(**{n: cast(inputs[n]) for n, cast in self._input_types})
+        reg_in = self._params.RegulatorInputs(**{n: cast(inputs[n]) for n, cast in self._input_types})
         out = self._step_fn(reg_in, float(h))
         return {n: float(out[n]) for n in self._outputs}
 
