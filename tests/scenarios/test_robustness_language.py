@@ -15,7 +15,6 @@ from scenarios.cosim.master import run_arm
 from scenarios.cosim.regulators import make_regulator
 from scenarios.errors import ScenarioError
 from scenarios.lang import plantio, spec
-from scenarios.lang.scenario import PELVIS
 
 HEAD = '''name = "x"
 duration_s = 4.0
@@ -168,7 +167,7 @@ floor_friction = 0.7
     cap = Capture()
     run_arm(s, "adaptive", make_regulator("inprocess"), plant=cap)
     m = cap.walker.model
-    pelvis = m.body(PELVIS).id
+    pelvis = m.body("cassie-pelvis").id
     assert m.body_mass[pelvis] == 15.0
     np.testing.assert_allclose(m.body_ipos[pelvis] - start.body_ipos[pelvis], [0.02, -0.02, 0.0], atol=1e-15)
     np.testing.assert_allclose(m.dof_damping, start.dof_damping * 1.5, rtol=1e-12)
