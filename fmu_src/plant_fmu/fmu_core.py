@@ -158,7 +158,12 @@ INPUT_NAMES = tuple(s.name for s in INPUT_SPECS)
 
 # ------------------------------------------------------------------------------ parameters
 def perturbation_from_values(values: Mapping) -> Perturbation:
-    """The plant Perturbation the parameter values describe (not validated here)."""
+    """The plant Perturbation the parameter values describe (not validated here); the
+    floor and link parameters may be left out (their defaults change nothing)."""
+    def get(name):
+        return values.get(name, PARAM_DEFAULTS[name])
+
+    friction = get("floor_friction")
     mass = values["torso_mass_kg"]
     terrain = None
     if values["terrain_max_height_m"] != 0.0:
@@ -170,10 +175,10 @@ def perturbation_from_values(values: Mapping) -> Perturbation:
         torso_com_offset_m=(values["torso_com_offset_x_m"], values["torso_com_offset_y_m"],
                             values["torso_com_offset_z_m"]),
         joint_damping_scale=values["joint_damping_scale"], terrain=terrain,
-        floor_friction=None if values["floor_friction"] == MODEL_FLOOR_FRICTION else values["floor_friction"],
-        slope_deg=values["floor_slope_deg"], cross_slope_deg=values["floor_cross_slope_deg"],
-        link_mass_scale=tuple((body, values[link_parameter(body)]) for body in LINK_MASS_BODIES
-                              if values[link_parameter(body)] != 1.0))
+        floor_friction=None if friction == MODEL_FLOOR_FRICTION else friction,
+        slope_deg=get("floor_slope_deg"), cross_slope_deg=get("floor_cross_slope_deg"),
+        link_mass_scale=tuple((body, get(link_parameter(body))) for body in LINK_MASS_BODIES
+                              if get(link_parameter(body)) != 1.0))
 
 
 def values_from_perturbation(model: str, perturbation: Perturbation | None) -> dict:
