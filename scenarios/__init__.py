@@ -1,10 +1,16 @@
-"""Co-simulation scenarios: the master loop, scenario files, metrics, CLI and report.
+"""Co-simulation scenarios: the master and the experiments that use it, in layers that import
+downward only:
 
-- :mod:`scenarios.lang.spec`: TOML scenario files -> validated frozen dataclasses;
-- :mod:`scenarios.cosim.master`: the fmpy co-simulation master (FMU or in-process regulator);
-- :mod:`scenarios.results.metrics`: pure metric functions over the master's structured array;
-- :mod:`scenarios.results.output` / :mod:`scenarios.report`: csv, summary.json, plots, report.md;
-- :mod:`scenarios.cli`: ``python -m scenarios list|validate|run|report``.
+- :mod:`scenarios.cli` / :mod:`scenarios.report`: ``python -m scenarios`` and ``report DIR``;
+- :mod:`scenarios.run`, :mod:`scenarios.campaign`, :mod:`scenarios.ssp`, :mod:`scenarios.gaits`,
+  :mod:`scenarios.rl_hzd`: the experiments (the suite's runs, Monte-Carlo campaigns on Dask,
+  SSP export and other masters, the gait calibration, the RL-HZD baseline);
+- :mod:`scenarios.results`: metrics, CSV, summary.json, plots, videos, the results folder;
+- :mod:`scenarios.cosim`: the fmpy co-simulation master, the FMI host, the plant and regulator
+  paths;
+- :mod:`scenarios.lang`: scenario files (TOML) -> validated frozen dataclasses, and the plant
+  a scenario asks for;
+- :mod:`scenarios.errors`: the exceptions every layer raises.
 
-The paper suite lives in ``scenarios/suite/*.toml``.
+The paper suite lives in ``scenarios/suite/*.toml``, the campaigns in ``scenarios/campaigns/``.
 """

@@ -37,6 +37,8 @@ from pathlib import Path
 
 from pythonfmu.enums import Fmi2Status
 
+from fmu_src.core.avr_errors import StateError
+from fmu_src.fmi import avr_fmustate
 from fmu_src.fmi.avr_slavebase import INITIALIZATION_MODE, STEP_COMPLETE, SpecSlave
 from fmu_src.plant_fmu import fmu_core
 
@@ -107,8 +109,8 @@ class CassiePlant(SpecSlave):
 
     def _set_fmu_state(self, state):
         try:
-            if bytes(state[:len(self._core.avr_fmustate.REFUSED_STATE)]) == self._core.avr_fmustate.REFUSED_STATE:
-                raise self._core.StateError(bytes(state).decode("utf-8", "replace"))  # only without the guard
+            if bytes(state[:len(avr_fmustate.REFUSED_STATE)]) == avr_fmustate.REFUSED_STATE:
+                raise StateError(bytes(state).decode("utf-8", "replace"))  # only without the guard
             parts, walker = self._restore(bytes(state))
         except Exception as exc:  # noqa: BLE001 - a bad state is refused (fmi2Error), the instance unchanged
             self._refuse(f"fmi2SetFMUstate refused: {exc}")
@@ -138,6 +140,6 @@ class CassiePlant(SpecSlave):
             blob = bytes(state)
             fmu_core.decode_fmu_state(blob)
         except Exception as exc:  # noqa: BLE001 - nothing may escape to pythonfmu (it would mean fmi2Fatal)
-            return fmu_core.avr_fmustate.REFUSED_STATE + f"{type(exc).__name__}: {exc}".encode("utf-8", "replace")
+            return avr_fmustate.REFUSED_STATE + f"{type(exc).__name__}: {exc}".encode("utf-8", "replace")
         return blob
 

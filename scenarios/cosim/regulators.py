@@ -60,30 +60,32 @@ class InProcessRegulator(RegulatorPath):
     kind = "inprocess"
 
     def __init__(self) -> None:
-        from fmu_src.core import avr_core, avr_params, avr_specs
+        from fmu_src.core.avr_params import RegulatorInputs
+        from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS
 
-        self._core = avr_core
-        self._params = avr_params
-        self._specs = avr_specs
-        self._input_types = [(s.name, FMI_CASTS[s.type]) for s in avr_specs.INPUT_SPECS]
-        self._outputs = tuple(s.name for s in avr_specs.OUTPUT_SPECS)
+        self._inputs = RegulatorInputs
+        self._input_types = [(s.name, FMI_CASTS[s.type]) for s in INPUT_SPECS]
+        self._outputs = tuple(s.name for s in OUTPUT_SPECS)
         self._step_fn: Callable[[Any, float], dict] | None = None
 
     def output_names(self) -> tuple[str, ...]:
         return self._outputs
 
     def start(self, parameters: Mapping[str, Any], t0: float, t_stop: float) -> None:
-        core = self._core
-        types = {s.name: FMI_CASTS[s.type] for s in self._specs.PARAM_SPECS}
+        from fmu_src.core.avr_core import Regulator
+        from fmu_src.core.avr_params import params_from_overrides
+        from fmu_src.core.avr_specs import PARAM_SPECS
+
+        types = {s.name: FMI_CASTS[s.type] for s in PARAM_SPECS}
         unknown = sorted(set(parameters) - set(types))
         if unknown:
             raise CosimError(f"unknown regulator parameter(s): {', '.join(unknown)}")
         # cast as the FMU's setters do, then the core's own defaults and checks
-        params = self._params.params_from_overrides({n: types[n](v) for n, v in parameters.items()})
-        self._step_fn = core.Regulator(params).step
+        params = params_from_overrides({n: types[n](v) for n, v in parameters.items()})
+        self._step_fn = Regulator(params).step
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
-        reg_in = self._params.RegulatorInputs(**{n: cast(inputs[n]) for n, cast in self._input_types})
+        reg_in = self._inputs(**{n: cast(inputs[n]) for n, cast in self._input_types})
         out = self._step_fn(reg_in, float(h))
         return {n: float(out[n]) for n in self._outputs}
 
