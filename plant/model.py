@@ -36,7 +36,7 @@ from plant.constants import (
 )
 from plant.errors import ModelError, PerturbationError
 from plant.mjcf import spec_from_file
-from plant.perturbation import Applied, Perturbation, apply_to_compiled
+from plant.perturbation import Applied, Perturbation, apply_environment, apply_to_compiled
 from plant.terrain import (
     add_terrain, terrain_summary,
 )
@@ -188,6 +188,8 @@ def load_perturbed(source: str | os.PathLike = "menagerie",
             raise ModelError(f"{HOME_KEY!r} keyframe has {key.qpos.size} qpos, model nq={model.nq}")
 
     applied = None if perturbation is None else apply_to_compiled(model, perturbation)
+    if perturbation is not None:
+        apply_environment(model, perturbation)
     if log.isEnabledFor(logging.INFO):
         log.info("loaded Cassie model %r: %s (%s)", src, model_summary(model), applied)
     return model, applied

@@ -33,6 +33,16 @@ MAX_TORSO_MASS_KG = 100.0
 MAX_COM_OFFSET_M = 0.5
 #: Largest joint damping factor.
 MAX_DAMPING_SCALE = 10.0
+#: Floor friction (MuJoCo's sliding coefficient) range: (0, 2]. Both models' floor has 1;
+#: 0.5-1.0 is the rubber-on-floor range robustness studies draw from, 2 leaves headroom.
+MAX_FLOOR_FRICTION = 2.0
+#: Steepest constant floor slope, deg, either way along x or y: the walker starts in its
+#: flat standing pose at the origin, where a 15 deg plane is 1.3 cm off under the feet.
+MAX_FLOOR_SLOPE_DEG = 15.0
+#: Largest link mass factor (0, 5] and link mass (0, 50] kg (the heaviest link, a hip
+#: pitch body, is 5.5 kg).
+MAX_LINK_MASS_SCALE = 5.0
+MAX_LINK_MASS_KG = 50.0
 
 
 @dataclass(frozen=True)
@@ -49,6 +59,19 @@ class Perturbation(Checked):
         joint_damping_scale: multiplies every ``dof_damping`` (N*m*s/rad or N*s/m),
             in [0, 10].
         terrain: replaces the flat floor by a random height field; None keeps it.
+        floor_friction: sliding friction of every world-body geom (the floor or the
+            terrain), in (0, 2]; None keeps the model's (1 for both models). The floor
+            gets a contact priority above the robot's geoms, so its friction is the
+            contact's (MuJoCo otherwise takes the larger of the two).
+        slope_deg: tilts the flat floor plane about the world y axis so the ground rises
+            by ``tan(slope_deg)`` per metre along +x (uphill walking forward), deg, in
+            [-15, 15]; only without terrain.
+        cross_slope_deg: the same along +y (the ground rises to the robot's left).
+        link_mass_scale: ``(body, factor)`` pairs: the body's mass and inertia times the
+            factor, in (0, 5]; any body of the model but the world and the pelvis
+            (``torso_mass_kg``); checked against the model when it is loaded.
+        link_mass_kg: ``(body, kg)`` pairs: the body's new mass, in (0, 50] kg, its
+            inertia scaled by the same ratio; a body is named at most once in both lists.
     """
 
     torso_mass_kg: float | None = None
@@ -56,6 +79,11 @@ class Perturbation(Checked):
     torso_com_offset_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
     joint_damping_scale: float = 1.0
     terrain: TerrainSpec | None = None
+    floor_friction: float | None = None
+    slope_deg: float = 0.0
+    cross_slope_deg: float = 0.0
+    link_mass_scale: tuple[tuple[str, float], ...] = ()
+    link_mass_kg: tuple[tuple[str, float], ...] = ()
 
     def problems(self, base_torso_mass_kg: float | None = None) -> list[str]:
         """Every problem of this perturbation, one string each naming field and range, on a
@@ -95,7 +123,45 @@ class Perturbation(Checked):
                 p.extend(self.terrain.problems(prefix="terrain."))
             else:
                 p.append(f"terrain={self.terrain!r} must be a TerrainSpec or None")
+        p.extend(self.environment_problems())
         return p
+
+    def environment_problems(self) -> list[str]:
+        """The problems of the floor (friction, slope) and link mass fields."""
+        p: list[str] = []
+        if self.floor_friction is not None:
+            check_range(p, "floor_friction", self.floor_friction, 0.0, MAX_FLOOR_FRICTION, "(or None)", True)
+        for name in ("slope_deg", "cross_slope_deg"):
+            check_range(p, name, getattr(self, name), -MAX_FLOOR_SLOPE_DEG, MAX_FLOOR_SLOPE_DEG, "deg", False)
+        if self.terrain is not None and (self.slope_deg != 0 or self.cross_slope_deg != 0):
+            p.append("slope_deg/cross_slope_deg tilt the flat floor: give a slope or a terrain, not both")
+        seen: set[str] = set()
+        for field, pairs, hi, unit in (("link_mass_scale", self.link_mass_scale, MAX_LINK_MASS_SCALE, ""),
+                                       ("link_mass_kg", self.link_mass_kg, MAX_LINK_MASS_KG, "kg")):
+            try:
+                items = [tuple(pair) for pair in pairs]
+            except TypeError:
+                p.append(f"{field}={pairs!r} must be (body name, number) pairs")
+                continue
+            for item in items:
+                if len(item) != 2 or not isinstance(item[0], str):
+                    p.append(f"{field} entry {item!r} must be a (body name, number) pair")
+                    continue
+                body, value = item
+                check_range(p, f"{field}[{body!r}]", value, 0.0, hi, unit, True)
+                if body == PELVIS_BODY:
+                    p.append(f"{field}[{body!r}]: the pelvis is set by torso_mass_kg")
+                elif body in seen:
+                    p.append(f"{field}[{body!r}]: body named twice (each body once in link_mass_scale and "
+                             "link_mass_kg)")
+                seen.add(body)
+        return p
+
+    @property
+    def environment_is_nominal(self) -> bool:
+        """True when the floor and link mass fields change nothing."""
+        return (self.floor_friction is None and self.slope_deg == 0 and self.cross_slope_deg == 0
+                and not self.link_mass_scale and not self.link_mass_kg)
 
     def __post_init__(self):
         # Accept any length-3 sequence (list, numpy array) for the offset; store a
@@ -106,13 +172,20 @@ class Perturbation(Checked):
                 object.__setattr__(self, "torso_com_offset_m", tuple(off))
             except TypeError:
                 pass
+        for name in ("link_mass_scale", "link_mass_kg"):  # hashable pairs, in a stable order
+            pairs = getattr(self, name)
+            try:
+                object.__setattr__(self, name, tuple(sorted(tuple(pair) for pair in pairs)))
+            except TypeError:
+                pass
 
     @property
     def is_nominal(self) -> bool:
         """True when applying this perturbation changes nothing."""
         return (self.torso_mass_kg is None and self.torso_added_mass_kg is None and self.joint_damping_scale == 1.0
                 and self.terrain is None
-                and all(c == 0 for c in self.torso_com_offset_m))
+                and all(c == 0 for c in self.torso_com_offset_m)
+                and self.environment_is_nominal)
 
 
 def torso_mass_on(p: Perturbation, base_torso_mass_kg: float) -> float | None:
@@ -171,3 +244,94 @@ def apply_to_compiled(model: mujoco.MjModel, p: Perturbation) -> Applied:
     if changed:
         mujoco.mj_setConst(model, mujoco.MjData(model))
     return Applied(torso_mass_before_kg=m0, torso_mass_after_kg=float(model.body_mass[pelvis]))
+
+
+# --------------------------------------------------------------------------- floor and links
+def world_geoms(model: mujoco.MjModel) -> np.ndarray:
+    """Ids of the world-body geoms: the floor (plane or terrain) and fixed obstacles."""
+    return np.flatnonzero(model.geom_bodyid == 0)
+
+
+def model_problems(model: mujoco.MjModel, p: Perturbation) -> list[str]:
+    """What of ``p`` does not fit this compiled model: link bodies it does not have."""
+    out = []
+    for field, pairs in (("link_mass_scale", p.link_mass_scale), ("link_mass_kg", p.link_mass_kg)):
+        for body, _ in pairs:
+            bid = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, body)
+            if bid <= 0:
+                names = [model.body(i).name for i in range(1, model.nbody) if model.body(i).name != PELVIS_BODY]
+                out.append(f"{field}[{body!r}]: the model has no such body; its bodies: {', '.join(names)}")
+    return out
+
+
+def slope_normal(slope_deg: float, cross_slope_deg: float) -> np.ndarray:
+    """Unit normal of the plane rising ``tan(slope_deg)`` per metre along +x and
+    ``tan(cross_slope_deg)`` along +y."""
+    n = np.array([-np.tan(np.radians(slope_deg)), -np.tan(np.radians(cross_slope_deg)), 1.0])
+    return n / np.linalg.norm(n)
+
+
+def _set_link_mass(model: mujoco.MjModel, bid: int, mass: float) -> None:
+    model.body_inertia[bid] *= mass / float(model.body_mass[bid])
+    model.body_mass[bid] = mass
+
+
+def apply_environment(model: mujoco.MjModel, p: Perturbation) -> None:
+    """Floor friction, floor slope and link masses of ``p`` on the compiled model (after
+    :func:`apply_to_compiled`); PerturbationError when a named body is missing."""
+    if p.environment_is_nominal:
+        return
+    found = model_problems(model, p)
+    if found:
+        from plant.errors import PerturbationError
+
+        err = PerturbationError(f"invalid perturbation for this model, {len(found)} problem(s): " + "; ".join(found))
+        err.problems = found
+        raise err
+    if p.floor_friction is not None:
+        set_floor_friction(model, p.floor_friction)
+    if p.slope_deg != 0 or p.cross_slope_deg != 0:
+        planes = world_geoms(model)
+        planes = planes[model.geom_type[planes] == mujoco.mjtGeom.mjGEOM_PLANE]
+        n = slope_normal(p.slope_deg, p.cross_slope_deg)
+        quat = np.zeros(4)
+        axis = np.cross([0.0, 0.0, 1.0], n)
+        angle = float(np.arccos(np.clip(n[2], -1.0, 1.0)))
+        axis /= np.linalg.norm(axis)
+        mujoco.mju_axisAngle2Quat(quat, axis, angle)
+        for g in planes:  # tilted about the point under the origin: the robot starts there
+            model.geom_quat[g] = quat
+    for body, scale in p.link_mass_scale:
+        bid = model.body(body).id
+        _set_link_mass(model, bid, float(model.body_mass[bid]) * scale)
+    for body, kg in p.link_mass_kg:
+        _set_link_mass(model, model.body(body).id, kg)
+    mujoco.mj_setConst(model, mujoco.MjData(model))
+
+
+def set_floor_friction(model: mujoco.MjModel, friction: float) -> None:
+    """Sliding friction of every world-body geom, with a contact priority above every
+    other geom's so the floor's friction is the contact's."""
+    geoms = world_geoms(model)
+    model.geom_friction[geoms, 0] = friction
+    model.geom_priority[geoms] = int(model.geom_priority.max()) + 1
+
+
+def change_plant(model: mujoco.MjModel, *, torso_mass_kg: float | None = None,
+                 torso_com_shift_m=None, damping_factor: float | None = None,
+                 floor_friction: float | None = None) -> None:
+    """Change the running plant (an event during a walk): the pelvis mass (inertia scaled
+    with it), a shift of the pelvis COM (pelvis frame, m), a factor on every joint
+    damping, the floor friction. MuJoCo reads these from the model at every step; the
+    derived constants are recomputed (:func:`mujoco.mj_setConst` on a scratch MjData,
+    the running one is not touched)."""
+    pelvis = model.body(PELVIS_BODY).id
+    if torso_mass_kg is not None:
+        _set_link_mass(model, pelvis, float(torso_mass_kg))
+    if torso_com_shift_m is not None:
+        model.body_ipos[pelvis] += np.asarray(torso_com_shift_m, dtype=float)
+    if damping_factor is not None:
+        model.dof_damping[:] *= float(damping_factor)
+    if floor_friction is not None:
+        set_floor_friction(model, float(floor_friction))
+    mujoco.mj_setConst(model, mujoco.MjData(model))

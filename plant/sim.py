@@ -191,6 +191,28 @@ class CassieWalker:
         """Constant world-frame force (N, 3-vector) on the pelvis until changed."""
         self.physics.set_pelvis_force(force_n)
 
+    def set_body_force(self, body: str, force_n) -> None:
+        """Constant world-frame force (N, 3-vector) at the COM of the model's body ``body``
+        until changed (a push on a link other than the pelvis); KeyError for an unknown body."""
+        import numpy as np
+
+        bid = mujoco.mj_name2id(self.model, mujoco.mjtObj.mjOBJ_BODY, body)
+        if bid <= 0:
+            raise KeyError(f"body {body!r}: the model has no such body")
+        f = np.asarray(force_n, dtype=float).reshape(3)
+        if not np.all(np.isfinite(f)):
+            raise ValueError(f"force_n must be finite, got {f}")
+        self.data.xfrc_applied[bid, :3] = f
+
+    def change_plant(self, **changes) -> None:
+        """Change the walker's own model while it walks (an event): ``torso_mass_kg``,
+        ``torso_com_shift_m``, ``damping_factor``, ``floor_friction``
+        (:func:`plant.perturbation.change_plant`)."""
+        from plant.perturbation import change_plant
+
+        change_plant(self.model, **changes)
+        log.info("t=%.3f s: plant changed: %s", self.time_s, changes)
+
     def fell(self) -> bool:
         """True once a fall has been detected (latched; checked at the end of ``advance``)."""
         if self._fall_reason is None:

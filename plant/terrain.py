@@ -232,7 +232,7 @@ class GroundHeight:
     cell's twist ``|h00 - h10 - h01 + h11|``, a few mm for the generated fields).
     Points beyond the field's edge are clamped to the edge (there is no ground
     there). Without terrain: the height of the first world-body floor plane (0 for
-    both models), or 0 without one. Non-finite x or y give NaN.
+    both models; on a tilted plane, its height under the point), or 0 without one. Non-finite x or y give NaN.
     """
 
     def __init__(self, model: mujoco.MjModel):
@@ -242,6 +242,14 @@ class GroundHeight:
             planes = np.flatnonzero((model.geom_type == mujoco.mjtGeom.mjGEOM_PLANE)
                                     & (model.geom_bodyid == 0))
             self.flat_m = float(model.geom_pos[planes[0], 2]) if planes.size else 0.0
+            self._plane = None  # a tilted floor (plant.perturbation's slope): (x0, y0, -nx/nz, -ny/nz)
+            if planes.size:
+                mat = np.zeros(9)
+                mujoco.mju_quat2Mat(mat, model.geom_quat[planes[0]])
+                nx, ny, nz = mat[2], mat[5], mat[8]  # the plane's z axis in the world
+                if nx != 0.0 or ny != 0.0:
+                    gx, gy = model.geom_pos[planes[0], :2]
+                    self._plane = (float(gx), float(gy), float(-nx / nz), float(-ny / nz))
             return
         gid, hid = ids
         self._heights = _terrain_heights(model, hid)
@@ -252,7 +260,10 @@ class GroundHeight:
 
     def __call__(self, x: float, y: float) -> float:
         if not self.has_terrain:
-            return self.flat_m
+            if self._plane is None:
+                return self.flat_m
+            x0, y0, sx, sy = self._plane
+            return self.flat_m + sx * (x - x0) + sy * (y - y0)
         if not (math.isfinite(x) and math.isfinite(y)):
             return math.nan
         sx, sy, nrow, ncol = self._sx, self._sy, self._nrow, self._ncol

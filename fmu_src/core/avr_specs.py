@@ -98,11 +98,13 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
     _param("psi_limit", 0.3, 0.0, 1.0, "rad",
            "Saturation of every network output Psi (before psi_gain), rad, in [0, 1]; "
            "saturated outputs stop integrating outward (anti-windup)"),
-    _param("learn_from_step", 1, 0, INT32_MAX, "1",
+    _param("learn_from_step", 12, 0, INT32_MAX, "1",
            "The networks learn only while step_index >= learn_from_step, in [0, 2147483647]; "
-           "the default 1 waits for the first completed walking step (before it there is no "
-           "step-averaged velocity vx[k] to learn from); 0 learns from the first call. Psi "
-           "is still applied while learning waits", type="Integer"),
+           "the default 12 waits out the start-up (the step-averaged vx is 0 until the first "
+           "completed step and lags after it; the gait ramps to the command at 0.5 m/s^2, "
+           "to 1 m/s by about step 8): until then the offsets are PD-only's; 1 learns from "
+           "the first completed step, 0 from the first call. Psi is still applied while "
+           "learning waits", type="Integer"),
     _param("psi_gain_swing_hip_pitch", 1.0, *_GAIN_RANGE, "1",
            "Gain of Psi_x[0] on delta_swing_hip_pitch, in [-5, 5]; 0 switches it off"),
     _param("psi_gain_swing_knee", 1.0, *_GAIN_RANGE, "1",

@@ -33,7 +33,8 @@ from fmu_src.core.avr_errors import StateError
 from plant.constants import NOMINAL_TORSO_MASS_KG, OFFSET_NAMES, SIDES
 from plant.errors import PerturbationError
 from plant.model import load_model
-from plant.perturbation import MAX_COM_OFFSET_M, MAX_DAMPING_SCALE, MAX_TORSO_MASS_KG, Perturbation
+from plant.perturbation import (MAX_COM_OFFSET_M, MAX_DAMPING_SCALE, MAX_FLOOR_FRICTION, MAX_FLOOR_SLOPE_DEG,
+                                MAX_LINK_MASS_SCALE, MAX_TORSO_MASS_KG, Perturbation)
 from plant.sim import CassieWalker
 from plant.terrain import MAX_HEIGHT_M, MAX_SLOPE_DEG, SIZE_RANGE_M, TerrainSpec
 
@@ -53,6 +54,18 @@ STEPS_TOL = 1e-6
 #: step, which could run for hours, is refused (fmi2Error naming this maximum); a master takes
 #: several steps instead.
 MAX_STEP_S = 10.0
+
+
+#: The links whose mass the FMU can scale (``link_mass_scale_<body with _>``): the leg's rigid
+#: links of both models (the rods, springs and crank of the leg linkage keep their masses).
+LINK_MASS_BODIES = tuple(f"{side}-{link}" for side in ("left", "right")
+                         for link in ("hip-roll", "hip-yaw", "hip-pitch", "knee", "shin", "tarsus", "foot"))
+#: The floor friction of both models' floor (the parameter's default leaves it).
+MODEL_FLOOR_FRICTION = 1.0
+
+
+def link_parameter(body: str) -> str:
+    return "link_mass_scale_" + body.replace("-", "_")
 
 
 def _p(name, default, lo, hi, unit, description, type="Real"):
@@ -90,6 +103,18 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
     _p("terrain_size_m", 20.0, *SIZE_RANGE_M, "m",
        f"Uneven terrain: half-length of the square field around the start, m, in [{SIZE_RANGE_M[0]:g}, "
        f"{SIZE_RANGE_M[1]:g}] (at most 2001 samples per side at 0.05 m, so at most 50 m); no ground beyond it"),
+    _p("floor_friction", MODEL_FLOOR_FRICTION, 0.0, MAX_FLOOR_FRICTION, "1",
+       f"Sliding friction of the floor (or terrain), in (0, {MAX_FLOOR_FRICTION:g}]; the floor's friction is the "
+       f"contact's (it has the higher contact priority); {MODEL_FLOOR_FRICTION:g} is the models' own"),
+    _p("floor_slope_deg", 0.0, -MAX_FLOOR_SLOPE_DEG, MAX_FLOOR_SLOPE_DEG, "deg",
+       f"Constant slope of the flat floor along world x (positive: rising ahead), deg, in "
+       f"[{-MAX_FLOOR_SLOPE_DEG:g}, {MAX_FLOOR_SLOPE_DEG:g}]; not with terrain"),
+    _p("floor_cross_slope_deg", 0.0, -MAX_FLOOR_SLOPE_DEG, MAX_FLOOR_SLOPE_DEG, "deg",
+       f"Constant slope of the flat floor along world y (positive: rising to the left), deg, in "
+       f"[{-MAX_FLOOR_SLOPE_DEG:g}, {MAX_FLOOR_SLOPE_DEG:g}]; not with terrain"),
+    *(_p(link_parameter(body), 1.0, 0.0, MAX_LINK_MASS_SCALE, "1",
+         f"Mass (and inertia) factor of the {body} link, in (0, {MAX_LINK_MASS_SCALE:g}]; 1 leaves it")
+      for body in LINK_MASS_BODIES),
 )
 
 INPUT_SPECS: tuple[VarSpec, ...] = (
@@ -133,7 +158,12 @@ INPUT_NAMES = tuple(s.name for s in INPUT_SPECS)
 
 # ------------------------------------------------------------------------------ parameters
 def perturbation_from_values(values: Mapping) -> Perturbation:
-    """The plant Perturbation the parameter values describe (not validated here)."""
+    """The plant Perturbation the parameter values describe (not validated here); the
+    floor and link parameters may be left out (their defaults change nothing)."""
+    def get(name):
+        return values.get(name, PARAM_DEFAULTS[name])
+
+    friction = get("floor_friction")
     mass = values["torso_mass_kg"]
     terrain = None
     if values["terrain_max_height_m"] != 0.0:
@@ -144,7 +174,11 @@ def perturbation_from_values(values: Mapping) -> Perturbation:
         torso_mass_kg=None if mass == NOMINAL_TORSO_MASS_KG else mass,
         torso_com_offset_m=(values["torso_com_offset_x_m"], values["torso_com_offset_y_m"],
                             values["torso_com_offset_z_m"]),
-        joint_damping_scale=values["joint_damping_scale"], terrain=terrain)
+        joint_damping_scale=values["joint_damping_scale"], terrain=terrain,
+        floor_friction=None if friction == MODEL_FLOOR_FRICTION else friction,
+        slope_deg=get("floor_slope_deg"), cross_slope_deg=get("floor_cross_slope_deg"),
+        link_mass_scale=tuple((body, get(link_parameter(body))) for body in LINK_MASS_BODIES
+                              if get(link_parameter(body)) != 1.0))
 
 
 def values_from_perturbation(model: str, perturbation: Perturbation | None) -> dict:
@@ -159,6 +193,12 @@ def values_from_perturbation(model: str, perturbation: Perturbation | None) -> d
         values["torso_mass_kg"] = float(p.torso_mass_kg)
     for axis, c in zip("xyz", p.torso_com_offset_m):
         values[f"torso_com_offset_{axis}_m"] = float(c)
+    if p.floor_friction is not None:
+        values["floor_friction"] = float(p.floor_friction)
+    values.update(floor_slope_deg=float(p.slope_deg), floor_cross_slope_deg=float(p.cross_slope_deg))
+    for body, scale in p.link_mass_scale:
+        if link_parameter(body) in values:  # others: plantio.fmu_unsupported refuses the scenario
+            values[link_parameter(body)] = float(scale)
     if p.terrain is not None:
         values.update(terrain_max_height_m=float(p.terrain.max_height_m),
                       terrain_max_slope_deg=float(p.terrain.max_slope_deg),

@@ -418,29 +418,29 @@ static void refresh_gait(CcController *c, double dt) {
         tx = 0.0;
         ty = 0.0;
     } else {
-        tx = mm->cmd_vx;
-        ty = mm->cmd_vy;
+        tx = mm->vx_des;
+        ty = mm->vy_des;
     }
-    double nx = mm->vx_des + py_max(-a, py_min(a, tx - mm->vx_des));
-    double ny = mm->vy_des + py_max(-a, py_min(a, ty - mm->vy_des));
-    double tw = mm->mode == CC_WALK ? mm->cmd_yaw_rate : 0.0;
-    if (tw != mm->yaw_rate_des) {
+    double nx = mm->vx_ref + py_max(-a, py_min(a, tx - mm->vx_ref));
+    double ny = mm->vy_ref + py_max(-a, py_min(a, ty - mm->vy_ref));
+    double tw = mm->mode == CC_WALK ? mm->yaw_rate_des : 0.0;
+    if (tw != mm->yaw_rate_ref) {
         double aw = p->yaw_accel_limit_radps2 * dt;
-        mm->yaw_rate_des = mm->yaw_rate_des + py_max(-aw, py_min(aw, tw - mm->yaw_rate_des));
+        mm->yaw_rate_ref = mm->yaw_rate_ref + py_max(-aw, py_min(aw, tw - mm->yaw_rate_ref));
     }
-    if (nx != mm->vx_des || ny != mm->vy_des || !c->has_gait) {
-        mm->vx_des = nx;
-        mm->vy_des = ny;
+    if (nx != mm->vx_ref || ny != mm->vy_ref || !c->has_gait) {
+        mm->vx_ref = nx;
+        mm->vy_ref = ny;
         c->gait = lookup(c->gaits, nx, ny);
         c->has_gait = 1;
     }
 }
 
 void cc_set_command(CcController *c, double vx, double vy, double yaw_rate, const CcGaitLibrary *lib) {
-    c->mem.cmd_vx = vx;
-    c->mem.cmd_vy = vy;
+    c->mem.vx_des = vx;
+    c->mem.vy_des = vy;
     c->gaits = lib ? lib : &cc_library_gait;
-    c->mem.cmd_yaw_rate = yaw_rate;
+    c->mem.yaw_rate_des = yaw_rate;
     c->has_gait = 0;
     refresh_gait(c, 0.0);
 }
@@ -453,7 +453,7 @@ int cc_set_offsets(CcController *c, const double *offsets) {
 }
 
 void cc_memory_restored(CcController *c) {
-    c->gait = lookup(c->gaits, c->mem.vx_des, c->mem.vy_des);
+    c->gait = lookup(c->gaits, c->mem.vx_ref, c->mem.vy_ref);
     c->has_gait = 1;
 }
 
@@ -542,7 +542,7 @@ static double sense(CcController *c, Sensed *sd) {
     double yaw = hs[0];
     double dt = py_max(t - mm->last_t, 0.0);
     mm->last_t = t;
-    if (mm->yaw_rate_des != 0.0) mm->yaw_ref = remainder(mm->yaw_ref + mm->yaw_rate_des * dt, TAU_2PI);
+    if (mm->yaw_rate_ref != 0.0) mm->yaw_ref = remainder(mm->yaw_ref + mm->yaw_rate_ref * dt, TAU_2PI);
     double yaw_err = remainder(yaw - mm->yaw_ref, TAU_2PI);
     mm->vy_filt = low_pass(mm->vy_filt, hs[4], dt, p->vy_filter_tau_s);
     mm->vx_filt = low_pass(mm->vx_filt, hs[3], dt, p->vx_filter_tau_s);
@@ -593,7 +593,7 @@ static void stance_targets(CcController *c, CcTargets *tg, const Sensed *sd, int
     tg->q[s][CC_KNEE] = c->fx.stance_knee[s] + off[CC_D_STANCE_KNEE];
     tg->ff[s][CC_KNEE] = p->stance_knee_ff_nm * share;
     tg->q[s][CC_HIP_YAW] = q[CC_HIP_YAW] + sd->yaw_err;
-    tg->qd[s][CC_HIP_YAW] = qd[CC_HIP_YAW] + sd->yaw_rate - c->mem.yaw_rate_des;
+    tg->qd[s][CC_HIP_YAW] = qd[CC_HIP_YAW] + sd->yaw_rate - c->mem.yaw_rate_ref;
     tg->q[s][CC_FOOT] = q[CC_FOOT];
     tg->kp[s][CC_FOOT] = 0.0;
     tg->kd[s][CC_FOOT] = 0.0;
@@ -631,12 +631,12 @@ static void landing_angles(const CcController *c, double *theta, double *phi) {
     const CcMemory *mm = &c->mem;
     const CcGait *g = &c->gait;
     double step_time_s = g->step_time_s, leg_length_m = p->stance_leg_length_m;
-    double v_np = mm->vx_des + p->neutral_point_blend * (mm->vx_filt - mm->vx_des);
+    double v_np = mm->vx_ref + p->neutral_point_blend * (mm->vx_filt - mm->vx_ref);
     *theta = (neutral_angle(v_np, step_time_s, leg_length_m) + g->leg_angle_offset_rad + mm->offsets[CC_D_SWING_HIP_PITCH]);
     double side = swing_side(c) == CC_LEFT ? 1.0 : -1.0;
-    *phi = (neutral_angle(mm->vy_des, step_time_s, leg_length_m) + g->lateral_offset_rad + side * g->step_width_rad
-            + mm->offsets[CC_D_SWING_HIP_ROLL] + p->lateral_speed_gain * (mm->vy_filt - mm->vy_des)
-            + p->turn_lateral_gain * mm->vx_des * mm->yaw_rate_des);
+    *phi = (neutral_angle(mm->vy_ref, step_time_s, leg_length_m) + g->lateral_offset_rad + side * g->step_width_rad
+            + mm->offsets[CC_D_SWING_HIP_ROLL] + p->lateral_speed_gain * (mm->vy_filt - mm->vy_ref)
+            + p->turn_lateral_gain * mm->vx_ref * mm->yaw_rate_ref);
 }
 
 static void swing_foot_xy(const CcController *c, const mjtNum *hip, double theta, double phi, double yaw_err,
@@ -673,7 +673,7 @@ static void walking_targets(CcController *c, CcTargets *tg, const Sensed *sd) {
     tg->q[sw][CC_KNEE] = knee + mm->offsets[CC_D_SWING_KNEE] * b;
     tg->q[sw][CC_HIP_PITCH] = theta + sd->pitch - angle_offset(c, sw, knee);
     tg->q[sw][CC_HIP_ROLL] = phi - sd->roll;
-    tg->q[sw][CC_HIP_YAW] = -sd->yaw_err + 0.5 * mm->yaw_rate_des * g->step_time_s;
+    tg->q[sw][CC_HIP_YAW] = -sd->yaw_err + 0.5 * mm->yaw_rate_ref * g->step_time_s;
     tg->q[sw][CC_FOOT] = level_foot(c, sd->q[sw], sd->pitch);
     (void)g;
 }

@@ -31,7 +31,7 @@ enum { CC_D_SWING_HIP_PITCH = 0, CC_D_SWING_KNEE, CC_D_SWING_HIP_ROLL,
  * (NominalController.MEMORY_FIELDS, in that order). */
 typedef struct {
     double offsets[CC_NOFFSETS];
-    double vx_des, vy_des, cmd_vx, cmd_vy, yaw_rate_des, cmd_yaw_rate;
+    double vx_ref, vy_ref, vx_des, vy_des, yaw_rate_ref, yaw_rate_des;
     int mode, stance;
     long long step_index;
     double t_step_start, tau, vx_step_avg, vy_filt, vx_filt;

@@ -202,7 +202,7 @@ CcGaitLibrary = _struct("CcGaitLibrary", [
     ("swing_end_tau", ctypes.c_double), ("height_end_tau", ctypes.c_double)])
 CcMemory = _struct("CcMemory", [
     ("offsets", ctypes.c_double * 6),
-    *((n, ctypes.c_double) for n in ("vx_des", "vy_des", "cmd_vx", "cmd_vy", "yaw_rate_des", "cmd_yaw_rate")),
+    *((n, ctypes.c_double) for n in ("vx_ref", "vy_ref", "vx_des", "vy_des", "yaw_rate_ref", "yaw_rate_des")),
     ("mode", ctypes.c_int), ("stance", ctypes.c_int), ("step_index", ctypes.c_longlong),
     *((n, ctypes.c_double) for n in ("t_step_start", "tau", "vx_step_avg", "vy_filt", "vx_filt")),
     ("step_start_xy", ctypes.c_double * 2), ("swing_start", ctypes.c_double * 2),

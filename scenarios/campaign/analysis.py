@@ -141,6 +141,86 @@ def paired(rows: Sequence[dict[str, Any]], a: str, b: str) -> dict[str, Any]:
     return out
 
 
+#: The share of paired samples the first arm must win for the "beats" verdict.
+WIN_SHARE_REQUIRED = 0.9
+#: Bootstrap resamples of the paired median difference, and their fixed seed.
+BOOTSTRAP_N = 2000
+BOOTSTRAP_SEED = 0
+
+
+def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float] | None:
+    """The exact (Clopper-Pearson) interval of a proportion k/n: the binomial tails'
+    inversion, by bisection on math.comb sums (no scipy). None for n = 0."""
+    if n == 0:
+        return None
+    alpha = 1.0 - level
+
+    def cdf(j: int, p: float) -> float:  # P[X <= j]
+        return sum(math.comb(n, i) * p ** i * (1 - p) ** (n - i) for i in range(j + 1))
+
+    def solve(f, target: float) -> float:  # f increasing in p on [0, 1]
+        lo, hi = 0.0, 1.0
+        for _ in range(60):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if f(mid) < target else (lo, mid)
+        return 0.5 * (lo + hi)
+
+    lower = 0.0 if k == 0 else solve(lambda p: 1.0 - cdf(k - 1, p), alpha / 2)
+    upper = 1.0 if k == n else solve(lambda p: 1.0 - cdf(k, p), 1.0 - alpha / 2)
+    return lower, upper
+
+
+def verdicts(rows: Sequence[dict[str, Any]], a: str, b: str) -> dict[str, Any]:
+    """The two paired claims of ``a`` against ``b`` (e.g. adaptive vs PD-only), as verdicts:
+
+    * ``never_falls_where_b_walks``: no sample where ``a`` fell and ``b`` did not (the
+      samples where it did are listed); with the exact 95 % interval of that rate.
+    * ``beats``: ``a`` wins a sample when ``b`` fell and ``a`` did not, or both walked and
+      ``a``'s sse_vx is lower; a sample both fell on is no contest and left out. The verdict
+      holds when the wins are at least :data:`WIN_SHARE_REQUIRED` of the contested samples;
+      with the exact 95 % interval of the share, and a bootstrap 95 % interval of the median
+      sse_vx difference over the samples both walked.
+    """
+    p = paired(rows, a, b)
+    contested = p["n"] - p["both_fell"]
+    wins = len(p["only_b_fell"]) + p["a_lower_vx"]
+    diffs = _paired_diffs(rows, a, b)
+    return {
+        "n": p["n"], "contested": contested, "wins": wins,
+        "win_share": wins / contested if contested else None,
+        "win_ci": clopper_pearson(wins, contested),
+        "beats": bool(contested) and wins >= WIN_SHARE_REQUIRED * contested,
+        "only_a_fell": p["only_a_fell"], "never_falls_where_b_walks": not p["only_a_fell"],
+        "only_a_fell_ci": clopper_pearson(len(p["only_a_fell"]), p["n"]),
+        "median_diff_vx": quantile(diffs, 0.5), "median_diff_ci": bootstrap_median_ci(diffs),
+        "not_better": p["not_better"],
+    }
+
+
+def _paired_diffs(rows: Sequence[dict[str, Any]], a: str, b: str) -> list[float]:
+    """sse_vx of ``a`` minus ``b`` on the samples both completed and walked."""
+    by = {(r["sample"], r["arm"]): r for r in rows if r["status"] == COMPLETE}
+    out = []
+    for (s, arm), ra in sorted(by.items()):
+        rb = by.get((s, b))
+        if arm == a and rb is not None and ra["fell"] is False and rb["fell"] is False \
+                and ra["steady_state_error_vx"] is not None and rb["steady_state_error_vx"] is not None:
+            out.append(ra["steady_state_error_vx"] - rb["steady_state_error_vx"])
+    return out
+
+
+def bootstrap_median_ci(values: Sequence[float], level: float = 0.95) -> tuple[float, float] | None:
+    """Percentile bootstrap interval of the median (:data:`BOOTSTRAP_N` resamples, fixed seed)."""
+    if not values:
+        return None
+    import numpy as np
+
+    rng = np.random.default_rng(BOOTSTRAP_SEED)
+    v = np.asarray(values, dtype=float)
+    medians = np.median(v[rng.integers(0, len(v), (BOOTSTRAP_N, len(v)))], axis=1)
+    return (float(np.quantile(medians, (1 - level) / 2)), float(np.quantile(medians, (1 + level) / 2)))
+
+
 def worst(rows: Sequence[dict[str, Any]], arm: str, k: int = 5) -> list[dict[str, Any]]:
     """Falls first (earliest first), then the largest sse_vx."""
     done = [r for r in rows if r["arm"] == arm and r["status"] == COMPLETE]

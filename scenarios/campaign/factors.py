@@ -93,6 +93,53 @@ def _set_pushes(doc: dict, value: Any) -> None:
         doc.pop("push", None)
 
 
+def _set_table(key: str) -> Callable[[dict, Any], None]:
+    """The whole ``[key]`` table (``"none"`` removes it)."""
+    def apply(doc: dict, value: Any) -> str | None:
+        if value == "none":
+            doc.pop(key, None)
+        else:
+            if key == "command_profile":  # the profile replaces the schedule
+                doc.pop("command", None)
+            doc[key] = dict(value)
+        return None
+    return apply
+
+
+def _set_table_key(table_key: str, key: str) -> Callable[[dict, Any], str | None]:
+    def apply(doc: dict, value: Any) -> str | None:
+        if not isinstance(doc.get(table_key), dict):
+            if table_key == "command_profile" and (doc.get("command") or "command_profile" in doc):
+                return None  # this sample has no profile (a `command_profile` choice of "none")
+            if table_key == "random_pushes" and "random_pushes" not in doc:
+                return None
+            return f"needs a base with a [{table_key}] table or a `{table_key}` factor"
+        doc[table_key] = {**doc[table_key], key: value}
+        return None
+    return apply
+
+
+def _set_floor(doc: dict, value: Any) -> None:
+    """``"flat"``, or a table of any of slope_deg, cross_slope_deg, terrain (a [terrain]
+    table): the floor's shape; drops what the base had."""
+    for key in ("terrain", "slope_deg", "cross_slope_deg"):
+        doc.pop(key, None)
+    if value != "flat":
+        doc.update({k: (dict(v) if isinstance(v, dict) else v) for k, v in value.items()})
+
+
+def _set_floor_terrain_seed(doc: dict, value: Any) -> None:
+    if isinstance(doc.get("terrain"), dict):
+        doc["terrain"] = {**doc["terrain"], "seed": value}
+
+
+def _set_link_mass(body: str) -> Callable[[dict, Any], None]:
+    def apply(doc: dict, value: Any) -> None:
+        links = [dict(t) for t in doc.get("link_mass", []) if t.get("body") != body]
+        doc["link_mass"] = links + [{"body": body, "scale": value}]
+    return apply
+
+
 def _set_regulator(param: str) -> Callable[[dict, Any], None]:
     def apply(doc: dict, value: Any) -> None:
         doc["regulator"] = {**doc.get("regulator", {}), param: value}
@@ -122,14 +169,34 @@ FACTORS: dict[str, FactorKind] = {
     "push_force_x_n": FactorKind("number", _set_push_key("force_n", 0), "push[0].force_n x, N"),
     "push_force_y_n": FactorKind("number", _set_push_key("force_n", 1), "push[0].force_n y, N"),
     "push_force_z_n": FactorKind("number", _set_push_key("force_n", 2), "push[0].force_n z, N"),
+    "model": FactorKind("model", _set_top("model"), "the model: \"menagerie\" or \"osu\""),
+    "floor_friction": FactorKind("number", _set_top("floor_friction"), "floor friction, (0, 2]"),
+    "floor": FactorKind("floor", _set_floor, "\"flat\" or a table of slope_deg, cross_slope_deg or terrain "
+                                             "(a [terrain] table): the floor's shape"),
+    "floor_terrain_seed": FactorKind("integer", _set_floor_terrain_seed,
+                                     "terrain.seed of a sample whose floor has a terrain (else nothing)"),
+    "slope_deg": FactorKind("number", _set_top("slope_deg"), "constant floor slope along x, deg"),
+    "cross_slope_deg": FactorKind("number", _set_top("cross_slope_deg"), "constant floor slope along y, deg"),
+    "command_profile": FactorKind("table", _set_table("command_profile"),
+                                  "a [command_profile] table (replaces [[command]]), or \"none\""),
+    "command_profile_seed": FactorKind("integer", _set_table_key("command_profile", "seed"),
+                                       "command_profile.seed"),
+    "random_pushes": FactorKind("table", _set_table("random_pushes"), "a [random_pushes] table, or \"none\""),
+    "random_pushes_seed": FactorKind("integer", _set_table_key("random_pushes", "seed"), "random_pushes.seed"),
+    "random_pushes_count": FactorKind("integer", _set_table_key("random_pushes", "count"), "random_pushes.count"),
 }
 REGULATOR_PREFIX = "regulator."
+#: ``link_mass_scale.<body>``: that link's mass factor (a [[link_mass]] entry with scale).
+LINK_MASS_PREFIX = "link_mass_scale."
 
 
 def lookup(name: str) -> FactorKind | None:
     """The factor called ``name`` (``regulator.<param>`` for FMU parameters), or None."""
     if name in FACTORS:
         return FACTORS[name]
+    if name.startswith(LINK_MASS_PREFIX) and len(name) > len(LINK_MASS_PREFIX):
+        body = name[len(LINK_MASS_PREFIX):]
+        return FactorKind("number", _set_link_mass(body), f"mass factor of the link {body}")
     if name.startswith(REGULATOR_PREFIX):
         from scenarios.lang.sections import regulator_param_specs
 
@@ -167,10 +234,20 @@ def value_ok(kind: str, value: Any) -> bool:
         return value == "flat" or isinstance(value, dict)
     if kind == "pushes":
         return isinstance(value, list) and all(isinstance(p, dict) for p in value)
+    if kind == "model":
+        return value in ("menagerie", "osu")
+    if kind == "floor":
+        return value == "flat" or (isinstance(value, dict) and bool(value)
+                                    and set(value) <= {"slope_deg", "cross_slope_deg", "terrain"})
+    if kind == "table":
+        return value == "none" or isinstance(value, dict)
     return False
 
 
 KIND_HINT = {
     "number": "a number", "integer": "an integer", "bool": "true or false",
     "terrain": "\"flat\" or a [terrain] table", "pushes": "a list of push tables",
+    "model": "\"menagerie\" or \"osu\"",
+    "floor": "\"flat\" or a table of slope_deg, cross_slope_deg or terrain",
+    "table": "a table, or \"none\"",
 }

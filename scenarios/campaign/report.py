@@ -73,15 +73,35 @@ def _paired_lines(data: analysis.CampaignData) -> list[str]:
              f"(median difference {a} - {b}: {_f(p['median_diff_vx'], 4)} m/s) and the lower sse_vy in "
              f"{p['a_lower_vy']} (median difference {_f(p['median_diff_vy'], 4)} m/s, largest "
              f"{_f(p['max_diff_vy'], 4)} m/s).", ""]
+    lines += _verdict_lines(data, a, b)
     if p["not_better"]:
-        lines += [f"Samples where {a} is not better ({len(p['not_better'])}):", ""]
+        lines += [f"Every sample where {a} is not better ({len(p['not_better'])}):", ""]
         rows = [[f"[{s}](samples/{s}.toml)", why, _f(ra["steady_state_error_vx"]), _f(rb["steady_state_error_vx"]),
-                 _factor_cells(ra, data.factors)] for s, why, ra, rb in p["not_better"][:20]]
+                 _factor_cells(ra, data.factors)] for s, why, ra, rb in p["not_better"]]
         lines += _md_table(["sample", "why", f"{a} sse_vx", f"{b} sse_vx", "factors"], rows)
-        if len(p["not_better"]) > 20:
-            lines.append(f"\n... and {len(p['not_better']) - 20} more (see campaign.csv).")
         lines.append("")
     return lines + ["![paired](paired.png)", ""]
+
+
+def _pct(ci) -> str:
+    return "-" if ci is None else f"[{100 * ci[0]:.1f}, {100 * ci[1]:.1f}] %"
+
+
+def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
+    """The paired claims as explicit verdicts (:func:`scenarios.campaign.analysis.verdicts`)."""
+    v = analysis.verdicts(data.rows, a, b)
+    fell = ", ".join(f"[{s}](samples/{s}.toml)" for s in v["only_a_fell"]) or "none"
+    share = "-" if v["win_share"] is None else f"{100 * v['win_share']:.1f} %"
+    ci = v["median_diff_ci"]
+    return [f"**Verdict: {a} never falls where {b} walks: {'PASS' if v['never_falls_where_b_walks'] else 'FAIL'}** "
+            f"({len(v['only_a_fell'])} of {v['n']} paired samples, exact 95 % interval {_pct(v['only_a_fell_ci'])}; "
+            f"samples: {fell}).", "",
+            f"**Verdict: {a} beats {b} on >= {100 * analysis.WIN_SHARE_REQUIRED:.0f} % of paired samples: "
+            f"{'PASS' if v['beats'] else 'FAIL'}** ({v['wins']} of {v['contested']} samples where at least one arm "
+            f"walked = {share}, exact 95 % interval {_pct(v['win_ci'])}; a win: only {b} fell, or both walked and "
+            f"{a}'s sse_vx is lower). Median sse_vx difference {a} - {b} over the samples both walked: "
+            f"{_f(v['median_diff_vx'], 4)} m/s (bootstrap 95 % interval "
+            f"{'-' if ci is None else f'[{ci[0]:.4f}, {ci[1]:.4f}]'} m/s).", ""]
 
 
 def _worst_lines(data: analysis.CampaignData) -> list[str]:

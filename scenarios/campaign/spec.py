@@ -156,7 +156,8 @@ def parse_factor(name: str, tab: Any, probs: Problems) -> Factor | None:
     f = f"factors.{name}"
     kind = fx.lookup(name)
     if kind is None:
-        hint = did_you_mean(name, fx.known_names(), f"; known: {', '.join(fx.FACTORS)}, regulator.<param>")
+        hint = did_you_mean(name, fx.known_names(), f"; known: {', '.join(fx.FACTORS)}, regulator.<param>, "
+                                                     "link_mass_scale.<body>")
         probs.note(f, "unknown factor" + hint)
         return None
     if not isinstance(tab, dict):
@@ -255,6 +256,8 @@ def _flatten_regulator(raw: dict[str, Any]) -> dict[str, Any]:
     for name, tab in raw.items():
         if name == "regulator" and isinstance(tab, dict) and "dist" not in tab:
             out.update({f"{fx.REGULATOR_PREFIX}{k}": v for k, v in tab.items()})
+        elif f"{name}." == fx.LINK_MASS_PREFIX and isinstance(tab, dict) and "dist" not in tab:
+            out.update({f"{fx.LINK_MASS_PREFIX}{k}": v for k, v in tab.items()})
         else:
             out[name] = tab
     return out

@@ -226,6 +226,8 @@ def _run_steps(scenario: Scenario, arm: Arm, walker: Plant, regulator: Regulator
     # Jacobi: the offsets in force over step k are the regulator's outputs at t_k, computed
     # in step k-1; at t0 its outputs' start values, 0 for every regulator output.
     held = {n: 0.0 for n in outputs} if exchange == "jacobi" else None
+    body_forces: dict[str, tuple[float, float, float]] = {}
+    running = {"torso_com_offset_m": scenario.torso_com_offset_m, "joint_damping_scale": scenario.joint_damping_scale}
     try:
         for k in range(n_steps):
             if stop is not None and stop():
@@ -239,6 +241,10 @@ def _run_steps(scenario: Scenario, arm: Arm, walker: Plant, regulator: Regulator
             if f != force:
                 walker.set_pelvis_force(np.array(f, dtype=float))
                 force = f
+            if scenario.pushed_bodies:
+                body_forces = _apply_body_forces(scenario, walker, k, body_forces)
+            if scenario.events:
+                running = _apply_events(scenario, walker, k, running)
             sensed = walker.regulator_inputs()
             tel = walker.telemetry()
             inputs = {n: sensed[n] for n in SENSED_INPUTS}
@@ -273,6 +279,38 @@ def _run_steps(scenario: Scenario, arm: Arm, walker: Plant, regulator: Regulator
                 break
     finally:
         steps.timings.update(regulator_s=reg_s, plant_s=plant_s, record_s=record_s)
+
+
+def _apply_body_forces(scenario: Scenario, walker, k: int, before: dict) -> dict:
+    """Set the forces on the pushed bodies other than the pelvis over step ``k`` (zero on a
+    body whose pushes ended); return them."""
+    now = scenario.body_forces_at_step(k)
+    if now != before:
+        for body in scenario.pushed_bodies:
+            walker.set_body_force(body, np.array(now.get(body, (0.0, 0.0, 0.0)), dtype=float))
+    return now
+
+
+def _apply_events(scenario: Scenario, walker, k: int, running: dict) -> dict:
+    """The scenario's events at step ``k`` on the walker's model: each value replaces the
+    scenario's (``running``: the COM offset and damping scale in force, which the walker
+    changes by a shift and a factor)."""
+    for event in scenario.events_at_step(k):
+        change: dict[str, Any] = {}
+        if event.torso_mass_kg is not None:
+            change["torso_mass_kg"] = event.torso_mass_kg
+        if event.torso_com_offset_m is not None:
+            change["torso_com_shift_m"] = tuple(n - o for n, o in zip(event.torso_com_offset_m,
+                                                                     running["torso_com_offset_m"]))
+            running = {**running, "torso_com_offset_m": event.torso_com_offset_m}
+        if event.joint_damping_scale is not None:  # the start scale is > 0 (sections.events)
+            change["damping_factor"] = event.joint_damping_scale / running["joint_damping_scale"]
+            running = {**running, "joint_damping_scale": event.joint_damping_scale}
+        if event.floor_friction is not None:
+            change["floor_friction"] = event.floor_friction
+        walker.change_plant(**change)
+        log.debug("%s: event at t = %g s: %s", scenario.name, event.t_s, change)
+    return running
 
 
 def run_scenario(scenario: Scenario, regulator: str = "fmu", *, fmu_path: str | Path | None = None,

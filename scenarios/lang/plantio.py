@@ -27,23 +27,30 @@ def build_perturbation(scenario: "Scenario") -> "Perturbation | None":
     t = scenario.terrain
     terrain = None if t is None else dataclasses.asdict(t)  # Terrain's fields are TerrainSpec's
     pert = _perturbation(scenario.torso_mass_kg, scenario.torso_added_mass_kg, scenario.torso_com_offset_m,
-                         scenario.joint_damping_scale, terrain)
+                         scenario.joint_damping_scale, terrain, **environment_values(scenario))
     return None if pert.is_nominal else pert
+
+
+def environment_values(scenario: "Scenario") -> dict[str, Any]:
+    """The scenario's floor and link mass values as the plant's Perturbation fields."""
+    return {"floor_friction": scenario.floor_friction, "slope_deg": scenario.slope_deg,
+            "cross_slope_deg": scenario.cross_slope_deg, "link_masses": scenario.link_masses}
 
 
 def perturbation_problems(torso_mass_kg: float | None, torso_added_mass_kg: float | None,
                           torso_com_offset_m, joint_damping_scale: float,
-                          terrain: dict[str, Any] | None) -> list[str]:
+                          terrain: dict[str, Any] | None, **environment) -> list[str]:
     """The plant's own problems with these perturbation values (``terrain``: the
-    TerrainSpec's fields), on the plant's nominal torso mass."""
+    TerrainSpec's fields; ``environment``: :func:`environment_values`), on the plant's
+    nominal torso mass."""
     from plant.constants import NOMINAL_TORSO_MASS_KG
 
     return _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale,
-                         terrain).problems(NOMINAL_TORSO_MASS_KG)
+                         terrain, **environment).problems(NOMINAL_TORSO_MASS_KG)
 
 
-def _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale,
-                  terrain) -> "Perturbation":
+def _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale, terrain,
+                  floor_friction=None, slope_deg=0.0, cross_slope_deg=0.0, link_masses=()) -> "Perturbation":
     """The one place that builds the plant's Perturbation (and TerrainSpec) from scenario values."""
     from plant.perturbation import Perturbation
     from plant.terrain import TerrainSpec
@@ -54,6 +61,9 @@ def _perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_
         torso_com_offset_m=tuple(torso_com_offset_m),
         joint_damping_scale=joint_damping_scale,
         terrain=None if terrain is None else TerrainSpec(**terrain),
+        floor_friction=floor_friction, slope_deg=slope_deg, cross_slope_deg=cross_slope_deg,
+        link_mass_scale=tuple((lm.body, lm.scale) for lm in link_masses if lm.scale is not None),
+        link_mass_kg=tuple((lm.body, lm.mass_kg) for lm in link_masses if lm.mass_kg is not None),
     )
 
 
@@ -67,7 +77,39 @@ def check_plant(scenario: "Scenario") -> list[tuple[str, str]]:
     if problem is not None:
         return [("model", problem)]
     pert = build_perturbation(scenario)
-    return [("perturbation", p) for p in (pert.problems(mass) if pert is not None else [])]
+    found = [("perturbation", p) for p in (pert.problems(mass) if pert is not None else [])]
+    return found + body_problems(scenario)
+
+
+def body_problems(scenario: "Scenario") -> list[tuple[str, str]]:
+    """``(field, problem)`` for every link mass or push naming a body the scenario's model
+    does not have (the compiled model is the cached one of :func:`check_plant`)."""
+    named = [(f"link_mass[{i}].body", lm.body) for i, lm in enumerate(scenario.link_masses)]
+    named += [(f"push[{i}].body", p.body) for i, p in enumerate(scenario.pushes) if p.body != "cassie-pelvis"]
+    if not named:
+        return []
+    bodies = _model_bodies(scenario.model, _file_stamp(scenario.model))
+    if bodies is None:
+        return []
+    out = []
+    for field, body in named:
+        if body not in bodies or body in ("world",):
+            out.append((field, f"{body!r}: the model has no such body; its bodies: {', '.join(bodies[1:])}"))
+        elif field.startswith("link_mass") and body == "cassie-pelvis":
+            out.append((field, f"{body!r}: the pelvis mass is torso_mass_kg / torso_added_mass_kg"))
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def _model_bodies(model: str, stamp: tuple | None) -> tuple[str, ...] | None:
+    """The body names of ``model`` (world first), or None when it does not load."""
+    from plant.model import load_model
+
+    try:
+        m = load_model(model)
+    except Exception:  # the model's own problem is reported by _base_model_check
+        return None
+    return tuple(m.body(i).name for i in range(m.nbody))
 
 
 def _file_stamp(model: str) -> tuple | None:
@@ -133,6 +175,8 @@ def _shared_model(model: str, stamp: tuple | None, pert: "Perturbation | None") 
 FMU_FIELDS = {"torso_mass_kg": "torso_mass_kg", "joint_damping_scale": "joint_damping_scale",
               **{f"torso_com_offset_{a}_m": f"torso_com_offset_m[{a}]" for a in "xyz"},
               **{f"terrain_{k}": f"terrain.{k}" for k in ("max_height_m", "max_slope_deg", "seed", "size_m")},
+              "floor_friction": "floor_friction", "floor_slope_deg": "slope_deg",
+              "floor_cross_slope_deg": "cross_slope_deg",
 }
 
 
@@ -146,7 +190,7 @@ def _range(spec) -> str:
 
 def plant_parameter_problems(torso_mass_kg: float | None, torso_added_mass_kg: float | None,
                              torso_com_offset_m, joint_damping_scale: float,
-                             terrain: dict[str, Any] | None) -> list[tuple[str, Any, str]]:
+                             terrain: dict[str, Any] | None, **environment) -> list[tuple[str, Any, str]]:
     """``(field, value, why)`` for every perturbation value outside the range the
     CassiePlant FMU declares for its parameter (``fmu_src.plant_fmu.fmu_core.PARAM_SPECS``, the one
     source of those ranges; on the plant's nominal torso mass). For values the plant's
@@ -158,7 +202,7 @@ def plant_parameter_problems(torso_mass_kg: float | None, torso_added_mass_kg: f
     from plant.perturbation import resolved
 
     pert = resolved(_perturbation(torso_mass_kg, torso_added_mass_kg, torso_com_offset_m, joint_damping_scale,
-                                  terrain), NOMINAL_TORSO_MASS_KG)
+                                  terrain, **environment), NOMINAL_TORSO_MASS_KG)
     values = fmu_core.values_from_perturbation("menagerie", None if pert.is_nominal else pert)
     out: list[tuple[str, Any, str]] = []
     for spec in fmu_core.PARAM_SPECS:
@@ -203,6 +247,9 @@ def plant_fmu_problems(scenario: "Scenario") -> list[str]:
     if scenario.model not in fmu_core.MODEL_FILES:
         return [f"model = {scenario.model!r}: the CassiePlant FMU holds {', '.join(fmu_core.MODEL_FILES)} only; "
                 "an MJCF path needs --plant inprocess"]
+    found = fmu_unsupported(scenario)
+    if found:
+        return found
     pert = build_perturbation(scenario)
     if pert is None or pert.terrain is None:
         return []
@@ -210,3 +257,26 @@ def plant_fmu_problems(scenario: "Scenario") -> list[str]:
     return [f"terrain.{f.name} = {getattr(pert.terrain, f.name)!r}: the CassiePlant FMU has no parameter for it "
             f"(it uses {getattr(carried, f.name)!r}); --plant inprocess runs it"
             for f in dataclasses.fields(pert.terrain) if getattr(pert.terrain, f.name) != getattr(carried, f.name)]
+
+
+def fmu_unsupported(scenario: "Scenario") -> list[str]:
+    """What of ``scenario`` the CassiePlant FMU has no parameter or input for: events
+    during the walk, pushes on bodies other than the pelvis, link masses in kg or on
+    links without a ``link_mass_scale_*`` parameter."""
+    from fmu_src.plant_fmu import fmu_core
+
+    out = []
+    if scenario.events:
+        out.append("event: the CassiePlant FMU has no parameters that change during a walk; "
+                   "--plant inprocess runs events")
+    for i, p in enumerate(scenario.pushes):
+        if p.body != "cassie-pelvis":
+            out.append(f"push[{i}].body = {p.body!r}: the CassiePlant FMU pushes the pelvis only; "
+                       "--plant inprocess runs it")
+    for i, lm in enumerate(scenario.link_masses):
+        if lm.mass_kg is not None:
+            out.append(f"link_mass[{i}].mass_kg: the CassiePlant FMU takes link masses as scale only")
+        elif lm.body not in fmu_core.LINK_MASS_BODIES:
+            out.append(f"link_mass[{i}].body = {lm.body!r}: the CassiePlant FMU has link_mass_scale_* parameters "
+                       f"for {', '.join(fmu_core.LINK_MASS_BODIES)} only")
+    return out

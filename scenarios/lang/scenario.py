@@ -46,24 +46,79 @@ CHECKABLE_METRICS = (
 CHECK_OPS = ("<", "<=", ">", ">=", "==", "!=")
 
 
+#: The body a push acts on unless it names another (the MuJoCo body name of both models).
+PELVIS = "cassie-pelvis"
+
+
 @dataclass(frozen=True)
 class CommandPoint:
     """From ``t_s`` on (until the next point), command (vx_des, vy_des) in m/s (heading
-    frame) and yaw_rate_des in rad/s (positive turns left)."""
+    frame) and yaw_rate_des in rad/s (positive turns left). ``ramp``: the command
+    reaches these values linearly from the previous point's (a ramp over the
+    communication steps between the two points' times) instead of stepping at ``t_s``."""
 
     t_s: float
     vx_des: float
     vy_des: float = 0.0
     yaw_rate_des: float = 0.0
+    ramp: bool = False
 
 
 @dataclass(frozen=True)
 class Push:
-    """A constant world-frame force on the pelvis from ``t_s`` for ``duration_s``."""
+    """A constant world-frame force on ``body`` (at its COM) from ``t_s`` for ``duration_s``."""
 
     t_s: float
     force_n: tuple[float, float, float]
     duration_s: float
+    body: str = PELVIS
+
+
+@dataclass(frozen=True)
+class LinkMass:
+    """One link's mass: ``scale`` times the model's, or ``mass_kg`` (exactly one is set)."""
+
+    body: str
+    scale: float | None = None
+    mass_kg: float | None = None
+
+
+@dataclass(frozen=True)
+class Event:
+    """At ``t_s`` during the walk, the plant changes: each field given replaces the
+    scenario's value of the same name from then on (None: unchanged)."""
+
+    t_s: float
+    torso_mass_kg: float | None = None
+    torso_com_offset_m: tuple[float, float, float] | None = None
+    joint_damping_scale: float | None = None
+    floor_friction: float | None = None
+
+
+@dataclass(frozen=True)
+class CommandProfile:
+    """A seeded random command: a new (vx_des, vy_des) drawn uniformly every ``hold_s``,
+    held (``shape = "stepped"``) or reached linearly (``"ramped"``)."""
+
+    shape: str
+    seed: int
+    hold_s: float
+    vx_range: tuple[float, float]
+    vy_range: tuple[float, float] = (0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class RandomPushes:
+    """``count`` pushes drawn from ``seed``: start time uniform in ``t_range_s`` (on the
+    grid), horizontal direction uniform in [0, 360) deg, magnitude uniform in
+    ``magnitude_range_n``, each ``duration_s`` long, on a body drawn from ``bodies``."""
+
+    count: int
+    seed: int
+    t_range_s: tuple[float, float]
+    magnitude_range_n: tuple[float, float]
+    duration_s: float
+    bodies: tuple[str, ...] = (PELVIS,)
 
 
 @dataclass(frozen=True)
@@ -133,6 +188,13 @@ class Scenario:
     terrain: Terrain | None = None
     claim: Claim | None = None
     source: str | None = None
+    floor_friction: float | None = None
+    slope_deg: float = 0.0
+    cross_slope_deg: float = 0.0
+    link_masses: tuple[LinkMass, ...] = ()
+    events: tuple[Event, ...] = ()
+    command_profile: CommandProfile | None = None
+    random_pushes: RandomPushes | None = None
 
     @property
     def n_comm_steps(self) -> int:
@@ -144,11 +206,16 @@ class Scenario:
         first one that starts after ``k``, that starts at or before ``k`` (the first point
         before any). O(log n): a bisection over the points' running-maximum start steps."""
         starts, points = self._command_index
-        cmd = points[max(bisect.bisect_right(starts, k) - 1, 0)]
+        i = max(bisect.bisect_right(starts, k) - 1, 0)
+        cmd = points[i]
+        if i + 1 < len(points) and points[i + 1].ramp and starts[i + 1] > starts[i]:
+            nxt, a = points[i + 1], (k - starts[i]) / (starts[i + 1] - starts[i])
+            return (cmd.vx_des + a * (nxt.vx_des - cmd.vx_des), cmd.vy_des + a * (nxt.vy_des - cmd.vy_des),
+                    cmd.yaw_rate_des + a * (nxt.yaw_rate_des - cmd.yaw_rate_des))
         return cmd.vx_des, cmd.vy_des, cmd.yaw_rate_des
 
     def push_force_at_step(self, k: int) -> tuple[float, float, float]:
-        """Sum of the pushes active over communication step ``k`` (push ``p`` is active over
+        """Sum of the pelvis pushes active over communication step ``k`` (push ``p`` is active over
         steps ``[k0, k0 + n)``), added from 0.0 in the file's order. O(log n): a bisection
         over the steps where the set of active pushes changes, each segment's sum computed
         once, the first time it is asked for."""
@@ -189,6 +256,8 @@ class Scenario:
         first asked for, and the pushes active over each segment in file order)."""
         spans = []
         for j, p in enumerate(self.pushes):
+            if p.body != PELVIS:  # body_forces_at_step
+                continue
             k0 = to_step(p.t_s, self.comm_step_s)
             spans.append((k0, k0 + to_step(p.duration_s, self.comm_step_s), j))
         bounds = sorted({k for k0, k1, _ in spans if k0 < k1 for k in (k0, k1)})
@@ -205,6 +274,28 @@ class Scenario:
             now.update(starts.get(b, ()))
             active.append(tuple(sorted(now)))
         return bounds, [None] * len(bounds), active
+
+    def body_forces_at_step(self, k: int) -> dict[str, tuple[float, float, float]]:
+        """{body: sum of its pushes active over step ``k``} for the pushes on bodies other
+        than the pelvis (the pelvis': :meth:`push_force_at_step`)."""
+        out: dict[str, tuple[float, float, float]] = {}
+        for p in self.pushes:
+            if p.body == PELVIS:
+                continue
+            k0 = to_step(p.t_s, self.comm_step_s)
+            if k0 <= k < k0 + to_step(p.duration_s, self.comm_step_s):
+                f = out.get(p.body, (0.0, 0.0, 0.0))
+                out[p.body] = (f[0] + p.force_n[0], f[1] + p.force_n[1], f[2] + p.force_n[2])
+        return out
+
+    @property
+    def pushed_bodies(self) -> tuple[str, ...]:
+        """The bodies other than the pelvis that some push acts on."""
+        return tuple(sorted({p.body for p in self.pushes if p.body != PELVIS}))
+
+    def events_at_step(self, k: int) -> tuple[Event, ...]:
+        """The events taking place at the start of communication step ``k``."""
+        return tuple(e for e in self.events if to_step(e.t_s, self.comm_step_s) == k)
 
     def arm(self, name: str) -> Arm:
         for a in self.arms:

@@ -23,7 +23,8 @@ from scenarios.lang.fields import (Problems, did_you_mean, integer, name, number
 from scenarios.lang.formatting import is_number, show
 from scenarios.lang.scenario import (BUILTIN_ARMS, BUILTIN_MODELS, CHECK_OPS, CHECKABLE_METRICS, DEFAULT_COMM_STEP_S,
                                 DEFAULT_FLAT_RADIUS_M, DEFAULT_MODEL, DEFAULT_TERRAIN_SIZE_M, PLANT_DT_S, Arm, Claim, ClaimCheck,
-                                CommandPoint, Push, Terrain)
+                                CommandPoint, CommandProfile, Event, LinkMass, PELVIS, Push, RandomPushes,
+                                Terrain)
 from fmu_src.core.avr_params import params_from_overrides
 from fmu_src.core.avr_specs import PARAM_SPECS
 
@@ -31,9 +32,17 @@ TOP_KEYS = (
     "name", "description", "tags", "duration_s", "model", "comm_step_s", "seed",
     "perturbation_t_s", "torso_mass_kg", "torso_added_mass_kg", "torso_com_offset_m",
     "joint_damping_scale", "compare", "command", "push", "terrain", "regulator", "arm", "claim",
+    "floor_friction", "slope_deg", "cross_slope_deg", "link_mass", "event", "command_profile", "random_pushes",
 )
-COMMAND_KEYS = ("t_s", "vx_des", "vy_des", "yaw_rate_des")
-PUSH_KEYS = ("t_s", "force_n", "duration_s")
+COMMAND_KEYS = ("t_s", "vx_des", "vy_des", "yaw_rate_des", "ramp")
+PUSH_KEYS = ("t_s", "force_n", "duration_s", "body")
+LINK_MASS_KEYS = ("body", "scale", "mass_kg")
+EVENT_KEYS = ("t_s", "torso_mass_kg", "torso_com_offset_m", "joint_damping_scale", "floor_friction")
+COMMAND_PROFILE_KEYS = ("shape", "seed", "hold_s", "vx_des", "vy_des")
+COMMAND_PROFILE_SHAPES = ("stepped", "ramped")
+RANDOM_PUSHES_KEYS = ("count", "seed", "t_s", "magnitude_n", "duration_s", "bodies")
+#: Most pushes a [random_pushes] table draws.
+MAX_RANDOM_PUSHES = 100
 TERRAIN_KEYS = ("max_height_m", "max_slope_deg", "seed", "size_m", "flat_radius_m")
 ARM_KEYS = ("name", "description", "regulator")
 CLAIM_KEYS = ("text", "source", "check")
@@ -160,8 +169,11 @@ def commands(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> tuple[Comma
                           le=MAX_ABS_YAW_RATE_DES)
         grid.check_time(t, f + ".t_s", probs)
         grid.check_before_end(t, f + ".t_s", probs)
+        ramp = flag(c, "ramp", f + ".ramp", probs)
+        if ramp and i == 0:
+            probs.add(f + ".ramp", ramp, "the first command has no previous point to ramp from")
         if t is not None and vx is not None and vy is not None and yaw_rate is not None:
-            out.append(CommandPoint(t, vx, vy, yaw_rate))
+            out.append(CommandPoint(t, vx, vy, yaw_rate, ramp))
     ts = [c.get("t_s") for c in tables]
     if ts and ts[0] != 0 and is_number(ts[0]):
         probs.add("command[0].t_s", ts[0], "the first command must be at t_s = 0")
@@ -172,7 +184,8 @@ def commands(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> tuple[Comma
 
 
 def pushes(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> tuple[Push, ...]:
-    """Constant pelvis forces on the communication grid, within the run."""
+    """Constant forces on the pelvis (or the ``body`` named) on the communication grid,
+    within the run; the body is checked against the model by :func:`scenarios.lang.plantio.check_plant`."""
     out: list[Push] = []
     for i, p in enumerate(_schedule(doc, "push", probs)):
         f = f"push[{i}]"
@@ -187,8 +200,9 @@ def pushes(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> tuple[Push, .
         grid.check_time(t, f + ".t_s", probs)
         grid.check_span(dur, f + ".duration_s", probs)
         grid.check_before_end(t, f + ".t_s", probs)
+        body = string(p, "body", f + ".body", probs, default=PELVIS)
         if t is not None and force is not None and dur is not None:
-            out.append(Push(t, force, dur))
+            out.append(Push(t, force, dur, body))
     return tuple(out)
 
 
@@ -203,6 +217,8 @@ def perturbation(doc: Mapping[str, Any], probs: Problems) -> dict[str, Any]:
         "torso_com_offset_m": vec3(doc, "torso_com_offset_m", "torso_com_offset_m", probs, default=(0.0, 0.0, 0.0)),
         "joint_damping_scale": number(doc, "joint_damping_scale", "joint_damping_scale", probs, default=1.0),
     }
+    env = environment(doc, probs)
+    out.update(env)
     values, out["terrain"] = _terrain(doc, probs)
     unreadable = [f"terrain.{k}=" for k, v in values.items() if v is None]  # already reported
     plant_values = {k: v for k, v in out.items() if k != "terrain"}
@@ -232,6 +248,182 @@ def _terrain(doc: Mapping[str, Any], probs: Problems) -> tuple[dict[str, Any], T
     }
     complete = all(v is not None for v in values.values())
     return values, Terrain(**values) if complete else None
+
+
+def flag(table: Mapping[str, Any], key: str, field: str, probs: Problems, default: bool = False) -> bool:
+    """An optional boolean."""
+    if key not in table:
+        return default
+    v = table[key]
+    if not isinstance(v, bool):
+        probs.add(field, v, "must be true or false")
+        return default
+    return v
+
+
+def environment(doc: Mapping[str, Any], probs: Problems) -> dict[str, Any]:
+    """Floor friction, floor slope and ``[[link_mass]]``: read here, their ranges are the
+    plant's (``Perturbation.problems``, checked by :func:`perturbation`), the link's body is
+    checked against the model by :func:`scenarios.lang.plantio.check_plant`."""
+    out: dict[str, Any] = {
+        "floor_friction": number(doc, "floor_friction", "floor_friction", probs),
+        "slope_deg": number(doc, "slope_deg", "slope_deg", probs, default=0.0),
+        "cross_slope_deg": number(doc, "cross_slope_deg", "cross_slope_deg", probs, default=0.0),
+    }
+    links: list[LinkMass] = []
+    for i, t in enumerate(table_list(doc, "link_mass", "link_mass", probs)):
+        f = f"link_mass[{i}]"
+        unknown_keys(t, LINK_MASS_KEYS, f + ".", probs)
+        body = string(t, "body", f + ".body", probs, required=True)
+        scale = number(t, "scale", f + ".scale", probs)
+        kg = number(t, "mass_kg", f + ".mass_kg", probs)
+        if ("scale" in t) == ("mass_kg" in t):
+            probs.note(f, "give exactly one of scale (times the model's mass) or mass_kg")
+        elif body and (scale is not None or kg is not None):
+            links.append(LinkMass(body, scale, kg))
+    out["link_masses"] = tuple(links)
+    return out
+
+
+def events(doc: Mapping[str, Any], grid: Grid, start: Mapping[str, Any], probs: Problems) -> tuple[Event, ...]:
+    """``[[event]]``: plant changes during the walk, on the grid, within the run, in time
+    order; each value's range is the plant's (the same as the top-level key of that name).
+    ``start``: the scenario's own values (a damping change needs a non-zero start scale)."""
+    from plant.perturbation import Perturbation
+
+    out: list[Event] = []
+    last = None
+    for i, e in enumerate(_schedule(doc, "event", probs)):
+        f = f"event[{i}]"
+        unknown_keys(e, EVENT_KEYS, f + ".", probs)
+        t = number(e, "t_s", f + ".t_s", probs, required=True, gt=0.0)
+        grid.check_time(t, f + ".t_s", probs)
+        grid.check_before_end(t, f + ".t_s", probs)
+        if t is not None and last is not None and not t > last:
+            probs.add(f + ".t_s", t, f"must be > event[{i - 1}].t_s = {last:g} (increasing)")
+        last = t if t is not None else last
+        values = {"torso_mass_kg": number(e, "torso_mass_kg", f + ".torso_mass_kg", probs),
+                  "torso_com_offset_m": vec3(e, "torso_com_offset_m", f + ".torso_com_offset_m", probs),
+                  "joint_damping_scale": number(e, "joint_damping_scale", f + ".joint_damping_scale", probs),
+                  "floor_friction": number(e, "floor_friction", f + ".floor_friction", probs)}
+        if not any(k in e for k in values):
+            probs.note(f, f"changes nothing; give at least one of {', '.join(values)}")
+        given = {k: v for k, v in values.items() if v is not None}
+        plant = Perturbation(**given)
+        for problem in plant.problems():
+            probs.note(f, problem)
+        if "joint_damping_scale" in given and not start.get("joint_damping_scale"):
+            probs.add(f + ".joint_damping_scale", given["joint_damping_scale"],
+                      "a damping change needs a non-zero joint_damping_scale to start from")
+        if t is not None and not any(v is None and k in e for k, v in values.items()):
+            out.append(Event(t, **given))
+    return tuple(out)
+
+
+def _range_pair(t: Mapping[str, Any], key: str, field: str, probs: Problems, lo: float, hi: float,
+                required: bool = True) -> tuple[float, float] | None:
+    """``[low, high]`` with lo <= low <= high <= hi."""
+    if key not in t:
+        if required:
+            probs.note(field, "required: [low, high]")
+        return None
+    v = t[key]
+    if not (isinstance(v, list) and len(v) == 2 and all(as_finite_number(x) for x in v)):
+        probs.add(field, v, "must be [low, high], two finite numbers")
+        return None
+    a, b = float(v[0]), float(v[1])
+    if not (lo <= a <= b <= hi):
+        probs.add(field, v, f"must satisfy {lo:g} <= low <= high <= {hi:g}")
+        return None
+    return a, b
+
+
+def as_finite_number(x: Any) -> bool:
+    return is_number(x) and math.isfinite(float(x))
+
+
+def command_profile(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> CommandProfile | None:
+    """``[command_profile]``: a seeded random command instead of ``[[command]]``."""
+    t = table(doc, "command_profile", "command_profile", probs)
+    if t is None:
+        return None
+    if "command" in doc:
+        probs.note("command_profile", "give [[command]] or [command_profile], not both")
+    unknown_keys(t, COMMAND_PROFILE_KEYS, "command_profile.", probs)
+    shape = string(t, "shape", "command_profile.shape", probs, required=True)
+    if isinstance(t.get("shape"), str) and shape not in COMMAND_PROFILE_SHAPES:
+        probs.add("command_profile.shape", shape, f"must be one of {', '.join(COMMAND_PROFILE_SHAPES)}")
+    seed = integer(t, "seed", "command_profile.seed", probs, required=True, ge=0)
+    hold = number(t, "hold_s", "command_profile.hold_s", probs, required=True, gt=0.0)
+    grid.check_span(hold, "command_profile.hold_s", probs)
+    vx = _range_pair(t, "vx_des", "command_profile.vx_des", probs, -MAX_ABS_VX_DES, MAX_ABS_VX_DES)
+    vy = _range_pair(t, "vy_des", "command_profile.vy_des", probs, -MAX_ABS_VY_DES, MAX_ABS_VY_DES,
+                     required=False) or (0.0, 0.0)
+    if None in (seed, hold, vx) or shape not in COMMAND_PROFILE_SHAPES:
+        return None
+    return CommandProfile(shape, seed, hold, vx, vy)
+
+
+def profile_commands(profile: CommandProfile, grid: Grid) -> tuple[CommandPoint, ...]:
+    """The command points of ``profile`` over the run: a point every ``hold_s`` from 0,
+    (vx_des, vy_des) uniform in the ranges from ``numpy.random.default_rng(seed)``."""
+    import numpy as np
+
+    rng = np.random.default_rng(profile.seed)
+    n = max(1, math.ceil(round(grid.duration / profile.hold_s, 9)))
+    out = []
+    for i in range(n):
+        vx = round(float(rng.uniform(*profile.vx_range)), 4)
+        vy = round(float(rng.uniform(*profile.vy_range)), 4)
+        out.append(CommandPoint(round(i * profile.hold_s, 9), vx, vy, 0.0,
+                                ramp=profile.shape == "ramped" and i > 0))
+    return tuple(out)
+
+
+def random_pushes(doc: Mapping[str, Any], grid: Grid, probs: Problems) -> RandomPushes | None:
+    """``[random_pushes]``: seeded pushes added to the ``[[push]]`` ones."""
+    t = table(doc, "random_pushes", "random_pushes", probs)
+    if t is None:
+        return None
+    unknown_keys(t, RANDOM_PUSHES_KEYS, "random_pushes.", probs)
+    count = integer(t, "count", "random_pushes.count", probs, required=True, ge=0)
+    if count is not None and count > MAX_RANDOM_PUSHES:
+        probs.add("random_pushes.count", count, f"must be <= {MAX_RANDOM_PUSHES}")
+        count = None
+    seed = integer(t, "seed", "random_pushes.seed", probs, required=True, ge=0)
+    span = _range_pair(t, "t_s", "random_pushes.t_s", probs, 0.0, grid.duration or MAX_DURATION_S)
+    if span is not None and grid.duration is not None and span[1] >= grid.duration:
+        probs.add("random_pushes.t_s", list(span), f"the latest start must be < duration_s = {grid.duration:g}")
+        span = None
+    mag = _range_pair(t, "magnitude_n", "random_pushes.magnitude_n", probs, 0.0, MAX_PUSH_FORCE_N)
+    dur = number(t, "duration_s", "random_pushes.duration_s", probs, required=True, gt=0.0)
+    grid.check_span(dur, "random_pushes.duration_s", probs)
+    bodies = t.get("bodies", [PELVIS])
+    if not (isinstance(bodies, list) and bodies and all(isinstance(b, str) for b in bodies)):
+        probs.add("random_pushes.bodies", bodies, "must be a non-empty list of body names")
+        bodies = None
+    if None in (count, seed, span, mag, dur, bodies):
+        return None
+    return RandomPushes(count, seed, span, mag, dur, tuple(bodies))
+
+
+def drawn_pushes(spec: RandomPushes, grid: Grid) -> tuple[Push, ...]:
+    """The pushes of ``spec``: start uniform in ``t_range_s`` snapped to the grid (within
+    the range), direction uniform in [0, 360) deg in the horizontal plane, magnitude
+    uniform, body uniform among ``bodies``; from ``numpy.random.default_rng(seed)``."""
+    import numpy as np
+
+    rng = np.random.default_rng(spec.seed)
+    lo_k, hi_k = math.ceil(spec.t_range_s[0] / grid.h - 1e-9), math.floor(spec.t_range_s[1] / grid.h + 1e-9)
+    out = []
+    for _ in range(spec.count):
+        k = int(rng.integers(lo_k, hi_k, endpoint=True)) if hi_k >= lo_k else lo_k
+        heading = float(rng.uniform(0.0, 2.0 * math.pi))
+        mag = float(rng.uniform(*spec.magnitude_range_n))
+        body = spec.bodies[int(rng.integers(len(spec.bodies)))]
+        force = (round(mag * math.cos(heading), 4), round(mag * math.sin(heading), 4), 0.0)
+        out.append(Push(round(k * grid.h, 9), force, spec.duration_s, body))
+    return tuple(out)
 
 
 # --------------------------------------------------------------------------- regulator and arms

@@ -108,7 +108,18 @@ def parse_scenario(doc: Mapping[str, Any], source: str | None = None, *, base_di
     probs = Problems()
     head, grid = sections.header(doc, base_dir, probs)
     plant = sections.perturbation(doc, probs)
-    schedule = {"commands": sections.commands(doc, grid, probs), "pushes": sections.pushes(doc, grid, probs)}
+    profile = sections.command_profile(doc, grid, probs)
+    drawn = sections.random_pushes(doc, grid, probs)
+    grid_ok = grid.ok and grid.duration is not None
+    if "command_profile" in doc:
+        cmds = sections.profile_commands(profile, grid) if profile is not None and grid_ok else ()
+    else:
+        cmds = sections.commands(doc, grid, probs)
+    pushes = sections.pushes(doc, grid, probs)
+    if drawn is not None and grid_ok:
+        pushes += sections.drawn_pushes(drawn, grid)
+    schedule = {"commands": cmds, "pushes": pushes, "command_profile": profile, "random_pushes": drawn,
+                "events": sections.events(doc, grid, plant, probs)}
     arms, arm_names = sections.arms(doc, head["seed"], probs)
     claim = sections.claim(doc, arm_names, probs)
     scenario = None

@@ -386,3 +386,29 @@ def test_arm_stats_and_paired_comparison():
     assert p["both_walked"] == 2 and p["a_lower_vx"] == 1 and p["a_lower_vy"] == 0 and p["median_diff_vy"] == 0.0
     assert [x[0] for x in p["not_better"]] == ["b", "d"]
     assert [w["sample"] for w in analysis.worst(rows, "adaptive", 2)] == ["b", "d"]
+
+
+def test_paired_verdicts_never_falls_where_pd_walks_and_beats_pd():
+    def r(sample, arm, fell, sse):
+        return {"sample": sample, "arm": arm, "status": "complete", "fell": fell, "t_fall_s": 3.0 if fell else None,
+                "steady_state_error_vx": None if fell else sse, "steady_state_error_vy": None if fell else 0.01,
+                "convergence_time_s": None}
+    # 19 wins (one by a PD fall), one sample both fell (no contest): 19/19 contested
+    rows = [x for i in range(18) for x in (r(f"w{i}", "adaptive", False, 0.02), r(f"w{i}", "pd_only", False, 0.1))]
+    rows += [r("pf", "adaptive", False, 0.03), r("pf", "pd_only", True, None),
+             r("bf", "adaptive", True, None), r("bf", "pd_only", True, None)]
+    v = analysis.verdicts(rows, "adaptive", "pd_only")
+    assert v["never_falls_where_b_walks"] and v["beats"] and (v["wins"], v["contested"]) == (19, 19)
+    assert v["win_ci"][1] == 1.0 and abs(v["win_ci"][0] - 0.8235) < 1e-3  # exact 95 % for 19/19: (0.8235, 1]
+    lo, hi = v["median_diff_ci"]
+    assert lo == hi == pytest.approx(-0.08)
+    # one sample where adaptive falls and PD walks, one where PD is better: both verdicts fail
+    rows += [r("af", "adaptive", True, None), r("af", "pd_only", False, 0.1),
+             r("pb", "adaptive", False, 0.2), r("pb", "pd_only", False, 0.1)]
+    v = analysis.verdicts(rows, "adaptive", "pd_only")
+    assert not v["never_falls_where_b_walks"] and v["only_a_fell"] == ["af"]
+    assert (v["wins"], v["contested"]) == (19, 21) and v["beats"]  # 19/21 = 90.5 % >= 90 %
+    rows += [r("pb2", "adaptive", False, 0.3), r("pb2", "pd_only", False, 0.1)]
+    v = analysis.verdicts(rows, "adaptive", "pd_only")
+    assert (v["wins"], v["contested"]) == (19, 22) and not v["beats"]  # 86.4 %
+    assert [x[0] for x in v["not_better"]] == ["af", "pb", "pb2"]

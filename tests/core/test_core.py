@@ -727,8 +727,9 @@ def test_property_outputs_compose_pd_and_gained_psi(gains, seed):
 
 
 def test_learning_waits_for_learn_from_step_but_psi_keeps_acting():
-    """Default learn_from_step = 1: no step-averaged velocity exists before the first
-    completed walking step, so step_index 0 must not teach the networks anything."""
+    """learn_from_step = 1: no step-averaged velocity exists before the first
+    completed walking step, so step_index 0 must not teach the networks anything (the
+    default, 12, waits out the whole start-up: tests/scenarios/test_startup.py)."""
     p = small(learn_from_step=1, learning_rate=1e-4)
     nets = build_networks(p)
     s0 = initial_state(p, nets)
@@ -741,7 +742,7 @@ def test_learning_waits_for_learn_from_step_but_psi_keeps_acting():
                     p.replace(learn_from_step=5), nets)
     assert np.array_equal(s3.weights, s2.weights)  # gate closed again: frozen ...
     assert out3["psi_x"] != 0.0  # ... but what was learned still acts
-    assert RegulatorParams().learn_from_step == 1
+    assert RegulatorParams().learn_from_step == 12
 
 
 # -------------------------------------------------------------------- stride learning

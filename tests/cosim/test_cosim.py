@@ -88,6 +88,10 @@ def test_fmu_and_inprocess_bit_identical(fmu_path):
     s = short("compare_fixed_speed", 2.0,
               commands=(CommandPoint(0.0, 0.5, 0.0), CommandPoint(1.0, 0.3, 0.1)),
               pushes=(Push(1.5, (20.0, -5.0, 0.0), 0.1),))
+    # learning from the first completed step, so that it acts within these 2 s
+    adaptive = s.arm("adaptive")
+    s = dataclasses.replace(s, arms=(dataclasses.replace(
+        adaptive, overrides=tuple(sorted({**adaptive.overrides_dict(), "learn_from_step": 1}.items()))),))
     (a,) = master.run_scenario(s, "fmu", fmu_path=fmu_path, arms=("adaptive",))
     (b,) = master.run_scenario(s, "inprocess", arms=("adaptive",))
     assert a.rows.dtype == b.rows.dtype

@@ -48,7 +48,9 @@ def _memory_pairs(py, c):
     pairs = [("vx_step_avg", py.vx_step_avg, m.vx_step_avg), ("vy_filt", py.vy_filt, m.vy_filt),
              ("vx_filt", py.vx_filt, m.vx_filt), ("tau", py.tau, m.tau), ("yaw_ref", py.yaw_ref, m.yaw_ref),
              ("vx_des", py.vx_des, m.vx_des), ("vy_des", py.vy_des, m.vy_des),
-             ("yaw_rate_des", py.yaw_rate_des, m.yaw_rate_des), ("t_step_start", py.t_step_start, m.t_step_start),
+             ("yaw_rate_des", py.yaw_rate_des, m.yaw_rate_des), ("vx_ref", py.vx_ref, m.vx_ref),
+             ("vy_ref", py.vy_ref, m.vy_ref), ("yaw_rate_ref", py.yaw_rate_ref, m.yaw_rate_ref),
+             ("t_step_start", py.t_step_start, m.t_step_start),
              ("swing_start0", py._swing_start[0], m.swing_start[0]),
              ("swing_start1", py._swing_start[1], m.swing_start[1])]
     return [(n, struct.pack("<d", a), struct.pack("<d", b)) for n, a, b in pairs] + [

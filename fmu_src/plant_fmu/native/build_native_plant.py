@@ -112,7 +112,7 @@ def vars_header(guid: str) -> str:
         f"#define CP_STEPS_TOL ({c_double(fmu_core.STEPS_TOL)})",
         f"#define CP_FALL_HEIGHT_M ({c_double(cassie.FALL_HEIGHT_M)})",
         f"#define CP_FALL_TILT_RAD ({c_double(cassie.FALL_TILT_RAD)})",
-        f"#define CP_NOMINAL_PELVIS_MASS_KG ({c_double(constants.NOMINAL_PELVIS_MASS_KG)})",
+        f"#define CP_NOMINAL_TORSO_MASS_KG ({c_double(constants.NOMINAL_TORSO_MASS_KG)})",
         f"#define CP_PELVIS_BODY {c_string(constants.PELVIS_BODY)}",
         f"#define CP_HOME_KEY {c_string(constants.HOME_KEY)}",
         "static const double CP_HOME_PELVIS_POS[3] = {" + ", ".join(map(c_double, constants.HOME_PELVIS_POS_M)) + "};",

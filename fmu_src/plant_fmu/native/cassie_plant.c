@@ -95,7 +95,7 @@ static mjModel *load_model(const char *path, const double *v, char *err, int err
     int pelvis = mj_name2id(m, mjOBJ_BODY, CP_PELVIS_BODY);
     int changed = 0;
     double mass = v[CP_VR_torso_mass_kg];
-    if (mass != CP_NOMINAL_PELVIS_MASS_KG) {
+    if (mass != CP_NOMINAL_TORSO_MASS_KG) {
         double m0 = m->body_mass[pelvis];
         m->body_mass[pelvis] = mass;
         double ratio = mass / m0;

@@ -8,7 +8,7 @@
  *   u32 phase bit  u32 has walker  f64 time  f64 values[CP_N_VARS]
  *   walker (has walker only): i32 substep  i32 fell  char[160] fall reason
  *     f64 vx_des_mps vy_des_mps yaw_rate_des_radps
- *     controller memory: f64 offsets[6] vx_des vy_des cmd_vx cmd_vy yaw_rate_des cmd_yaw_rate
+ *     controller memory: f64 offsets[6] vx_ref vy_ref vx_des vy_des yaw_rate_ref yaw_rate_des
  *       i32 mode  i32 stance  i64 step_index  f64 t_step_start tau vx_step_avg vy_filt vx_filt
  *       step_start_xy[2] swing_start[2] last_t yaw_ref
  *     u32 n  f64 MuJoCo integration state[n] (mj_getState, mjSTATE_INTEGRATION)
@@ -358,7 +358,7 @@ static void put_walker(Buf *b, const CpWalker *w) {
     put_f64(b, w->yaw_rate_des_radps);
     const CcMemory *m = &w->ctrl.mem;
     for (int k = 0; k < CC_NOFFSETS; k++) put_f64(b, m->offsets[k]);
-    double head[] = {m->vx_des, m->vy_des, m->cmd_vx, m->cmd_vy, m->yaw_rate_des, m->cmd_yaw_rate};
+    double head[] = {m->vx_ref, m->vy_ref, m->vx_des, m->vy_des, m->yaw_rate_ref, m->yaw_rate_des};
     for (size_t k = 0; k < sizeof head / sizeof *head; k++) put_f64(b, head[k]);
     put_u32(b, (uint32_t)m->mode);
     put_u32(b, (uint32_t)m->stance);
@@ -490,12 +490,12 @@ static int read_walker(Buf *b, const CpWalker *w, WalkerState *ws, Problems *p) 
     ws->yaw_rate_des_radps = get_f64(b);
     CcMemory *mm = &ws->mem;
     for (int k = 0; k < CC_NOFFSETS; k++) mm->offsets[k] = get_f64(b);
+    mm->vx_ref = get_f64(b);
+    mm->vy_ref = get_f64(b);
     mm->vx_des = get_f64(b);
     mm->vy_des = get_f64(b);
-    mm->cmd_vx = get_f64(b);
-    mm->cmd_vy = get_f64(b);
+    mm->yaw_rate_ref = get_f64(b);
     mm->yaw_rate_des = get_f64(b);
-    mm->cmd_yaw_rate = get_f64(b);
     mm->mode = (int)get_u32(b);
     mm->stance = (int)get_u32(b);
     mm->step_index = (long long)get_u64(b);
@@ -552,12 +552,12 @@ static int read_walker(Buf *b, const CpWalker *w, WalkerState *ws, Problems *p) 
         snprintf(label, sizeof label, "controller offsets['%s']", offset_names[k]);
         input_range(p, label, mm->offsets[k], CP_VR_FIRST_OFFSET + k);
     }
-    input_range(p, "controller cmd_vx", mm->cmd_vx, CP_VR_vx_des);
     input_range(p, "controller vx_des", mm->vx_des, CP_VR_vx_des);
-    input_range(p, "controller cmd_vy", mm->cmd_vy, CP_VR_vy_des);
+    input_range(p, "controller vx_ref", mm->vx_ref, CP_VR_vx_des);
     input_range(p, "controller vy_des", mm->vy_des, CP_VR_vy_des);
-    input_range(p, "controller cmd_yaw_rate", mm->cmd_yaw_rate, CP_VR_yaw_rate_des);
+    input_range(p, "controller vy_ref", mm->vy_ref, CP_VR_vy_des);
     input_range(p, "controller yaw_rate_des", mm->yaw_rate_des, CP_VR_yaw_rate_des);
+    input_range(p, "controller yaw_rate_ref", mm->yaw_rate_ref, CP_VR_yaw_rate_des);
     number(p, "vx_step_avg", mm->vx_step_avg, -bound, bound);
     number(p, "vy_filt", mm->vy_filt, -bound, bound);
     number(p, "vx_filt", mm->vx_filt, -bound, bound);

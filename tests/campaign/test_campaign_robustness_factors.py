@@ -1,0 +1,137 @@
+"""Campaign factors for what robustness studies randomize: the model, floor friction and
+shape, link masses, seeded command profiles and several seeded random pushes; and the
+built-in robustness_random campaign built on them."""
+from __future__ import annotations
+
+import tomllib
+
+import pytest
+
+from scenarios.campaign import sampling, spec
+from scenarios.errors import ScenarioError
+from scenarios.lang import spec as scenario_spec
+from support.paths import REPO_ROOT
+
+BASE = """
+name = "c"
+samples = 12
+seed = 5
+base = "nominal"
+duration_s = 6.0
+compare = ["adaptive", "pd_only"]
+"""
+FACTORS = """
+[factors.model]
+dist = "choice"
+values = ["menagerie", "osu"]
+[factors.floor_friction]
+dist = "uniform"
+low = 0.5
+high = 1.0
+[factors.floor]
+dist = "choice"
+values = ["flat", { slope_deg = 4.0 }, { terrain = { max_height_m = 0.1, max_slope_deg = 10.0, seed = 0 } }]
+[factors.floor_terrain_seed]
+dist = "randint"
+low = 1
+high = 50
+[factors.link_mass_scale.left-shin]
+dist = "uniform"
+low = 0.8
+high = 1.2
+[factors.command_profile]
+dist = "choice"
+values = [{ shape = "ramped", seed = 0, hold_s = 2.0, vx_des = [0.2, 0.8] }]
+[factors.command_profile_seed]
+dist = "randint"
+low = 1
+high = 1000
+[factors.random_pushes]
+dist = "choice"
+values = [{ count = 1, seed = 0, t_s = [1.0, 5.0], magnitude_n = [10.0, 20.0], duration_s = 0.1 }]
+[factors.random_pushes_count]
+dist = "randint"
+low = 1
+high = 3
+[factors.random_pushes_seed]
+dist = "randint"
+low = 1
+high = 1000
+"""
+
+
+def campaign(text: str) -> spec.Campaign:
+    return spec.parse_campaign(tomllib.loads(text), source="test.toml", base_dir=REPO_ROOT)
+
+
+def test_new_factors_reach_every_sample():
+    c = campaign(BASE + FACTORS)
+    samples = sampling.draw(c)
+    texts = sampling.build_samples(c, samples)  # every sample passes the scenario loader
+    models, floors, counts = set(), set(), set()
+    for sample in samples:
+        s = scenario_spec.parse_scenario(tomllib.loads(texts[sample.id]), check_plant=False)
+        v = sample.values
+        models.add(s.model)
+        assert s.model == v["model"] and s.floor_friction == v["floor_friction"]
+        assert [(lm.body, lm.scale) for lm in s.link_masses] == [("left-shin", v["link_mass_scale.left-shin"])]
+        assert s.command_profile.seed == v["command_profile_seed"] and s.command_profile.shape == "ramped"
+        assert [c_.t_s for c_ in s.commands] == [0.0, 2.0, 4.0]
+        assert len(s.pushes) == v["random_pushes_count"] == s.random_pushes.count
+        assert s.random_pushes.seed == v["random_pushes_seed"]
+        counts.add(len(s.pushes))
+        if v["floor"] == "flat":
+            assert s.terrain is None and s.slope_deg == 0.0
+        elif "slope_deg" in v["floor"]:
+            assert s.terrain is None and s.slope_deg == 4.0
+        else:
+            assert s.terrain.seed == v["floor_terrain_seed"] and s.terrain.max_height_m == 0.1
+        floors.add(str(v["floor"]))
+    assert models == {"menagerie", "osu"} and len(floors) == 3 and counts == {1, 2, 3}
+
+
+def test_new_factors_checked_up_front_naming_the_factor():
+    with pytest.raises(ScenarioError) as exc:
+        campaign(BASE + """
+[factors.model]
+dist = "choice"
+values = ["menagerie", "cassie3"]
+[factors.floor]
+dist = "choice"
+values = ["flat", { bumps = 1 }]
+""")
+    found = exc.value.problems  # the kinds of values first; the ranges once the file is well-formed
+    assert any("factors.model.values[1]" in p and '"menagerie" or "osu"' in p for p in found)
+    assert any("factors.floor.values[1]" in p and "slope_deg, cross_slope_deg or terrain" in p for p in found)
+    with pytest.raises(ScenarioError) as exc:
+        campaign(BASE + """
+[factors.floor_friction]
+dist = "uniform"
+low = 0.5
+high = 2.5
+[factors.floor]
+dist = "choice"
+values = ["flat", { slope_deg = 30.0 }]
+[factors.link_mass_scale.left-wing]
+dist = "uniform"
+low = 0.8
+high = 1.2
+""")
+    found = exc.value.problems
+    assert any("factors.floor_friction = 2.5" in p and "(0, 2]" in p for p in found)
+    assert any("factors.floor" in p and "slope_deg=30.0" in p and "[-15, 15]" in p for p in found)
+    assert any("factors.link_mass_scale.left-wing" in p and "no such body" in p for p in found)
+
+
+def test_robustness_random_campaign_is_what_the_issue_asks():
+    c = spec.load_campaign(spec.resolve_campaign("robustness_random"))
+    assert c.n_samples >= 100 and c.arm_names() == ["adaptive", "pd_only", "rl_hzd"]
+    names = {f.name for f in c.factors}
+    for needed in ("model", "floor_friction", "torso_mass_kg", "torso_com_offset_x_m", "torso_com_offset_y_m",
+                   "joint_damping_scale", "floor", "command_profile", "random_pushes", "random_pushes_count",
+                   "link_mass_scale.left-hip-pitch", "seed"):
+        assert needed in names
+    samples = sampling.draw(c)
+    texts = sampling.build_samples(c, samples[:10])
+    s = scenario_spec.parse_scenario(tomllib.loads(texts[samples[0].id]), check_plant=False)
+    assert s.duration_s == 25.0 and s.random_pushes is not None and s.command_profile is not None
