@@ -277,7 +277,7 @@ def test_plant_fmu_parameters_carry_friction_slopes_and_link_scales():
 
     s = parse(HEAD + "floor_friction = 0.7\nslope_deg = -4.0\ncross_slope_deg = 2.0\n" + CMD +
               '[[link_mass]]\nbody = "left-hip-pitch"\nscale = 1.2\n')
-    pert = plantio.build_perturbation(s, None)
+    pert = plantio.build_perturbation(s)
     values = fmu_core.values_from_perturbation("menagerie", pert)
     assert values["floor_friction"] == 0.7 and values["floor_slope_deg"] == -4.0
     assert values["floor_cross_slope_deg"] == 2.0 and values["link_mass_scale_left_hip_pitch"] == 1.2
