@@ -128,7 +128,9 @@ def _plant_inputs(k: int) -> dict:
     return {"vx_des": 0.0 if k < 200 else 0.3}
 
 
-_REGULATOR = Experiment("3 s of walking-like measurements, a walking step every 0.25 s", 600, 0.005, 10,
+# 16 walking steps: the networks learn from step 12 on (learn_from_step's default), so the last
+# four exercise learning and its outputs.
+_REGULATOR = Experiment("4 s of walking-like measurements, a walking step every 0.25 s", 800, 0.005, 10,
                         _regulator_inputs)
 EXPERIMENTS = {
     "AdaptiveVelocityRegulator": _REGULATOR,

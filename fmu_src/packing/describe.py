@@ -23,9 +23,13 @@ PLANT_INITIAL_UNKNOWNS = {
     # The contact forces carrying the robot: its model and mass distribution, whether the floor is
     # a plane or the height field (terrain_max_height_m > 0) and the field's sample grid (its
     # spacing follows terrain_size_m).  The robot stands on the field's flat start patch
-    # (plant/terrain.py), so the terrain's seed and slope never reach it.
+    # (plant/terrain.py), so the terrain's seed and slope never reach it; a tilted floor, the
+    # floor's friction and the leg links' masses (fmu_core.LINK_MASS_BODIES) do.
     **{name: ("cassie_model", "torso_mass_kg", "torso_com_offset_x_m", "torso_com_offset_y_m", "torso_com_offset_z_m",
-              "terrain_max_height_m", "terrain_size_m") for name in ("left_foot_force", "right_foot_force")},
+              "terrain_max_height_m", "terrain_size_m", "floor_friction", "floor_slope_deg", "floor_cross_slope_deg",
+              *(f"link_mass_scale_{side}_{link}" for side in ("left", "right")
+                for link in ("hip_pitch", "shin", "tarsus")))
+       for name in ("left_foot_force", "right_foot_force")},
 }
 
 

@@ -17,7 +17,8 @@ from fmu_src.core.avr_specs import INPUT_SPECS
 from support.native_support import H, OUTPUT_NAMES, AnySlave, core_outputs, fmi2_only, input_sequence
 
 N_STEPS = 150
-PARAMS = {"n_neurons": 400, "seed": 11, "Kp_x": 0.3, "learning_rate": 1e-4}  # a fast learner: Psi visibly moves
+# a fast learner from the first step: Psi visibly moves
+PARAMS = {"n_neurons": 400, "seed": 11, "Kp_x": 0.3, "learning_rate": 1e-4, "learn_from_step": 1}
 TOL = dict(rtol=1e-12, atol=1e-12)
 
 
@@ -81,7 +82,7 @@ def test_libcosimpy_matches_core(regulator_fmu, sequence, reference, tmp_path):
 
     log_output_level(CosimLogLevel.ERROR)
     shutil.copy(regulator_fmu.path, tmp_path / regulator_fmu.path.name)
-    typed = {"n_neurons": "Integer", "seed": "Integer"}
+    typed = {"n_neurons": "Integer", "seed": "Integer", "learn_from_step": "Integer"}
     initial = "\n".join(
         f'        <InitialValue variable="{k}"><{typed.get(k, "Real")} value="{v!r}"/></InitialValue>'
         for k, v in PARAMS.items())
