@@ -19,7 +19,7 @@ from numbers import Real
 import numpy as np
 
 from fmu_src.core.avr_errors import InputError, ParameterError, StateError
-from fmu_src.core.avr_network import (INV_TAU_RC, NETWORK_NAMES, input_currents, lif_rates_times_tau_rc,
+from fmu_src.core.avr_network import (INV_TAU_RC, input_currents, lif_rates_times_tau_rc,
                            readonly, scaled_inputs)
 from fmu_src.core.avr_params import network_key, validate_inputs
 from fmu_src.core.avr_specs import (ANGLE_LIMIT_RAD, OFFSET_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
