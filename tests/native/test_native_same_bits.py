@@ -22,7 +22,8 @@ from fmpy.build import build_platform_binary
 
 from support.native_support import AARCH64_CC, CC, c_host_script, compile_host, input_sequence, require, run_host
 
-PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_knee": 0.0}
+PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_knee": 0.0,
+          "learn_from_step": 1, "leakage_per_s": 0.0}  # learning from the first step; the plain rule
 #: The same with every remedy against drift on, each acting on this sequence: the leak, a
 #: dead-zone the synthetic errors exceed, a bound below the x row's plain norm (7.6e-5 rad/Hz).
 REMEDIES = {**PARAMS, "leakage_per_s": 0.5, "error_deadzone_mps": 0.05, "weight_norm_max": 3e-5}
