@@ -221,24 +221,31 @@ FMI_APIS: dict[str, FmiApi] = {api.version: api for api in (Fmi2Api(), Fmi3Api()
 
 
 def _fmi2_callbacks():
-    """The process-lifetime fmi2CallbackFunctions with the routing logger."""
+    """The process-lifetime fmi2CallbackFunctions with the routing logger.
+
+    fmpy's logger proxy (which formats the variadic arguments in C) forwards to one Python
+    logger per process, the one registered last: each new instance registers ours again, so
+    another user of the proxy in the process (a test host, say) cannot take our messages."""
+    from fmpy.fmi2 import fmi2CallbackLoggerTYPE
+
     if "2.0" not in _SHARED:
         from fmpy import calloc, free
-        from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions,
-                               fmi2CallbackLoggerTYPE)
+        from fmpy.fmi2 import fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYPE, fmi2CallbackFunctions
 
         callbacks = fmi2CallbackFunctions()
-        callbacks.logger = fmi2CallbackLoggerTYPE(_route_fmu_message)
         callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        try:
-            from fmpy.logging import addLoggerProxy
-
-            addLoggerProxy(byref(callbacks))
-        except Exception as exc:  # pragma: no cover - fmpy's native proxy is optional
-            log.warning("fmpy logger proxy unavailable (%s): FMU messages are not formatted", exc)
         _SHARED["2.0"] = callbacks
-    return _SHARED["2.0"]
+        _SHARED["2.0 logger"] = fmi2CallbackLoggerTYPE(_route_fmu_message)
+    callbacks = _SHARED["2.0"]
+    callbacks.logger = _SHARED["2.0 logger"]
+    try:
+        from fmpy.logging import addLoggerProxy
+
+        addLoggerProxy(byref(callbacks))
+    except Exception as exc:  # pragma: no cover - fmpy's native proxy is optional
+        log.warning("fmpy logger proxy unavailable (%s): FMU messages are not formatted", exc)
+    return callbacks
 
 
 def _fmi3_logger():
