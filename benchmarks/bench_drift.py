@@ -227,7 +227,7 @@ def main(argv=None) -> int:
     extra = {}
     for item in args.set:
         name, _, value = item.partition("=")
-        extra[name] = float(value)
+        extra[name] = int(value) if value.lstrip('+-').isdigit() else float(value)
     out = []
     for name in names:
         for seed in args.seeds:
