@@ -807,7 +807,8 @@ def _learned(**params):
 
 
 def test_leakage_scales_every_weight_before_the_pes_step():
-    reg = _learned(leakage_per_s=0.5)
+    """leakage_mode 0: sigma-modification, every weight scaled by 1 - leakage dt."""
+    reg = _learned(leakage_per_s=0.5, leakage_mode=0)
     w = reg.state.weights
     # No learning error (vx = vx_des, pitch = pitch_des, y and roll not ready): only the leak acts,
     # on every weight, silent neurons' too, by exactly one rounded product each.
@@ -817,7 +818,7 @@ def test_leakage_scales_every_weight_before_the_pes_step():
     u = RegulatorInputs(vx=0.5, vx_des=0.1, pitch=0.1, step_index=4)
     plain = _learned()
     plain.step(u, DT)
-    leaky = _learned(leakage_per_s=0.5)
+    leaky = _learned(leakage_per_s=0.5, leakage_mode=0)
     leaky.step(u, DT)
     w = _learned().state.weights
     np.testing.assert_allclose(leaky.state.weights, plain.state.weights - w * (0.5 * DT),
@@ -826,7 +827,7 @@ def test_leakage_scales_every_weight_before_the_pes_step():
 
 def test_leakage_never_flips_a_weight_sign():
     """leakage_per_s dt >= 1 empties the weights (a factor 1 - leakage dt < 0 would flip them)."""
-    reg = _learned(leakage_per_s=1.0)
+    reg = _learned(leakage_per_s=1.0, leakage_mode=0)
     reg.step(RegulatorInputs(vx=0.3, vx_des=0.3, step_index=4), 1.5)
     assert np.array_equal(reg.state.weights, np.zeros_like(reg.state.weights))
     assert not np.signbit(reg.state.weights).any()
@@ -839,7 +840,7 @@ def test_leakage_mode_1_keeps_the_current_output_and_leaks_the_rest():
     # no learning error: only the leak acts; u far from where _learned learned (0.5 against 0.1)
     u = RegulatorInputs(vx=-0.4, vx_des=-0.4, step_index=4)
     other = RegulatorInputs(vx=1.0, vx_des=1.0, step_index=4)
-    kept, scaled = _learned(leakage_per_s=0.5, leakage_mode=1), _learned(leakage_per_s=0.5)
+    kept, scaled = _learned(leakage_per_s=0.5, leakage_mode=1), _learned(leakage_per_s=0.5, leakage_mode=0)
     w0 = kept.state.weights
     psi_other_before = _learned().step(other, DT)["psi_x"]
     first_kept, first_scaled = kept.step(u, DT), scaled.step(u, DT)
