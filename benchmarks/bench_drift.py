@@ -13,8 +13,9 @@ row (x, y, pitch, roll; rad/Hz); then whether and when the robot fell.
     python benchmarks/bench_drift.py --variant all --json drift.json
     python benchmarks/bench_drift.py --variant defaults --require-stable   # the 10-minute check
 
-Variants (``VARIANTS``): plain (the paper's rule: every remedy off), leakage, deadzone,
-projection, combined; ``defaults`` runs the shipped parameter defaults, ``pd_only`` the
+Variants (``VARIANTS``): plain (the paper's rule: every remedy off), leakage (uniform,
+``leakage_mode`` 0), leakage_kept_output (``leakage_mode`` 1: only what the current rates do
+not use leaks), deadzone, projection, combined; ``defaults`` runs the shipped parameter defaults, ``pd_only`` the
 PD regulator alone (adaptation off).
 """
 from __future__ import annotations
@@ -42,10 +43,11 @@ log = logging.getLogger("bench_drift")
 PLAIN = {"leakage_per_s": 0.0, "error_deadzone_mps": 0.0, "weight_norm_max": 0.0}
 VARIANTS = {
     "plain": PLAIN,
-    "leakage": {**PLAIN, "leakage_per_s": 0.01},
+    "leakage": {**PLAIN, "leakage_per_s": 0.01, "leakage_mode": 0},
+    "leakage_kept_output": {**PLAIN, "leakage_per_s": 0.01, "leakage_mode": 1},
     "deadzone": {**PLAIN, "error_deadzone_mps": 0.05},
     "projection": {**PLAIN, "weight_norm_max": 1.5e-5},
-    "combined": {**PLAIN, "leakage_per_s": 0.01, "weight_norm_max": 1.5e-5},
+    "combined": {**PLAIN, "leakage_per_s": 0.01, "leakage_mode": 0, "weight_norm_max": 1.5e-5},
     "defaults": {},
     "pd_only": {"adaptation_enabled": False},
 }
@@ -227,7 +229,7 @@ def main(argv=None) -> int:
     extra = {}
     for item in args.set:
         name, _, value = item.partition("=")
-        extra[name] = float(value)
+        extra[name] = int(value) if value.lstrip('+-').isdigit() else float(value)
     out = []
     for name in names:
         for seed in args.seeds:

@@ -277,7 +277,7 @@ def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, 
     psi = [limit if value > limit else (-limit if value < -limit else value) for value in raw]
     if params.learning_rate != 0.0 and step_index >= params.learn_from_step:
         errors = _learning_errors(stride, vx, vx_des, vy_des, pitch, params)
-        weights = _pes_update(weights, row_rates, raw, errors, dt, params)
+        weights = _pes_update(weights, row_rates, raw, sums, errors, dt, params)
     return weights, psi
 
 
@@ -323,7 +323,7 @@ def _leak_factor(leakage_per_s: float, dt: float) -> float:
     return 1.0 - amount if amount < 1.0 else 0.0
 
 
-def _pes_update(weights, row_rates, raw, errors, dt, params) -> np.ndarray:
+def _pes_update(weights, row_rates, raw, sums, errors, dt, params) -> np.ndarray:
     """The weights after one PES step with conditional-integration anti-windup, the
     leakage before it and the norm projection after it (both off at 0).
 
@@ -338,6 +338,8 @@ def _pes_update(weights, row_rates, raw, errors, dt, params) -> np.ndarray:
     coefficients = [0.0 if (value >= limit or value <= -limit) and value * error < 0.0
                     else alpha * error for value, error in zip(raw, errors)]
     keep = _leak_factor(params.leakage_per_s, dt)
+    if keep != 1.0 and params.leakage_mode == 1:
+        coefficients = _keep_current_output(coefficients, row_rates, [0.0 + v for v in sums], 1.0 - keep)
     bound = params.weight_norm_max
     if not any(coefficients) and keep == 1.0 and bound == 0.0:
         return weights  # nothing changes: keep (share) the read-only array
@@ -349,6 +351,19 @@ def _pes_update(weights, row_rates, raw, errors, dt, params) -> np.ndarray:
     if bound != 0.0:
         _project(new_weights, bound)
     return readonly(new_weights)
+
+
+def _keep_current_output(coefficients: list, row_rates: np.ndarray, sums: list,
+                         amount: float) -> list:
+    """The PES coefficients plus, for each row j, ``amount (w_j . h_j) / |h_j|^2``: after
+    the leak ``w_j -> (1 - amount) w_j``, adding that multiple of ``h_j`` gives back the
+    part of ``w_j`` along ``h_j``, so only the part orthogonal to the current rates decays
+    and the row's output at this call is kept.  ``sums[j]`` is ``w_j . h_j`` (the output's
+    sum before this call), ``|h_j|^2`` is summed in neuron order (a cumulative sum, as the
+    C core's loop); a row whose rates are all 0 gets nothing added."""
+    squares = np.cumsum(row_rates * row_rates, axis=1)[:, -1].tolist()
+    return [c if sq == 0.0 else c + (amount * s) / sq
+            for c, s, sq in zip(coefficients, sums, squares)]
 
 
 def _project(weights: np.ndarray, bound: float) -> None:

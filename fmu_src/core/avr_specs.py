@@ -147,10 +147,16 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
            "2 psi_limit = 0.6 rad); 0 makes every offset 0"),
     # Robust-adaptive-control remedies against parameter drift (docs/adaptation.md); each
     # acts only on calls that learn, and with all three 0 the rule is the paper's plain PES.
-    _param("leakage_per_s", 0.002, 0.0, 1.0, "1/s",
+    _param("leakage_per_s", 0.01, 0.0, 1.0, "1/s",
            "Leakage (sigma-modification) of the learned weights toward zero, 1/s, in [0, 1]: "
            "every call that learns first scales every weight by (1 - leakage_per_s dt) (by 0 "
            "if leakage_per_s dt >= 1); 0 switches it off (the paper's plain rule)"),
+    _param("leakage_mode", 1, 0, 1, "1",
+           "Which part of the weights leaks, in [0, 1]: 0 every weight (sigma-modification: "
+           "each row decays toward zero, its output with it); 1 only the part of each row "
+           "orthogonal to its current presynaptic rates (the row's output at this call is "
+           "kept; what the current state does not use decays at leakage_per_s)",
+           type="Integer"),
     _param("error_deadzone_mps", 0.0, 0.0, 1.0, "m/s",
            "Dead-zone on the two velocity learning errors (x: vx_des - vx; y: vy_des - the "
            "stride-averaged vy), m/s, in [0, 1]: an error e learns as e - d if e > d, e + d "

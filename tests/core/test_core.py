@@ -110,7 +110,7 @@ def test_specs_match_dataclasses_and_api_order():
         "psi_gain_stance_hip_roll", "psi_gain_stance_hip_pitch", "psi_gain_stance_knee",
         "adaptation_enabled", "velocity_scale_mps", "angle_scale_rad",
         "rate_scale_radps", "n_neurons", "seed", "delta_limit_rad",
-        "leakage_per_s", "error_deadzone_mps", "weight_norm_max"]
+        "leakage_per_s", "leakage_mode", "error_deadzone_mps", "weight_norm_max"]
     assert [f.name for f in dataclasses.fields(RegulatorParams)] == [s.name for s in PARAM_SPECS]
     p = RegulatorParams()
     for s in PARAM_SPECS:
@@ -807,7 +807,8 @@ def _learned(**params):
 
 
 def test_leakage_scales_every_weight_before_the_pes_step():
-    reg = _learned(leakage_per_s=0.5)
+    """leakage_mode 0: sigma-modification, every weight scaled by 1 - leakage dt."""
+    reg = _learned(leakage_per_s=0.5, leakage_mode=0)
     w = reg.state.weights
     # No learning error (vx = vx_des, pitch = pitch_des, y and roll not ready): only the leak acts,
     # on every weight, silent neurons' too, by exactly one rounded product each.
@@ -817,7 +818,7 @@ def test_leakage_scales_every_weight_before_the_pes_step():
     u = RegulatorInputs(vx=0.5, vx_des=0.1, pitch=0.1, step_index=4)
     plain = _learned()
     plain.step(u, DT)
-    leaky = _learned(leakage_per_s=0.5)
+    leaky = _learned(leakage_per_s=0.5, leakage_mode=0)
     leaky.step(u, DT)
     w = _learned().state.weights
     np.testing.assert_allclose(leaky.state.weights, plain.state.weights - w * (0.5 * DT),
@@ -826,10 +827,47 @@ def test_leakage_scales_every_weight_before_the_pes_step():
 
 def test_leakage_never_flips_a_weight_sign():
     """leakage_per_s dt >= 1 empties the weights (a factor 1 - leakage dt < 0 would flip them)."""
-    reg = _learned(leakage_per_s=1.0)
+    reg = _learned(leakage_per_s=1.0, leakage_mode=0)
     reg.step(RegulatorInputs(vx=0.3, vx_des=0.3, step_index=4), 1.5)
     assert np.array_equal(reg.state.weights, np.zeros_like(reg.state.weights))
     assert not np.signbit(reg.state.weights).any()
+
+
+def test_leakage_mode_1_keeps_the_current_output_and_leaks_the_rest():
+    """Mode 1 leaks only the part of each row orthogonal to the current rates: with no
+    learning error, the outputs at the same inputs stay (to a few roundings) while the
+    weights shrink and the outputs at other inputs move; mode 0 scales the outputs too."""
+    # no learning error: only the leak acts; u far from where _learned learned (0.5 against 0.1)
+    u = RegulatorInputs(vx=-0.4, vx_des=-0.4, step_index=4)
+    other = RegulatorInputs(vx=1.0, vx_des=1.0, step_index=4)
+    kept, scaled = _learned(leakage_per_s=0.5, leakage_mode=1), _learned(leakage_per_s=0.5, leakage_mode=0)
+    w0 = kept.state.weights
+    psi_other_before = _learned().step(other, DT)["psi_x"]
+    first_kept, first_scaled = kept.step(u, DT), scaled.step(u, DT)
+    for _ in range(400):
+        last_kept, last_scaled = kept.step(u, DT), scaled.step(u, DT)
+    for row in ("psi_x", "psi_pitch"):
+        assert abs(first_kept[row]) > 1e-4
+        # 400 leak steps, each exact up to a few roundings of |psi| (1e-16 relative each)
+        assert last_kept[row] == pytest.approx(first_kept[row], rel=1e-12)
+        assert last_scaled[row] == pytest.approx(first_scaled[row] * (1.0 - 0.5 * DT) ** 400, rel=1e-9)
+    norms0, norms = np.linalg.norm(w0, axis=1), np.linalg.norm(kept.state.weights, axis=1)
+    assert norms[0] < 0.9 * norms0[0] and norms[2] < norms0[2]  # what u does not use has leaked
+    kept_other = kept.step(other, DT)["psi_x"]
+    assert abs(kept_other - psi_other_before) > 0.05 * abs(psi_other_before)
+
+
+def test_leakage_mode_is_inert_without_leakage():
+    u = [RegulatorInputs(vx=0.5, vx_des=0.1, pitch=0.1, step_index=k // 7) for k in range(60)]
+    a = Regulator(small(learning_rate=1e-4, leakage_per_s=0.0))
+    b = Regulator(small(learning_rate=1e-4, leakage_per_s=0.0, leakage_mode=1))
+    assert run(a, u) == run(b, u)
+    assert np.array_equal(a.state.weights, b.state.weights)
+
+
+def test_leakage_mode_range_is_named():
+    with pytest.raises(ParameterError, match=r"leakage_mode = 2: must be an integer in \[0, 1\]"):
+        small(leakage_mode=2)
 
 
 @pytest.mark.parametrize("error", [0.3, -0.3])

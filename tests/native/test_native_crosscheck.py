@@ -134,9 +134,11 @@ def test_recorded_closed_loop_matches_the_core(native_fmus, closed_loop_inputs, 
 #: bound is below the x row's norm after 20 s of plain learning (7.6e-6 rad/Hz).
 REMEDIES = {
     "leakage": {"leakage_per_s": 0.05},
+    "leakage_keeps_output": {"leakage_per_s": 0.05, "leakage_mode": 1},
     "deadzone": {"error_deadzone_mps": 0.05},
     "projection": {"weight_norm_max": 3e-6},
-    "all": {"leakage_per_s": 0.05, "error_deadzone_mps": 0.05, "weight_norm_max": 3e-6},
+    "all": {"leakage_per_s": 0.05, "leakage_mode": 1, "error_deadzone_mps": 0.05,
+            "weight_norm_max": 3e-6},
 }
 _remedy_reference = {}
 

@@ -27,7 +27,9 @@ PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_k
 #: The same with every remedy against drift on, each acting on this sequence: the leak, a
 #: dead-zone the synthetic errors exceed, a bound below the x row's plain norm (7.6e-5 rad/Hz).
 REMEDIES = {**PARAMS, "leakage_per_s": 0.5, "error_deadzone_mps": 0.05, "weight_norm_max": 3e-5}
-RUNS = {"plain": PARAMS, "remedies": REMEDIES}
+#: The leak of the part orthogonal to the current rates (leakage_mode 1) with the dead-zone.
+KEEP_OUTPUT = {**PARAMS, "leakage_per_s": 0.5, "leakage_mode": 1, "error_deadzone_mps": 0.05}
+RUNS = {"plain": PARAMS, "remedies": REMEDIES, "keep_output": KEEP_OUTPUT}
 N_STEPS = 400
 LIBRARY = "AdaptiveVelocityRegulatorNative.so"
 SHIPPED = {2: f"binaries/linux64/{LIBRARY}", 3: f"binaries/x86_64-linux/{LIBRARY}"}
@@ -75,6 +77,7 @@ def shipped_outputs(native_fmus, tmp_path_factory):
             script.write_text(c_host_script(fmu, params, input_sequence(N_STEPS, seed=8)))
             runs[name] = (script, run_host(host, "x86_64", library, token, script))
         assert runs["plain"][1] != runs["remedies"][1]  # the remedies act on this sequence
+        assert runs["keep_output"][1] not in (runs["plain"][1], runs["remedies"][1])
         out[fmi] = (token, runs)
     return out
 

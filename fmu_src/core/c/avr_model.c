@@ -281,6 +281,19 @@ VECTOR_CLONES static void leak_row(double *restrict w, int n, double keep) {
     for (int i = 0; i < n; ++i) w[i] = w[i] * keep + 0.0;
 }
 
+/* coef + amount (w . h) / |h|^2 for a row w reading network k's rates h
+ * (avr_regulator._keep_current_output): after the leak w -> (1 - amount) w, adding that
+ * multiple of h gives back w's part along h, so the row's output at this call is kept.  Both
+ * sums in neuron order over the active neurons; a network with no active neuron adds nothing. */
+static double keep_current_output(const AvrCore *core, int k, const double *restrict w, double coef,
+                                  double amount) {
+    const double *restrict rates = core->rates + (size_t)k * core->n;
+    double squares = 0.0;
+    for (int i = 0; i < core->n_active[k]; ++i) squares += rates[i] * rates[i];
+    if (squares == 0.0) return coef;
+    return coef + (amount * sparse_dot(core, k, w)) / squares;
+}
+
 /* Learning with anti-windup (avr_regulator._adapt, _pes_update): raw = unsaturated outputs.
  * A silent neuron's weight would change by coef * 0: it is left as it is.  The remedies
  * against drift (each off at 0): the dead-zone on the velocity errors, the leak before the
@@ -297,13 +310,15 @@ static void learn(AvrCore *core, const double *values, double dt, const double r
     if (zone != 0.0) e_x = dead_zone(e_x, zone), e_y = dead_zone(e_y, zone);
     double err[AVR_N_ROWS] = {e_x, e_y, V(pitch_des) - V(pitch), e_roll};
     double keep = leak_factor(V(leakage_per_s), dt);
+    int keep_output = keep != 1.0 && V(leakage_mode) == 1.0;
     for (int r = 0; r < AVR_N_ROWS; ++r) {
         int saturated_outward = (raw[r] >= lim || raw[r] <= -lim) && raw[r] * err[r] < 0.0;
         double coef = saturated_outward ? 0.0 : alpha * err[r];
         double *restrict w = core->weights + (size_t)r * n;
+        int k = NET_OF_ROW[r];
+        if (keep_output) coef = keep_current_output(core, k, w, coef, 1.0 - keep);
         if (keep != 1.0) leak_row(w, n, keep);
         if (coef == 0.0) continue;
-        int k = NET_OF_ROW[r];
         const double *restrict rates = core->rates + (size_t)k * n;
         const int *restrict active = core->active + (size_t)k * n;
         for (int i = 0; i < core->n_active[k]; ++i) w[active[i]] = coef * rates[i] + w[active[i]];
