@@ -33,10 +33,9 @@ LOOP_SIGNALS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate")
 
 
 @pytest.fixture(scope="module")
-def plant_fmus(tmp_path_factory, build_module):
-    """{2: path, 3: path}: both native plant FMUs as build.py builds them."""
-    out = tmp_path_factory.mktemp("native_plant")
-    return {v: build_module.build_native_plant_fmu(v, out) for v in (2, 3)}
+def plant_fmus(native_plant_fmus):
+    """{2: path, 3: path}: both native plant FMUs as build.py builds them (conftest.py)."""
+    return native_plant_fmus
 
 
 @pytest.fixture(scope="module")
@@ -412,13 +411,13 @@ def test_fmu_state_restores_the_run_exactly(plant_fmu, plant_dir):
     # Corrupt or unreachable states are refused; the instance keeps walking as before.
     nominal = _Plant(plant_fmu, plant_dir)
     forged = {
-        "CRC-32": blob[:100] + bytes([blob[100] ^ 1]) + blob[101:],
+        "checksum mismatch": blob[:100] + bytes([blob[100] ^ 1]) + blob[101:],
         "fixed parameter torso_mass_kg": _forge(blob, VALUES_AT + 8 * plant.vr["torso_mass_kg"], "<d", 17.0),
         "vx_des = 7": _forge(blob, VALUES_AT + 8 * plant.vr["vx_des"], "<d", 7.0),
         "tau": _forge(blob, TAU_AT, "<d", 5.0),
         "norm": _forge(blob, QUAT_AT, "<d", 2.0),
         "substep": _forge(blob, WALKER_AT, "<I", 4),
-        "is from another FMU": blob[:12] + b"{x" + blob[14:-4] + struct.pack("<I", zlib.crc32(blob[:12] + b"{x" + blob[14:-4])),
+        "saved by another FMU": blob[:12] + b"{x" + blob[14:-4] + struct.pack("<I", zlib.crc32(blob[:12] + b"{x" + blob[14:-4])),
     }
     for why, bad in forged.items():
         plant.messages.clear()

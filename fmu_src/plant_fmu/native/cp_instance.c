@@ -27,6 +27,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "fmi_blob.h"
+
 static const char *const TYPE_NAMES[] = {"Real", "Integer", "Boolean", "String"};
 
 static void vlog(const CpInstance *inst, CpStatus status, const char *category, const char *fmt, va_list ap) {
@@ -58,20 +60,23 @@ void cp_debug(const CpInstance *inst, const char *fmt, ...) {
 }
 
 static const char *phase_name(const CpInstance *inst, CpPhase p) {
-    for (int i = 0; i < 4; i++)
+    for (int i = 0; i < CP_N_PHASES; i++)
         if (p == (CpPhase)(1u << i)) return inst->phase_names[i];
     return "?";
 }
 
 CpStatus cp_allowed(const CpInstance *inst, const char *call, unsigned mask) {
-    if (inst->phase & mask) return CP_OK;
+    if (inst == NULL) return CP_ERROR;
+    if ((unsigned)inst->phase & mask) return CP_OK;
+    if (mask == 0u) return cp_refuse(inst, call, "not provided by this FMU (see its modelDescription.xml)");
     char list[200] = "";
-    for (int i = 0; i < 4; i++)
+    for (int i = 0; i < CP_N_PHASES; i++)
         if (mask & (1u << i)) {
             if (list[0]) strncat(list, ", ", sizeof list - strlen(list) - 1);
             strncat(list, inst->phase_names[i], sizeof list - strlen(list) - 1);
         }
-    return cp_refuse(inst, call, "not allowed in state %s (allowed in: %s)", phase_name(inst, inst->phase), list);
+    return cp_refuse(inst, call, "not allowed in state %s (allowed in: %s)", phase_name(inst, inst->phase),
+                     list[0] ? list : "none");
 }
 
 CpStatus cp_check_categories(const CpInstance *inst, const char *call, size_t n, const char *const categories[]) {
@@ -281,13 +286,20 @@ CpStatus cp_do_step(CpInstance *inst, const char *call, double t, double h) {
 #define HEADER_BYTES (4 + 4 + 4 + GUID_BYTES)
 #define N_GAINS (CC_NSIDES * CC_NMOTOR * 2)
 
-static uint32_t crc32_of(const unsigned char *p, size_t n) {
-    uint32_t c = 0xFFFFFFFFu;
-    for (size_t i = 0; i < n; i++) {
-        c ^= p[i];
-        for (int k = 0; k < 8; k++) c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
-    }
-    return c ^ 0xFFFFFFFFu;
+/* The smallest blob: header, phase, walker flag, time, the values and the CRC (no walker). */
+#define MIN_BLOB_BYTES (HEADER_BYTES + 4 + 4 + 8 + 8 * CP_N_VARS + 4)
+
+/* The framing every C FMU of the project checks alike (fmi_blob.c): magic, version, the size
+ * the header states, the CRC-32 over every byte before it, the GUID of the FMU that saved it. */
+static CpStatus check_frame(const CpInstance *inst, const char *call, const unsigned char *bytes, size_t size) {
+    static const FmiBlobFormat format = {
+        .magic = MAGIC, .magic_bytes = 4, .version_at = 4, .version = STATE_VERSION, .version_note = NULL,
+        .size_at = 8, .size_field_bytes = 4, .size_add = 0, .crc_bytes = 4,
+        .guid_at = 12, .guid_bytes = GUID_BYTES, .guid = CP_GUID, .min_bytes = MIN_BLOB_BYTES};
+    char why[400];
+    if (fmi_blob_problem(&format, bytes, size, why, sizeof why) != NULL)
+        return cp_refuse(inst, call, "not a state of this CassiePlantNative FMU: %s", why);
+    return CP_OK;
 }
 
 typedef struct {
@@ -416,7 +428,7 @@ CpStatus cp_fmustate_get(CpInstance *inst, const char *call, void **state) {
     put_f64(&b, inst->time);
     for (int i = 0; i < CP_N_VARS; i++) put_f64(&b, inst->values[i]);
     if (inst->has_walker) put_walker(&b, &inst->walker);
-    put_u32(&b, crc32_of(blob->bytes, b.at));
+    put_u32(&b, fmi_crc32(blob->bytes, b.at));
     return CP_OK;
 }
 
@@ -598,21 +610,8 @@ static void apply_walker(CpWalker *w, const WalkerState *ws) {
 }
 
 static CpStatus check_and_set(CpInstance *inst, const char *call, const unsigned char *bytes, size_t size) {
-    char guid[GUID_BYTES] = {0};
-    strncpy(guid, CP_GUID, GUID_BYTES - 1);
-    if (size < HEADER_BYTES + 4 || memcmp(bytes, MAGIC, 4) != 0)
-        return cp_refuse(inst, call, "not a CassiePlantNative state (%zu bytes, no 'CPNS' header)", size);
-    Buf b = {(unsigned char *)bytes, 4, size, 0};
-    uint32_t version = get_u32(&b), total = get_u32(&b);
-    if (version != STATE_VERSION || total != size)
-        return cp_refuse(inst, call, "state version %u of %u bytes: this FMU reads version %u states of their stated "
-                         "size (%zu bytes given)", version, total, STATE_VERSION, size);
-    uint32_t crc = (uint32_t)bytes[size - 4] | (uint32_t)bytes[size - 3] << 8 | (uint32_t)bytes[size - 2] << 16 |
-                   (uint32_t)bytes[size - 1] << 24;
-    if (crc != crc32_of(bytes, size - 4)) return cp_refuse(inst, call, "the state's CRC-32 does not match: corrupt state");
-    if (memcmp(bytes + 12, guid, GUID_BYTES) != 0) return cp_refuse(inst, call, "the state is from another FMU (GUID)");
-    b.at = HEADER_BYTES;
-    b.size = size - 4;
+    if (check_frame(inst, call, bytes, size) != CP_OK) return CP_ERROR;
+    Buf b = {(unsigned char *)bytes, HEADER_BYTES, size - 4, 0}; /* the body: after the header, before the CRC */
     uint32_t phase = get_u32(&b), has_walker = get_u32(&b);
     double time = get_f64(&b), values[CP_N_VARS];
     for (int i = 0; i < CP_N_VARS; i++) values[i] = get_f64(&b);
@@ -684,13 +683,9 @@ CpStatus cp_fmustate_set(CpInstance *inst, const char *call, const void *state) 
 CpStatus cp_fmustate_deserialize(const CpInstance *inst, const char *call, const unsigned char *bytes, size_t size,
                                  void **state) {
     if (bytes == NULL || state == NULL) return cp_refuse(inst, call, "the byte array or FMUstate pointer is NULL");
-    if (size < HEADER_BYTES + 4 || size > ((size_t)1 << 30))
-        return cp_refuse(inst, call, "size = %zu: not a CassiePlantNative state", size);
-    /* the header and the CRC now; the rest (variables, walker) when the state is set */
-    if (memcmp(bytes, MAGIC, 4) != 0) return cp_refuse(inst, call, "not a CassiePlantNative state (no 'CPNS' header)");
-    uint32_t crc = (uint32_t)bytes[size - 4] | (uint32_t)bytes[size - 3] << 8 | (uint32_t)bytes[size - 2] << 16 |
-                   (uint32_t)bytes[size - 1] << 24;
-    if (crc != crc32_of(bytes, size - 4)) return cp_refuse(inst, call, "the state's CRC-32 does not match: corrupt state");
+    if (size > ((size_t)1 << 30)) return cp_refuse(inst, call, "size = %zu: not a CassiePlantNative state", size);
+    /* the framing now; the contents (variables, walker) when the state is set */
+    if (check_frame(inst, call, bytes, size) != CP_OK) return CP_ERROR;
     CpBlob *blob = malloc(sizeof(CpBlob) + size);
     if (blob == NULL) return cp_refuse(inst, call, "out of memory for a state of %zu bytes", size);
     blob->size = size;

@@ -2,8 +2,8 @@
  * One CassiePlantNative instance, independent of the FMI version: the variable values, the
  * FMI phase, the walker, and every check both FMI layers share (phases, variables and their
  * ranges, step arguments, FMU states).  fmi2_plant.c and fmi3_plant.c are thin layers over it
- * (the pattern of fmu_src/regulator_fmu/native/avr_instance.c and the Reference-FMUs): each converts its
- * types to and from the doubles kept here.
+ * (through fmi_model.h and the shared fmu_src/fmi/fmi_layer.h, as the regulator's avr_instance.c):
+ * each converts its types to and from the doubles kept here.
  *
  * Every refused call logs a message naming the call, the variable and its allowed range,
  * returns CP_ERROR and changes nothing.
@@ -16,13 +16,20 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "fmi_phase_rules.h"
+
 typedef enum { CP_OK = 0, CP_WARNING = 1, CP_DISCARD = 2, CP_ERROR = 3, CP_FATAL = 4 } CpStatus;
 
-/* Phases as bits, so that a function's allowed phases are one mask. */
-typedef enum { CP_INSTANTIATED = 1u, CP_INIT_MODE = 2u, CP_STEP_MODE = 4u, CP_TERMINATED = 8u } CpPhase;
-#define CP_ANY_PHASE (CP_INSTANTIATED | CP_INIT_MODE | CP_STEP_MODE | CP_TERMINATED)
-#define CP_SET_PHASES (CP_INSTANTIATED | CP_INIT_MODE | CP_STEP_MODE)
-#define CP_GET_PHASES (CP_INIT_MODE | CP_STEP_MODE | CP_TERMINATED)
+/* Phases as the bits of fmi_phase_rules.h (generated from fmu_src/fmi/phase_rules.py), so that
+ * a function's allowed phases are one mask, its FMI_MASK_<function>.  The bit is stored in
+ * FMU-state blobs.  No stepFailed: a refused doStep changes nothing. */
+typedef enum {
+    CP_INSTANTIATED = FMI_INSTANTIATED,
+    CP_INIT_MODE = FMI_INIT_MODE,
+    CP_STEP_MODE = FMI_STEP_MODE, /* FMI 2.0 stepComplete, FMI 3.0 Step Mode */
+    CP_TERMINATED = FMI_TERMINATED,
+} CpPhase;
+#define CP_N_PHASES 4 /* the bits above: 0 .. 3 */
 /* Relative tolerance on "doStep starts where the last step ended" (fmu_src/fmi/avr_slavebase.py). */
 #define CP_TIME_MATCH_RTOL 1e-9
 
