@@ -187,6 +187,30 @@
 /* A Boolean read as its byte: a bool other than 0/1 is refused by the range check, not UB. */
 #define FMI3_READ_BYTE(values, i) ((double)((const unsigned char *)(values))[i])
 
+/* Every getter and setter of a model's Real/Integer/Boolean variables (its types REAL, INTEGER,
+ * BOOLEAN).  FMI 2.0: BOOL_TO_DOUBLE reads an fmi2Boolean (FMI_TO_DOUBLE: any value other than
+ * 0/1 is then refused by the range check).  FMI 3.0: TIME_VR is time's value reference. */
+#define FMI_TO_DOUBLE(x) ((double)(x))
+#define FMI2_AS_REAL(x) (x)
+#define FMI2_AS_INTEGER(x) ((fmi2Integer)(x))
+#define FMI2_AS_BOOLEAN(x) ((x) != 0.0 ? fmi2True : fmi2False)
+#define FMI2_NUMERIC_VARIABLES(REAL, INTEGER, BOOLEAN, BOOL_TO_DOUBLE)       \
+    FMI2_GETTER(fmi2GetReal, fmi2Real, REAL, FMI2_AS_REAL)                   \
+    FMI2_GETTER(fmi2GetInteger, fmi2Integer, INTEGER, FMI2_AS_INTEGER)       \
+    FMI2_GETTER(fmi2GetBoolean, fmi2Boolean, BOOLEAN, FMI2_AS_BOOLEAN)       \
+    FMI2_SETTER(fmi2SetReal, fmi2Real, REAL, FMI_TO_DOUBLE)                  \
+    FMI2_SETTER(fmi2SetInteger, fmi2Integer, INTEGER, FMI_TO_DOUBLE)         \
+    FMI2_SETTER(fmi2SetBoolean, fmi2Boolean, BOOLEAN, BOOL_TO_DOUBLE)
+#define FMI3_AS_INT32(x) ((fmi3Int32)(x))
+#define FMI3_AS_BOOLEAN(x) ((x) != 0.0)
+#define FMI3_NUMERIC_VARIABLES(REAL, INTEGER, BOOLEAN, TIME_VR)                                  \
+    FMI3_GET_FLOAT64(TIME_VR)                                                                    \
+    FMI3_GETTER(fmi3GetInt32, fmi3Int32, INTEGER, FMI3_AS_INT32)                                 \
+    FMI3_GETTER(fmi3GetBoolean, fmi3Boolean, BOOLEAN, FMI3_AS_BOOLEAN)                           \
+    FMI3_SETTER(fmi3SetFloat64, fmi3Float64, REAL, FMI3_READ_NUMBER, TIME_VR)                    \
+    FMI3_SETTER(fmi3SetInt32, fmi3Int32, INTEGER, FMI3_READ_NUMBER, TIME_VR)                     \
+    FMI3_SETTER(fmi3SetBoolean, fmi3Boolean, BOOLEAN, FMI3_READ_BYTE, TIME_VR)
+
 /* ---- FMU state: the six functions over the model's blob functions (fmi_model.h maps
  * fmi_model_fmustate_{get,set,free,size,serialize,deserialize}).  STATE is the version's
  * FMU-state type, BYTE its byte type, the names its spellings ("FMUstate", "FMUState"). ------- */

@@ -29,9 +29,10 @@ from fmu_src.packing import compiler
 from fmu_src.packing.archive import PLACEHOLDER_GUID, content_guid
 from fmu_src.packing.describe import PLANT_INITIAL_UNKNOWNS, model_description
 from fmu_src.packing.vendor import copy_models
+from fmu_src.core.avr_specs import VarSpec
 from fmu_src.fmi import phase_rules
 from fmu_src.plant_fmu import fmu_core
-from plant import cassie, constants
+from plant import cassie, constants, terrain
 from plant.native import native_ctrl
 
 log = logging.getLogger("avr_build")
@@ -42,9 +43,9 @@ THIRD_PARTY = HERE.parents[1] / "fmi" / "third_party"
 #: The FMI standard headers (third_party/fmi<version>/, with their license) each FMU ships.
 FMI_HEADERS = {2: ("fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"),
                3: ("fmi3Functions.h", "fmi3FunctionTypes.h", "fmi3PlatformTypes.h")}
-PLANT_SOURCES = ("cassie_plant.c", "cp_instance.c")
+PLANT_SOURCES = ("cassie_plant.c", "cp_instance.c", "cp_terrain.c")
 API_SOURCES = {2: ("fmi2_plant.c",), 3: ("fmi3_plant.c",)}
-PLANT_HEADERS = ("cassie_plant.h", "cp_instance.h", "fmi_model.h")
+PLANT_HEADERS = ("cassie_plant.h", "cp_instance.h", "cp_terrain.h", "fmi_model.h")
 #: The FMI layer every native FMU shares (fmu_src/fmi/): per FMI version its common functions,
 #: and for both the state-blob framing check and the layer's headers.
 SHARED_FMI = HERE.parents[1] / "fmi"
@@ -63,6 +64,8 @@ WINDOWS_WHEEL_TAG = "win_amd64"
 WINDOWS_WHEEL_ENV = "CASSIE_MUJOCO_WIN_WHEEL"
 #: Optimized; no FMA contraction (the sources say so by pragma too); never fast-math.
 CFLAGS = ("-std=c99", "-O2", "-ffp-contract=off", "-Wall", "-Wextra", "-Werror", "-fvisibility=hidden")
+#: The TerrainSpec fields the FMU has no parameter for: fmu_core builds its TerrainSpec with their defaults.
+_TERRAIN_DEFAULTS = terrain.TerrainSpec(max_height_m=0.1, max_slope_deg=10.0, seed=0)
 LOG_CATEGORIES = (("logStatusError", "Refused calls and errors (always logged)"),
                   ("logAll", "Debug messages (with logging on)"))
 _TYPES = {"Real": "CP_REAL", "Integer": "CP_INTEGER", "Boolean": "CP_BOOLEAN", "String": "CP_STRING"}
@@ -73,16 +76,30 @@ def fmu_name(fmi_version: int) -> str:
     return f"{MODEL_IDENTIFIER}_fmi{fmi_version}.fmu"
 
 
+#: The native plant's one variable the pythonfmu plant has not: it cannot generate the terrain
+#: (numpy's FFT and PCG64), so the host hands the height field over as a file, made once for the
+#: terrain_* parameters by plant.terrain.write_field (cp_terrain.c checks it against them).
+TERRAIN_FIELD_SPEC = VarSpec(
+    "terrain_field_file", "String", "", None, None, "", "parameter", "fixed",
+    "Uneven terrain: the height-field file of the terrain_* parameters (a path; written by "
+    "plant.terrain.write_field), needed when terrain_max_height_m > 0; unused on the flat floor")
+#: The variables: the pythonfmu plant's (fmu_core.SPECS, the same value references), then
+#: terrain_field_file.
+SPECS = (*fmu_core.SPECS, TERRAIN_FIELD_SPEC)
+
+
 def _start(spec) -> float:
+    if spec is TERRAIN_FIELD_SPEC:
+        return 0.0  # a text kept beside the values (cp_instance.c)
     if spec.type == "String":
         return float(list(fmu_core.MODEL_FILES).index(spec.default))
     return float(spec.default)
 
 
 def vars_header(guid: str) -> str:
-    """``cp_vars.h``: the variable table (value reference = position in ``fmu_core.SPECS``),
+    """``cp_vars.h``: the variable table (value reference = position in :data:`SPECS`),
     the models, the plant's constants and the home pose, and the GUID."""
-    specs = fmu_core.SPECS
+    specs = SPECS
     models = list(fmu_core.MODEL_FILES)
     first_offset = [s.name for s in specs].index(constants.OFFSET_NAMES[0])
     if [s.name for s in specs[first_offset:first_offset + 6]] != list(constants.OFFSET_NAMES):
@@ -122,6 +139,11 @@ def vars_header(guid: str) -> str:
         f"#define CP_FALL_HEIGHT_M ({c_double(cassie.FALL_HEIGHT_M)})",
         f"#define CP_FALL_TILT_RAD ({c_double(cassie.FALL_TILT_RAD)})",
         f"#define CP_NOMINAL_TORSO_MASS_KG ({c_double(constants.NOMINAL_TORSO_MASS_KG)})",
+        f"#define CP_TERRAIN_NAME {c_string(terrain.TERRAIN_HFIELD)} /* the hfield and its geom */",
+        f"#define CP_TERRAIN_FLAT_RADIUS_M ({c_double(_TERRAIN_DEFAULTS.flat_radius_m)})",
+        f"#define CP_TERRAIN_RESOLUTION_M ({c_double(_TERRAIN_DEFAULTS.resolution_m)})",
+        f"#define CP_TERRAIN_MAX_SAMPLES {terrain.FIELD_MAX_SAMPLES}",
+        f"#define CP_TERRAIN_BASE_M ({c_double(terrain.FIELD_HFIELD_BASE_M)})",
         f"#define CP_PELVIS_BODY {c_string(constants.PELVIS_BODY)}",
         f"#define CP_HOME_KEY {c_string(constants.HOME_KEY)}",
         "static const double CP_HOME_PELVIS_POS[3] = {" + ", ".join(map(c_double, constants.HOME_PELVIS_POS_M)) + "};",
@@ -162,7 +184,7 @@ def _skeleton2() -> bytes:
     for name, text in LOG_CATEGORIES:
         ET.SubElement(categories, "Category", name=name, description=text)
     variables = ET.SubElement(root, "ModelVariables")
-    for vr, s in enumerate(fmu_core.SPECS):
+    for vr, s in enumerate(SPECS):
         var = ET.SubElement(variables, "ScalarVariable", _variable_attributes(s, vr))
         ET.SubElement(var, s.type, start=_xml_start(s))
     return ET.tostring(root, encoding="UTF-8")
@@ -203,7 +225,7 @@ def _model_description3(units: dict, token: str) -> bytes:
         ET.SubElement(categories, "Category", name=name, description=text)
     ET.SubElement(root, "DefaultExperiment", DEFAULT_EXPERIMENT)
     variables = ET.SubElement(root, "ModelVariables")
-    specs = fmu_core.SPECS
+    specs = SPECS
     vr_of = {s.name: vr for vr, s in enumerate(specs)}
     for vr, s in enumerate(specs):
         attrs = _variable_attributes(s, vr)
@@ -238,7 +260,7 @@ def _model_description3(units: dict, token: str) -> bytes:
 def _model_description(fmi_version: int, units: dict, guid: str) -> bytes:
     if fmi_version == 3:
         return _model_description3(units, guid)
-    tree = model_description(_skeleton2(), fmu_core.SPECS, units, initial_unknowns=PLANT_INITIAL_UNKNOWNS)
+    tree = model_description(_skeleton2(), SPECS, units, initial_unknowns=PLANT_INITIAL_UNKNOWNS)
     tree.getroot().set("guid", guid)
     return ET.tostring(tree.getroot(), encoding="UTF-8", xml_declaration=True)
 
@@ -258,7 +280,8 @@ def documentation(fmi_version: int, platforms) -> bytes:
 <code>resources/models/</code> with their licenses) with the nominal walking controller compiled in C (the
 project's Python controller operation for operation: on Linux x86-64 the same outputs, bit for bit, as the
 pythonfmu CassiePlant). Same variables, value references, units, ranges, fixed parameters and refusals as
-CassiePlant; connect the AdaptiveVelocityRegulator FMUs name to name.</p>
+CassiePlant, and one more parameter, <code>terrain_field_file</code> (below); connect the AdaptiveVelocityRegulator
+FMUs name to name.</p>
 <h2>Platforms</h2><ul>{binaries}</ul>
 <p>Each folder carries MuJoCo's library (Apache-2.0, <code>MUJOCO_LICENSE</code>) beside the FMU's; the FMU
 finds it there (Linux: run path <code>$ORIGIN</code>; Windows: loaded from the FMU library's folder). Nothing
@@ -267,12 +290,16 @@ else is needed: no Python, no numpy.</p>
 <p>Communication steps: whole multiples of 0.5 ms, at most {fmu_core.MAX_STEP_S:g} s. Calls the state machine
 forbids, sets of outputs or of fixed parameters after initialization, NaN/inf or out-of-range values:
 {call} Error, logged with the variable and its range, no effect. Uneven terrain
-(<code>terrain_max_height_m</code> &gt; 0) is not available in this FMU (the terrain generator is numpy's):
-{call}ExitInitializationMode refuses it and stays in initialization mode. FMU state: MuJoCo's integration
+(<code>terrain_max_height_m</code> &gt; 0): this FMU cannot generate the height field (the generator is numpy's
+FFT and PCG64 draws), so the host hands it over: <code>terrain_field_file</code> names the file
+<code>plant.terrain.write_field</code> wrote for the terrain_* parameters; the walk is then CassiePlant's bit for
+bit. {call}ExitInitializationMode refuses a missing, unreadable, corrupted (CRC-32) or mismatched file (another
+seed, slope, height or size; samples outside [0, 1]) naming the parameter, and stays in initialization mode.
+FMU state: MuJoCo's integration
 state, the servo gains, the controller's memory; restore-then-continue is bit-identical; corrupt states (CRC-32,
 GUID) and ones no run can reach (out-of-range values, non-unit quaternions, unordered step times, other fixed
 parameters) are refused naming the field.</p>
-{variables_table(fmu_core.SPECS)}</body></html>
+{variables_table(SPECS)}</body></html>
 """.encode()
 
 

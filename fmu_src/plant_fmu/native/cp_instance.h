@@ -46,6 +46,7 @@ typedef struct CpInstance {
     double time;
     double values[CP_N_VARS];
     char *resources; /* the resources folder (a file system path) */
+    char *terrain_field; /* terrain_field_file's text (malloc'd); NULL: "" (its start value) */
     CpWalker walker;
     int has_walker;
 } CpInstance;
@@ -83,8 +84,13 @@ void cp_reset(CpInstance *inst);
 /* vr[0..n-1] are variables of `type` (get: any; set: settable now, `value` legal). */
 CpStatus cp_check_get(const CpInstance *inst, const char *call, const uint32_t vr[], size_t n, CpType type);
 CpStatus cp_check_set(const CpInstance *inst, const char *call, uint32_t vr, CpType type, double value);
-/* cassie_model's value for a text (the index of CP_MODEL_NAMES), refused if none. */
-CpStatus cp_model_index(const CpInstance *inst, const char *call, const char *text, double *index);
+/* The String variables: cassie_model (kept in values[] as its index in CP_MODEL_NAMES) and
+ * terrain_field_file (a path of at most CP_MAX_TEXT_BYTES bytes, kept as text).  Set: all or
+ * nothing, every vr settable now and every text legal before any is stored. */
+#define CP_MAX_TEXT_BYTES 4095
+CpStatus cp_set_strings(CpInstance *inst, const char *call, const uint32_t vr[], const char *const text[], size_t n);
+/* The text of String variable vr (checked by cp_check_get). */
+const char *cp_get_string(const CpInstance *inst, uint32_t vr);
 
 CpStatus cp_do_step(CpInstance *inst, const char *call, double t, double h);
 

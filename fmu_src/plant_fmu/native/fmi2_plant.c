@@ -90,32 +90,21 @@ TERMINATE(fmi2Terminate)
 RESET(fmi2Reset)
 
 /* ---- variables (FMI2_GETTER, FMI2_SETTER: fmi_layer.h) --------------------------------------- */
-#define AS_REAL(x) (x)
-#define AS_INT(x) ((fmi2Integer)(x))
-#define AS_BOOL(x) ((x) != 0.0 ? fmi2True : fmi2False)
-#define AS_MODEL(x) (CP_MODEL_NAMES[(int)(x)])
-#define FROM_NUM(x) ((double)(x))
-#define FROM_BOOL(x) ((x) != fmi2False ? 1.0 : 0.0)
-FMI2_GETTER(fmi2GetReal, fmi2Real, CP_REAL, AS_REAL)
-FMI2_GETTER(fmi2GetInteger, fmi2Integer, CP_INTEGER, AS_INT)
-FMI2_GETTER(fmi2GetBoolean, fmi2Boolean, CP_BOOLEAN, AS_BOOL)
-FMI2_GETTER(fmi2GetString, fmi2String, CP_STRING, AS_MODEL)
-FMI2_SETTER(fmi2SetReal, fmi2Real, CP_REAL, FROM_NUM)
-FMI2_SETTER(fmi2SetInteger, fmi2Integer, CP_INTEGER, FROM_NUM)
-FMI2_SETTER(fmi2SetBoolean, fmi2Boolean, CP_BOOLEAN, FROM_BOOL)
+#define FROM_BOOL(x) ((x) != fmi2False ? 1.0 : 0.0) /* any nonzero fmi2Boolean is true */
+FMI2_NUMERIC_VARIABLES(CP_REAL, CP_INTEGER, CP_BOOLEAN, FROM_BOOL)
 
-/* A String is cassie_model's name: stored as its index in CP_MODEL_NAMES. */
-fmi2Status fmi2SetString(fmi2Component instance, const fmi2ValueReference vr[], size_t n, const fmi2String value[]) {
-    BEGIN(fmi2SetString)
-    if (n > 0 && (vr == NULL || value == NULL)) REFUSE("NULL vr or value array with nvr = %zu", n);
-    if (n > CP_N_VARS) REFUSE("%zu values: more than the variables", n);
-    double index[CP_N_VARS];
-    for (size_t i = 0; i < n; i++)
-        if (cp_check_set(inst, call, vr[i], CP_STRING, 0.0) != CP_OK ||
-            cp_model_index(inst, call, value[i], &index[i]) != CP_OK)
-            return fmi2Error;
-    for (size_t i = 0; i < n; i++) inst->values[vr[i]] = index[i];
+/* Strings: cassie_model and terrain_field_file (cp_set_strings, cp_get_string). */
+fmi2Status fmi2GetString(fmi2Component instance, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
+    BEGIN(fmi2GetString)
+    if (nvr > 0 && value == NULL) REFUSE("NULL value array with nvr = %zu", nvr);
+    if (cp_check_get(inst, call, vr, nvr, CP_STRING) != CP_OK) return fmi2Error;
+    for (size_t i = 0; i < nvr; i++) value[i] = cp_get_string(inst, vr[i]);
     return fmi2OK;
+}
+
+fmi2Status fmi2SetString(fmi2Component instance, const fmi2ValueReference vr[], size_t nvr, const fmi2String value[]) {
+    BEGIN(fmi2SetString)
+    return (fmi2Status)cp_set_strings(inst, call, vr, value, nvr);
 }
 
 /* ---- FMU state (cp_instance.c, through FMUSTATE_FUNCTIONS of fmi_layer.h) --------------------- */

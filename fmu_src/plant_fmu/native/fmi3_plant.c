@@ -74,32 +74,26 @@ TERMINATE(fmi3Terminate)
 RESET(fmi3Reset)
 
 /* ---- variables (FMI3_GETTER, FMI3_SETTER: fmi_layer.h) --------------------------------------- */
-#define AS_INT32(x) ((fmi3Int32)(x))
-#define AS_BOOLEAN(x) ((x) != 0.0)
-#define AS_MODEL(x) (CP_MODEL_NAMES[(int)(x)])
-FMI3_GET_FLOAT64(TIME_VR)
-FMI3_GETTER(fmi3GetInt32, fmi3Int32, CP_INTEGER, AS_INT32)
-FMI3_GETTER(fmi3GetBoolean, fmi3Boolean, CP_BOOLEAN, AS_BOOLEAN)
-FMI3_GETTER(fmi3GetString, fmi3String, CP_STRING, AS_MODEL)
-FMI3_SETTER(fmi3SetFloat64, fmi3Float64, CP_REAL, FMI3_READ_NUMBER, TIME_VR)
-FMI3_SETTER(fmi3SetInt32, fmi3Int32, CP_INTEGER, FMI3_READ_NUMBER, TIME_VR)
-FMI3_SETTER(fmi3SetBoolean, fmi3Boolean, CP_BOOLEAN, FMI3_READ_BYTE, TIME_VR)
+FMI3_NUMERIC_VARIABLES(CP_REAL, CP_INTEGER, CP_BOOLEAN, TIME_VR)
 
-/* A String is cassie_model's name: stored as its index in CP_MODEL_NAMES. */
+/* Strings: cassie_model and terrain_field_file (cp_set_strings, cp_get_string). */
+fmi3Status fmi3GetString(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
+                         fmi3String values[], size_t nValues) {
+    BEGIN(fmi3GetString)
+    if (fmi3_check_counts(inst, call, valueReferences, nValueReferences, values, nValues) != fmi3OK ||
+        cp_check_get(inst, call, valueReferences, nValueReferences, CP_STRING) != CP_OK)
+        return fmi3Error;
+    for (size_t i = 0; i < nValueReferences; ++i) values[i] = cp_get_string(inst, valueReferences[i]);
+    return fmi3OK;
+}
+
 fmi3Status fmi3SetString(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                          const fmi3String values[], size_t nValues) {
     BEGIN(fmi3SetString)
     if (fmi3_check_counts(inst, call, valueReferences, nValueReferences, values, nValues) != fmi3OK) return fmi3Error;
-    if (nValueReferences > CP_N_VARS) REFUSE("%zu values: more than the variables", nValueReferences);
-    double index[CP_N_VARS];
-    for (size_t i = 0; i < nValueReferences; ++i) {
+    for (size_t i = 0; i < nValueReferences; ++i)
         if (valueReferences[i] == TIME_VR) REFUSE("time is the independent variable and cannot be set");
-        if (cp_check_set(inst, call, valueReferences[i], CP_STRING, 0.0) != CP_OK ||
-            cp_model_index(inst, call, values[i], &index[i]) != CP_OK)
-            return fmi3Error;
-    }
-    for (size_t i = 0; i < nValueReferences; ++i) inst->values[valueReferences[i]] = index[i];
-    return fmi3OK;
+    return (fmi3Status)cp_set_strings(inst, call, valueReferences, values, nValueReferences);
 }
 
 /* ---- FMU state (cp_instance.c, through FMUSTATE_FUNCTIONS of fmi_layer.h) --------------------- */

@@ -59,16 +59,8 @@ TERMINATE(fmi2Terminate)
 RESET(fmi2Reset)
 
 /* ---- variables ------------------------------------------------------------------------------- */
-#define AS_REAL(x) (x)
-#define AS_INTEGER(x) ((fmi2Integer)(x))
-#define AS_BOOLEAN(x) ((x) != 0.0 ? fmi2True : fmi2False)
-#define TO_DOUBLE(x) ((double)(x)) /* a Boolean other than 0/1 is refused by its range check */
-FMI2_GETTER(fmi2GetReal, fmi2Real, AVR_REAL, AS_REAL)
-FMI2_GETTER(fmi2GetInteger, fmi2Integer, AVR_INTEGER, AS_INTEGER)
-FMI2_GETTER(fmi2GetBoolean, fmi2Boolean, AVR_BOOLEAN, AS_BOOLEAN)
-FMI2_SETTER(fmi2SetReal, fmi2Real, AVR_REAL, TO_DOUBLE)
-FMI2_SETTER(fmi2SetInteger, fmi2Integer, AVR_INTEGER, TO_DOUBLE)
-FMI2_SETTER(fmi2SetBoolean, fmi2Boolean, AVR_BOOLEAN, TO_DOUBLE)
+/* a Boolean other than 0/1 is refused by its range check */
+FMI2_NUMERIC_VARIABLES(AVR_REAL, AVR_INTEGER, AVR_BOOLEAN, FMI_TO_DOUBLE)
 
 fmi2Status fmi2GetString(fmi2Component instance, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
     BEGIN(fmi2GetString)

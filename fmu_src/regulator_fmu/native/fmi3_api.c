@@ -63,14 +63,7 @@ TERMINATE(fmi3Terminate)
 RESET(fmi3Reset)
 
 /* ---- variables of this FMU's types (FMI3_GETTER, FMI3_SETTER: fmi_layer.h) ---------------------- */
-#define AS_INT32(x) ((fmi3Int32)(x))
-#define AS_BOOLEAN(x) ((x) != 0.0)
-FMI3_GET_FLOAT64(TIME_VR)
-FMI3_GETTER(fmi3GetInt32, fmi3Int32, AVR_INTEGER, AS_INT32)
-FMI3_GETTER(fmi3GetBoolean, fmi3Boolean, AVR_BOOLEAN, AS_BOOLEAN)
-FMI3_SETTER(fmi3SetFloat64, fmi3Float64, AVR_REAL, FMI3_READ_NUMBER, TIME_VR)
-FMI3_SETTER(fmi3SetInt32, fmi3Int32, AVR_INTEGER, FMI3_READ_NUMBER, TIME_VR)
-FMI3_SETTER(fmi3SetBoolean, fmi3Boolean, AVR_BOOLEAN, FMI3_READ_BYTE, TIME_VR)
+FMI3_NUMERIC_VARIABLES(AVR_REAL, AVR_INTEGER, AVR_BOOLEAN, TIME_VR)
 
 /* ---- FMU state (avr_state.c, through FMUSTATE_FUNCTIONS of fmi_layer.h) ---------------------- */
 FMUSTATE_FUNCTIONS(fmi3FMUState, fmi3Byte, fmi3GetFMUState, fmi3SetFMUState, fmi3FreeFMUState,
