@@ -7,7 +7,7 @@ corrupted states refused.
 
     python sanitize_run.py FMU OTHER_FMU                       (exit 0 when every check held)
     python sanitize_run.py --command-source FMU_DIR FMI_VERSION
-    python sanitize_run.py --plant FMU_DIR FMI_VERSION
+    python sanitize_run.py --plant FMU_DIR FMI_VERSION [TERRAIN_FIELD TERRAIN_PARAMS_JSON]
 """
 import sys
 from pathlib import Path
@@ -75,10 +75,14 @@ def command_source(fmu_dir, fmi):
           "a malformed schedule refused")
 
 
-def plant(fmu_dir, fmi):
+def plant(fmu_dir, fmi, field=None, terrain_params=None):
     """The native CassiePlant FMU in this process: 4 instances walking 300 steps of 10 ms, a state
-    taken, serialized, restored (same outputs after), and every byte-flipped state refused."""
+    taken, serialized, restored (same outputs after), and every byte-flipped state refused.  With
+    a height-field file (and the terrain parameters it was made for): an instance walking on it,
+    and the file cut short at every length class and with flipped bytes refused at initialization."""
+    import json
     import random
+    import tempfile
 
     from fmpy import read_model_description
     from fmpy.fmi1 import FMICallException
@@ -90,7 +94,7 @@ def plant(fmu_dir, fmi):
     outputs = [vr[n] for n in ("vx", "pitch", "roll", "plant_time")]
     h = 0.01
 
-    def make(i):
+    def make(i, params=None):
         if fmi == 2:
             s = FMU2Slave(guid=md.guid, unzipDirectory=fmu_dir, modelIdentifier=md.coSimulation.modelIdentifier,
                           instanceName=f"p{i}")
@@ -103,6 +107,11 @@ def plant(fmu_dir, fmi):
             s.instantiate()
             s.enterInitializationMode(startTime=0.0)
         (s.setReal if fmi == 2 else s.setFloat64)([vr["vx_des"]], [0.3 + 0.1 * i])
+        for name, value in (params or {}).items():
+            kind = type(value).__name__
+            setter = {"str": s.setString, "int": s.setInteger if fmi == 2 else s.setInt32,
+                      "float": s.setReal if fmi == 2 else s.setFloat64}[kind]
+            setter([vr[name]], [value])
         s.exitInitializationMode()
         return s
 
@@ -140,13 +149,38 @@ def plant(fmu_dir, fmi):
     for s in slaves:
         s.terminate()
         s.freeInstance()
-    print(f"plant FMI {fmi}.0: 4 x 300 steps, a state round trip, {refused} corrupted states refused")
+    note = ""
+    if field is not None:
+        params = dict(json.loads(terrain_params), terrain_field_file=field)
+        s = make(9, params)
+        walk(s, 0.0, 100)
+        s.terminate()
+        s.freeInstance()
+        data, bad_files = Path(field).read_bytes(), 0
+        with tempfile.TemporaryDirectory(dir=Path(fmu_dir).parent) as tmp:  # under the test's tmp_path
+            cuts = [data[:n] for n in (0, 10, 67, 68, 72, 1000, len(data) // 2, len(data) - 1)]
+            flips = []
+            for _ in range(12):
+                b = bytearray(data)
+                b[rng.randrange(len(b))] ^= 1 << rng.randrange(8)
+                flips.append(bytes(b))
+            for k, content in enumerate(cuts + flips + [data + b"\0" * 16]):
+                path = Path(tmp) / f"bad{k}.cptf"
+                path.write_bytes(content)
+                try:
+                    make(10 + k, dict(params, terrain_field_file=str(path)))
+                except FMICallException:
+                    bad_files += 1
+                else:
+                    raise AssertionError(f"accepted a bad height field ({len(content)} bytes)")
+        note = f", a terrain walk, {bad_files} bad height fields refused"
+    print(f"plant FMI {fmi}.0: 4 x 300 steps, a state round trip, {refused} corrupted states refused{note}")
 
 
 if __name__ == "__main__":
     if sys.argv[1] == "--command-source":
         command_source(sys.argv[2], int(sys.argv[3]))
     elif sys.argv[1] == "--plant":
-        plant(sys.argv[2], int(sys.argv[3]))
+        plant(sys.argv[2], int(sys.argv[3]), *sys.argv[4:6])
     else:
         main(sys.argv[1], sys.argv[2])
