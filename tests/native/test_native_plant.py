@@ -20,7 +20,8 @@ from pathlib import Path
 import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi3 import FMU3Slave
-from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+from fmpy.fmi2 import (FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE,
+                        fmi2LastSuccessfulTime, fmi2Terminated)
 from fmpy.logging import addLoggerProxy
 
 from fmu_src.plant_fmu import fmu_core
@@ -435,6 +436,9 @@ def test_refusals_name_the_field_and_change_nothing(plant_fmu, plant_dir):
     assert plant.s.getReal([vr["plant_time"]])[0] == 0.0  # nothing stepped
     plant.s.doStep(0.0, 0.01)
     assert plant.s.getReal([vr["plant_time"]])[0] == pytest.approx(0.01, abs=1e-12)  # sum of 20 x 0.5 ms
+    # the status functions of every native FMU (fmi2_common.c): the end of the last step, never terminated
+    assert plant.s.getRealStatus(fmi2LastSuccessfulTime) == 0.01 and plant.s.getBooleanStatus(fmi2Terminated) == 0
+    assert "only fmi2LastSuccessfulTime" in _refused(plant, plant.s.getRealStatus, fmi2Terminated)
     plant.s.terminate()
     plant.s.freeInstance()
 
