@@ -19,6 +19,9 @@ from __future__ import annotations
 import logging
 import math
 import numbers
+import os
+import struct
+import zlib
 from dataclasses import dataclass
 
 import mujoco
@@ -209,6 +212,48 @@ def add_terrain(spec: mujoco.MjSpec, terrain: TerrainSpec) -> None:
     for g in planes:
         log.info("terrain: removing floor plane %r", g.name)
         spec.delete(g)
+
+
+#: The height-field file (:func:`field_bytes`): what a host hands a plant that cannot generate the
+#: terrain itself (the native CassiePlant FMU's ``terrain_field_file``).  Little endian:
+#:   "CPTF" u32 version u32 total bytes                                    header (12 bytes)
+#:   f64 max_height_m f64 max_slope_deg f64 size_m f64 flat_radius_m       the spec it was made from
+#:   f64 resolution_m u32 seed u32 n                                       (n samples per side)
+#:   f64 peak                                                              heights.max(), m
+#:   f32 samples[n * n]   heights / peak (0 where peak is 0), row i at y = -size_m + i * spacing
+#:   u32 CRC-32 (zlib's) of every byte before it
+#: The samples are exactly the hfield data :func:`add_terrain` gives MuJoCo, so a model built
+#: from the file compiles to the same bits.
+FIELD_MAGIC = b"CPTF"
+#: What a reader of the file needs to build :func:`add_terrain`'s hfield: the box below height 0,
+#: m, and the most samples per side a field has.
+FIELD_HFIELD_BASE_M = _HFIELD_BASE_M
+FIELD_MAX_SAMPLES = _MAX_TERRAIN_SAMPLES
+FIELD_VERSION = 1
+FIELD_HEADER = struct.Struct("<4sII5dIId")
+
+
+def field_bytes(terrain: TerrainSpec) -> bytes:
+    """The height-field file of ``terrain`` (layout: :data:`FIELD_MAGIC`)."""
+    heights = generate_terrain(terrain)
+    n = heights.shape[0]
+    peak = float(heights.max())
+    samples = (heights / peak if peak > 0 else np.zeros((n, n))).astype("<f4").tobytes()
+    size = FIELD_HEADER.size + len(samples) + 4
+    head = FIELD_HEADER.pack(FIELD_MAGIC, FIELD_VERSION, size, float(terrain.max_height_m),
+                             float(terrain.max_slope_deg), float(terrain.size_m), float(terrain.flat_radius_m),
+                             float(terrain.resolution_m), int(terrain.seed), n, peak)
+    body = head + samples
+    return body + struct.pack("<I", zlib.crc32(body))
+
+
+def write_field(terrain: TerrainSpec, path: str | os.PathLike) -> str:
+    """Write :func:`field_bytes` of ``terrain`` to ``path``; returns the path as a string."""
+    data = field_bytes(terrain)
+    with open(path, "wb") as f:
+        f.write(data)
+    log.info("terrain seed=%d: wrote the %d-byte height field %s", terrain.seed, len(data), os.fspath(path))
+    return os.fspath(path)
 
 
 def _terrain_ids(model: mujoco.MjModel) -> tuple[int, int] | None:

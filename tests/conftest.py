@@ -71,6 +71,13 @@ def native_fmus(tmp_path_factory, build_module):
     return {v: build_module.build_native_fmu(v, out) for v in (2, 3)}
 
 
+@pytest.fixture(scope="session")
+def native_plant_fmus(tmp_path_factory, build_module):
+    """{2: path, 3: path}: both native CassiePlant FMUs exactly as build.py builds them."""
+    out = tmp_path_factory.mktemp("native_plant_fmus")
+    return {v: build_module.build_native_plant_fmu(v, out) for v in (2, 3)}
+
+
 @dataclass(frozen=True)
 class RegulatorFmu:
     """One of the regulator FMUs build.py builds: ``implementation`` "python" (pythonfmu) or

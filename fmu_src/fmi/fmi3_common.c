@@ -57,6 +57,13 @@ fmi3Instance fmi3InstantiateScheduledExecution(fmi3String instanceName, fmi3Stri
                                         instanceEnvironment, logMessage);
 }
 
+fmi3Status fmi3_check_counts(FmiModelInstance *inst, const char *call, const fmi3ValueReference vr[], size_t nvr,
+                             const void *values, size_t nValues) {
+    if (nvr > 0 && (vr == NULL || values == NULL)) REFUSE("NULL valueReferences or values with %zu references", nvr);
+    if (nValues != nvr) REFUSE("nValues = %zu, but %zu scalar variables were given", nValues, nvr);
+    return fmi3OK;
+}
+
 /* ---- stepping (the model steps: fmi_model_do_step) --------------------------------------------- */
 fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoint, fmi3Float64 communicationStepSize,
                       fmi3Boolean noSetFMUStatePriorToCurrentPoint, fmi3Boolean *eventHandlingNeeded,
@@ -82,7 +89,9 @@ NO_GET_SET(UInt16)
 NO_GET_SET(UInt32)
 NO_GET_SET(Int64)
 NO_GET_SET(UInt64)
+#ifndef FMI_MODEL_HAS_STRINGS /* fmi_model.h: the model's layer gets and sets its String variables */
 NO_GET_SET(String)
+#endif
 
 fmi3Status fmi3GetBinary(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,
                          size_t valueSizes[], fmi3Binary values[], size_t nValues) {

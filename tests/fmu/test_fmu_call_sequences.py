@@ -206,6 +206,7 @@ STATE_FUNCTIONS = {2: {"fmi2GetFMUstate", "fmi2SetFMUstate", "fmi2FreeFMUstate",
                        "fmi3SerializeFMUState", "fmi3DeserializeFMUState"}}
 PHASE_MATRIX = SUPPORT_DIR / "fmi" / "phase_matrix.py"
 COMMAND_SOURCES = ("command-source-fmi2", "command-source-fmi3")
+NATIVE_PLANTS = ("native-plant-fmi2", "native-plant-fmi3")
 
 
 def _not_provided(fmu_dir, fmi: int) -> set:
@@ -217,10 +218,11 @@ def _not_provided(fmu_dir, fmi: int) -> set:
     return NOT_PROVIDED[fmi] | (set() if cs.canGetAndSetFMUstate else STATE_FUNCTIONS[fmi])
 
 
-@pytest.fixture(scope="module", params=[*REGULATOR_FMUS, *COMMAND_SOURCES])
+@pytest.fixture(scope="module", params=[*REGULATOR_FMUS, *COMMAND_SOURCES, *NATIVE_PLANTS])
 def any_fmu(request, tmp_path_factory, build_module, unzip):
-    """(FMI version, extracted folder) of each FMU build.py builds but the plant: the pythonfmu
-    regulator (behind its C guard), the native regulators and the CommandSource FMUs."""
+    """(FMI version, extracted folder) of each FMU build.py builds with a C FMI layer: the
+    pythonfmu regulator (behind its C guard), the native regulators, the CommandSource FMUs and
+    the native CassiePlant FMUs."""
     kind, fmi = request.param.rsplit("-fmi", 1)
     fmi = int(fmi)
     if kind == "python":
@@ -228,8 +230,10 @@ def any_fmu(request, tmp_path_factory, build_module, unzip):
     if os.environ.get("AVR_TEST_FMU"):
         pytest.skip("AVR_TEST_FMU names the one FMU this run tests")
     out = tmp_path_factory.mktemp(request.param)
-    fmu = build_module.build_command_source(fmi, out) if kind == "command-source" else request.getfixturevalue(
-        "native_fmus")[fmi]
+    if kind == "command-source":
+        fmu = build_module.build_command_source(fmi, out)
+    else:
+        fmu = request.getfixturevalue("native_plant_fmus" if kind == "native-plant" else "native_fmus")[fmi]
     return fmi, unzip(fmu, out / "unzipped")
 
 

@@ -56,8 +56,10 @@ def test_guard_sources_do_not_copy_the_slave_blob_constants(source):
 
 # ---- the phase rules: one table (fmu_src/fmi/phase_rules.py), one generated header ----------------
 FMU_SRC = GUARD_DIR.parents[1]
-#: Every C source of the project's FMI layers: the guard, the native regulator, CommandSource, the shared layer.
-FMI_C_SOURCES = sorted(p for folder in ("regulator_fmu/guard", "regulator_fmu/native", "command_source", "fmi")
+#: Every C source of the project's FMI layers: the guard, the native regulator, CommandSource, the native
+#: plant, the shared layer.
+FMI_C_SOURCES = sorted(p for folder in ("regulator_fmu/guard", "regulator_fmu/native", "command_source", "fmi",
+                                        "plant_fmu/native")
                        for p in (FMU_SRC / folder).glob("*.[ch]"))
 
 
@@ -67,11 +69,11 @@ def test_no_fmi_layer_writes_its_own_phase_masks(source):
     function, a phase set, or a phase bit of its own."""
     code = re.sub(r"/\*.*?\*/", "", (FMU_SRC / source).read_text(), flags=re.S)
     own = re.findall(r"#define\s+(MASK_\w+|\w*(?:GET|SET|STATUS|ANY)_?PHASES?\w*|ANY_LIVE|BIT)\b", code)
-    own += re.findall(r"\b\w*(?:INSTANTIATED|INIT_MODE|STEP_MODE|TERMINATED)\s*=\s*1u?\s*<<", code)
+    own += re.findall(r"\b\w*(?:INSTANTIATED|INIT_MODE|STEP_MODE|TERMINATED)\s*=\s*(?:1u?\s*<<|[1248]u?\b)", code)
     assert not own, f"{source} defines {own}: take the allowed states from fmi_phase_rules.h (phase_rules.py)"
 
 
-def test_the_native_fmus_ship_the_generated_phase_rules(native_fmus, build_module, tmp_path):
+def test_the_native_fmus_ship_the_generated_phase_rules(native_fmus, native_plant_fmus, build_module, tmp_path):
     """Each native FMU's sources/ carries fmi_phase_rules.h exactly as phase_rules.c_header() writes it
     (its libraries are compiled from those sources; the guard's only copy is the one its build writes
     beside the generated variable table, and the guard finds no other)."""
@@ -79,7 +81,8 @@ def test_the_native_fmus_ship_the_generated_phase_rules(native_fmus, build_modul
 
     from fmu_src.fmi import phase_rules
 
-    fmus = [*native_fmus.values(), *(build_module.build_command_source(v, tmp_path) for v in (2, 3))]
+    fmus = [*native_fmus.values(), *native_plant_fmus.values(),
+            *(build_module.build_command_source(v, tmp_path) for v in (2, 3))]
     for fmu in fmus:
         with zipfile.ZipFile(fmu) as z:
             assert z.read("sources/fmi_phase_rules.h").decode() == phase_rules.c_header(), fmu.name

@@ -172,9 +172,9 @@ def test_command_source_under_asan_and_ubsan_with_zero_findings(sanitized_comman
     env = dict(os.environ, LD_PRELOAD=_preload(), ASAN_OPTIONS=f"detect_leaks=0:halt_on_error=1:log_path={reports}/asan",
                UBSAN_OPTIONS=f"print_stacktrace=1:halt_on_error=1:log_path={reports}/ubsan")
     folder = str(sanitized_command_sources[fmi])
-    runs = [subprocess.run([sys.executable, str(REPO_ROOT / "tests" / "fmi" / "phase_matrix.py"), folder, str(fmi)],
+    runs = [subprocess.run([sys.executable, str(SUPPORT_DIR / "fmi" / "phase_matrix.py"), folder, str(fmi)],
                            env=env, capture_output=True, text=True, timeout=600),
-            subprocess.run([sys.executable, str(REPO_ROOT / "tests" / "native" / "sanitize_run.py"), "--command-source",
+            subprocess.run([sys.executable, str(SUPPORT_DIR / "native" / "sanitize_run.py"), "--command-source",
                             folder, str(fmi)], env=env, capture_output=True, text=True, timeout=1200)]
     findings = sorted(p.name for p in reports.iterdir())
     print(f"\nCommandSource FMI {fmi}.0 under ASan+UBSan: every function in every state, "

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ctypes
 import itertools
+import shutil
 import struct
 import subprocess
 import zipfile
@@ -19,11 +20,13 @@ from pathlib import Path
 import pytest
 from fmpy import extract, read_model_description
 from fmpy.fmi3 import FMU3Slave
-from fmpy.fmi2 import FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE
+from fmpy.fmi2 import (FMU2Slave, defaultCallbacks, fmi2CallbackFunctions, fmi2CallbackLoggerTYPE,
+                        fmi2LastSuccessfulTime, fmi2Terminated)
 from fmpy.logging import addLoggerProxy
 
 from fmu_src.plant_fmu import fmu_core
 from plant.constants import OFFSET_NAMES
+from plant.terrain import GroundHeight
 from support.native_support import CC, FMI2_INCLUDE, MINGW_CC, NATIVE_DIR, WINE, compile_c, require
 
 #: Communication step of the loops (s): the suite's regulator period.
@@ -33,10 +36,9 @@ LOOP_SIGNALS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate")
 
 
 @pytest.fixture(scope="module")
-def plant_fmus(tmp_path_factory, build_module):
-    """{2: path, 3: path}: both native plant FMUs as build.py builds them."""
-    out = tmp_path_factory.mktemp("native_plant")
-    return {v: build_module.build_native_plant_fmu(v, out) for v in (2, 3)}
+def plant_fmus(native_plant_fmus):
+    """{2: path, 3: path}: both native plant FMUs as build.py builds them (conftest.py)."""
+    return native_plant_fmus
 
 
 @pytest.fixture(scope="module")
@@ -109,6 +111,56 @@ class _Plant:
         self.s.doStep(t, H)
         return self.outputs()
 
+    def serialize(self) -> bytes:
+        state = self.s.getFMUstate()
+        blob = self.s.serializeFMUstate(state)
+        self.s.freeFMUstate(state)
+        return blob
+
+    def deserialize_and_set(self, blob: bytes) -> None:
+        state = self.s.deSerializeFMUstate(blob)
+        self.s.setFMUstate(state)
+        self.s.freeFMUstate(state)
+
+
+class _Plant3(_Plant):
+    """The FMI 3.0 native plant through fmpy (the same calls as _Plant, FMI 3.0's names)."""
+
+    def __init__(self, fmu: Path, unzipped: Path, params: dict | None = None):
+        self.md = read_model_description(str(fmu))
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        self.types = {v.name: v.type for v in self.md.modelVariables}
+        self.messages = []
+        self.s = FMU3Slave(guid=self.md.guid, unzipDirectory=str(unzipped), modelIdentifier="CassiePlantNative",
+                           instanceName=f"plant-{next(_NAMES)}")
+        self.s.instantiate()
+        self.s.enterInitializationMode(startTime=0.0)
+        setters = {"String": self.s.setString, "Int32": self.s.setInt32, "Float64": self.s.setFloat64}
+        for name, value in (params or {}).items():
+            setters[self.types[name]]([self.vr[name]], [value])
+
+    def outputs(self) -> dict:
+        getters = {"Float64": lambda vr: self.s.getFloat64(vr)[0], "Int32": lambda vr: self.s.getInt32(vr)[0],
+                   "Boolean": lambda vr: bool(self.s.getBoolean(vr)[0])}
+        return {spec.name: getters[self.types[spec.name]]([self.vr[spec.name]]) for spec in fmu_core.OUTPUT_SPECS}
+
+    def step(self, t: float, inputs: dict) -> dict:
+        names = list(inputs)
+        self.s.setFloat64([self.vr[n] for n in names], [inputs[n] for n in names])
+        self.s.doStep(t, H)
+        return self.outputs()
+
+    def serialize(self) -> bytes:
+        state = self.s.getFMUState()
+        blob = self.s.serializeFMUState(state)
+        self.s.freeFMUState(state)
+        return blob
+
+    def deserialize_and_set(self, blob: bytes) -> None:
+        state = self.s.deserializeFMUState(blob)
+        self.s.setFMUState(state)
+        self.s.freeFMUState(state)
+
 
 def _compare(got: dict, want: dict, t: float) -> None:
     bad = [n for n in want if _bits(got[n]) != _bits(want[n])]
@@ -177,9 +229,10 @@ def _loop_host(compiler, fmi: int, out: Path) -> Path:
 
 
 def _loop_script(plant_fmu, plant_dir, reg_fmu, reg_dir, steps: int, vx_des: float,
-                 windows: bool = False, fmi: int = 2) -> tuple[str, list[str]]:
-    """The fmi<fmi>_loop_host script: the regulator (FMU 0) and the plant (FMU 1) in a loop; with
-    ``windows`` the Windows libraries, their paths as Wine sees them (drive Z: is /)."""
+                 windows: bool = False, fmi: int = 2, plant_params: dict | None = None) -> tuple[str, list[str]]:
+    """The fmi<fmi>_loop_host script: the regulator (FMU 0) and the plant (FMU 1, with
+    ``plant_params``) in a loop; with ``windows`` the Windows libraries, their paths as Wine sees
+    them (drive Z: is /)."""
     pmd, rmd = read_model_description(str(plant_fmu)), read_model_description(str(reg_fmu))
     pv = {v.name: v for v in pmd.modelVariables}
     rv = {v.name: v for v in rmd.modelVariables}
@@ -194,6 +247,8 @@ def _loop_script(plant_fmu, plant_dir, reg_fmu, reg_dir, steps: int, vx_des: flo
         plant_res, reg_res = f"{drive}{resources}/", "-"
     lines = [f"F {drive}{reg_lib} {rmd.guid} {reg_res}", f"F {drive}{plant_lib} {pmd.guid} {plant_res}",
              f"P 0 R {rv['vx_des'].valueReference} {vx_des!r}", f"P 1 R {pv['vx_des'].valueReference} {vx_des!r}"]
+    letter = {"Real": "R", "Float64": "R", "Integer": "I", "Int32": "I", "String": "S"}
+    lines += [f"P 1 {letter[pv[n].type]} {pv[n].valueReference} {value}" for n, value in (plant_params or {}).items()]
     lines += [f"L 1 R {pv[n].valueReference} 0 {rv[n].valueReference}" for n in LOOP_SIGNALS]
     lines.append(f"L 1 I {pv['step_index'].valueReference} 0 {rv['step_index'].valueReference}")
     lines += [f"L 0 R {rv[n].valueReference} 1 {pv[n].valueReference}" for n in OFFSET_NAMES]
@@ -286,13 +341,38 @@ def test_win64_loop_walks_under_wine(plant_fmus, regulator_fmus, tmp_path):
         assert abs(last["plant_time"] - 10.0) < 1e-9
 
 
+@pytest.mark.wine
+def test_win64_plant_walks_on_the_handed_over_terrain_under_wine(plant_fmus, regulator_fmus, terrain_field, tmp_path):
+    """The Windows plant reads the height field too (its MuJoCo model editing goes through the
+    mujoco.dll it loads): 3 s of the terrain_mass_com ground in the FMI 2.0 loop under Wine walk
+    as the Linux loop does, to 1e-6 m (Windows rounds differently in the last place; on the flat
+    floor, not reading the field, the pelvis would be centimetres off)."""
+    env = {"WINEPREFIX": str(tmp_path / "wineprefix"), "WINEDEBUG": "-all", "HOME": str(tmp_path),
+           "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin"}
+    reg_dir = Path(extract(str(regulator_fmus[2]), unzipdir=str(tmp_path / "regulator")))
+    plant_dir = Path(extract(str(plant_fmus[2]), unzipdir=str(tmp_path / "plant")))
+    rows = {}
+    for windows in (False, True):
+        params = dict(TERRAIN_PARAMS, terrain_field_file=("Z:" if windows else "") + terrain_field.as_posix())
+        script, printed = _loop_script(plant_fmus[2], plant_dir, regulator_fmus[2], reg_dir, 300, 0.5,
+                                       windows=windows, plant_params=params)
+        if windows:
+            host = _loop_host(require(MINGW_CC), 2, tmp_path / "fmi2_loop_host.exe")
+            rows[windows] = _run_loop(host, script, tmp_path / "win", env_prefix=(str(require(WINE)),), env=env)
+        else:
+            rows[windows] = _run_loop(_loop_host(CC, 2, tmp_path / "fmi2_loop_host"), script, tmp_path / "linux")
+    linux, win = (dict(zip(printed, rows[w][-1])) for w in (False, True))
+    assert linux["fell"] == 0.0 and win["fell"] == 0.0 and win["step_index"] == linux["step_index"] >= 4, (linux, win)
+    assert abs(win["pelvis_x"] - linux["pelvis_x"]) < 1e-6 and abs(win["pelvis_z"] - linux["pelvis_z"]) < 1e-6
+
+
 def test_fmi3_same_outputs_and_state(plant_fmus, tmp_path):
     """The FMI 3.0 FMU (the same C source): the Python plant's outputs bit for bit for 2 s of
     walking on the OSU model, and a state that restores the exact continuation."""
     fmu = plant_fmus[3]
     md = read_model_description(str(fmu), validate=True)
     vr = {v.name: v.valueReference for v in md.modelVariables}
-    assert [v.name for v in md.modelVariables] == [s.name for s in fmu_core.SPECS] + ["time"]
+    assert [v.name for v in md.modelVariables] == [s.name for s in fmu_core.SPECS] + ["terrain_field_file", "time"]
     s = FMU3Slave(guid=md.guid, unzipDirectory=str(extract(str(fmu), unzipdir=str(tmp_path / "fmu"))),
                   modelIdentifier="CassiePlantNative", instanceName="plant3")
     s.instantiate()
@@ -317,7 +397,7 @@ def test_fmi3_same_outputs_and_state(plant_fmus, tmp_path):
             state, t_saved = s.getFMUState(), t
         elif k > 150:
             saved.append(got)
-    assert s.getFloat64([len(fmu_core.SPECS)])[0] == t  # the independent variable time
+    assert s.getFloat64([vr["time"]])[0] == t  # the independent variable time
     s.setFMUState(state)
     t = t_saved
     for k, want in enumerate(saved):
@@ -345,7 +425,7 @@ def test_refusals_name_the_field_and_change_nothing(plant_fmu, plant_dir):
     assert "torso_mass_kg = nan" in _refused(plant, plant.s.setReal, [vr["torso_mass_kg"]], [float("nan")])
     assert "is an output" in _refused(plant, plant.s.setReal, [vr["pitch"]], [0.1])
     plant.s.setReal([vr["terrain_max_height_m"]], [0.05])
-    assert "terrain_max_height_m" in _refused(plant, plant.s.exitInitializationMode)
+    assert "needs the height field: set terrain_field_file" in _refused(plant, plant.s.exitInitializationMode)
     plant.s.setReal([vr["terrain_max_height_m"]], [0.0])
     plant.s.exitInitializationMode()  # still in initialization mode after the refusal: now it starts
     assert "fixed parameter" in _refused(plant, plant.s.setReal, [vr["torso_mass_kg"]], [12.0])
@@ -356,6 +436,9 @@ def test_refusals_name_the_field_and_change_nothing(plant_fmu, plant_dir):
     assert plant.s.getReal([vr["plant_time"]])[0] == 0.0  # nothing stepped
     plant.s.doStep(0.0, 0.01)
     assert plant.s.getReal([vr["plant_time"]])[0] == pytest.approx(0.01, abs=1e-12)  # sum of 20 x 0.5 ms
+    # the status functions of every native FMU (fmi2_common.c): the end of the last step, never terminated
+    assert plant.s.getRealStatus(fmi2LastSuccessfulTime) == 0.01 and plant.s.getBooleanStatus(fmi2Terminated) == 0
+    assert "only fmi2LastSuccessfulTime" in _refused(plant, plant.s.getRealStatus, fmi2Terminated)
     plant.s.terminate()
     plant.s.freeInstance()
 
@@ -373,7 +456,7 @@ def _walk(plant, t: float, steps: int) -> tuple[float, list[dict]]:
 #: The blob layout (cp_instance.c): header, phase, has-walker flag, time, the values, then the walker.
 HEADER = 4 + 4 + 4 + 40
 VALUES_AT = HEADER + 4 + 4 + 8
-WALKER_AT = VALUES_AT + 8 * len(fmu_core.SPECS)
+WALKER_AT = VALUES_AT + 8 * (len(fmu_core.SPECS) + 1)  # the pythonfmu plant's variables, then terrain_field_file
 #: Within the walker: substep, fell, fall reason, three commands, then the controller memory.
 MEMORY_AT = WALKER_AT + 4 + 4 + 160 + 3 * 8
 #: tau: after the six offsets, six speeds/rates, mode, stance, step_index, t_step_start.
@@ -412,13 +495,13 @@ def test_fmu_state_restores_the_run_exactly(plant_fmu, plant_dir):
     # Corrupt or unreachable states are refused; the instance keeps walking as before.
     nominal = _Plant(plant_fmu, plant_dir)
     forged = {
-        "CRC-32": blob[:100] + bytes([blob[100] ^ 1]) + blob[101:],
+        "checksum mismatch": blob[:100] + bytes([blob[100] ^ 1]) + blob[101:],
         "fixed parameter torso_mass_kg": _forge(blob, VALUES_AT + 8 * plant.vr["torso_mass_kg"], "<d", 17.0),
         "vx_des = 7": _forge(blob, VALUES_AT + 8 * plant.vr["vx_des"], "<d", 7.0),
         "tau": _forge(blob, TAU_AT, "<d", 5.0),
         "norm": _forge(blob, QUAT_AT, "<d", 2.0),
         "substep": _forge(blob, WALKER_AT, "<I", 4),
-        "is from another FMU": blob[:12] + b"{x" + blob[14:-4] + struct.pack("<I", zlib.crc32(blob[:12] + b"{x" + blob[14:-4])),
+        "saved by another FMU": blob[:12] + b"{x" + blob[14:-4] + struct.pack("<I", zlib.crc32(blob[:12] + b"{x" + blob[14:-4])),
     }
     for why, bad in forged.items():
         plant.messages.clear()
@@ -439,9 +522,10 @@ def test_fmu_state_restores_the_run_exactly(plant_fmu, plant_dir):
 
 def test_model_description_matches_the_pythonfmu_plant(plant_fmu):
     """Same variables, value references, types, causalities, variabilities, starts and ranges as
-    fmu_core.SPECS (the pythonfmu plant's table)."""
+    fmu_core.SPECS (the pythonfmu plant's table), then terrain_field_file."""
     md = read_model_description(str(plant_fmu), validate=True)
-    assert [v.name for v in md.modelVariables] == [s.name for s in fmu_core.SPECS]
+    # then the one the native plant has more: the terrain's height field, handed over as a file
+    assert [v.name for v in md.modelVariables] == [s.name for s in fmu_core.SPECS] + ["terrain_field_file"]
     for v, s in zip(md.modelVariables, fmu_core.SPECS):
         assert (v.type, v.causality, v.variability) == (s.type, s.causality, s.variability), s.name
         if s.type in ("Real", "Integer") and s.min is not None:
@@ -449,3 +533,160 @@ def test_model_description_matches_the_pythonfmu_plant(plant_fmu):
     with zipfile.ZipFile(plant_fmu) as z:
         names = z.namelist()
     assert "binaries/linux64/CassiePlantNative.so" in names and "sources/cassie_ctrl.c" in names
+
+
+# ---- uneven terrain: the height field handed over as a file (plant.terrain.write_field) ----------
+#: The terrain_mass_com scenario's ground and model change (scenarios/suite/terrain_mass_com.toml).
+TERRAIN_PARAMS = {"terrain_max_height_m": 0.4, "terrain_max_slope_deg": 20.0, "terrain_seed": 7,
+                  "terrain_size_m": 45.0, "torso_mass_kg": 10.33 + 5.0, "torso_com_offset_x_m": 0.1}
+
+
+@pytest.fixture(scope="module")
+def terrain_field(tmp_path_factory) -> Path:
+    """The height-field file of TERRAIN_PARAMS, as a host writes it for the native plant."""
+    from plant.terrain import TerrainSpec, write_field
+
+    spec = TerrainSpec(max_height_m=TERRAIN_PARAMS["terrain_max_height_m"],
+                       max_slope_deg=TERRAIN_PARAMS["terrain_max_slope_deg"], seed=TERRAIN_PARAMS["terrain_seed"],
+                       size_m=TERRAIN_PARAMS["terrain_size_m"])
+    return Path(write_field(spec, tmp_path_factory.mktemp("terrain") / "terrain_mass_com.cptf"))
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_terrain_walk_same_bits_as_the_python_plant(plant_fmus, terrain_field, fmi, tmp_path):
+    """3 s of the terrain_mass_com scenario's ground and model change, walking at 0.5 m/s then
+    0.8 m/s with a regulator's small offsets: every output of the native plant (the field read
+    from the file) carries the Python plant's bits (the field generated by numpy), every step;
+    a state taken at 1.5 s and set into a fresh instance (which builds its walker on the same
+    file) continues with the same bits."""
+    params = dict(TERRAIN_PARAMS, terrain_field_file=str(terrain_field))
+    unzipped = Path(extract(str(plant_fmus[fmi]), unzipdir=str(tmp_path / "fmu")))
+    plant = _Plant3(plant_fmus[fmi], unzipped, params) if fmi == 3 else _Plant(plant_fmus[fmi], unzipped, params)
+    plant.s.exitInitializationMode()
+    walker = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS, **TERRAIN_PARAMS))
+    assert walker.physics.model.hfield_nrow[0] == 1801  # the Python plant walks on the generated field
+    _compare(plant.outputs(), fmu_core.outputs(walker), 0.0)
+    inputs = {n: 0.0 for n in fmu_core.INPUT_NAMES}
+    t, state = 0.0, None
+    rows = []
+    for k in range(300):
+        inputs["vx_des"] = 0.5 if k < 150 else 0.8
+        for i, n in enumerate(OFFSET_NAMES):
+            inputs[n] = 0.01 * ((k + i) % 5 - 2) if k > 100 else 0.0
+        if k == 150:
+            state = plant.serialize()
+        got = plant.step(t, inputs)
+        want = fmu_core.advance(walker, inputs, 20)
+        t += H
+        _compare(got, want, t)
+        rows.append(want)
+    assert want["step_index"] >= 4 and not want["fell"]
+    # on the bumps: the ground under the pelvis has risen 8.9 cm by the end (5 cm: a margin, not a bound)
+    assert GroundHeight(walker.physics.model)(want["pelvis_x"], want["pelvis_y"]) > 0.05
+    other = _Plant3(plant_fmus[fmi], unzipped, params) if fmi == 3 else _Plant(plant_fmus[fmi], unzipped, params)
+    other.deserialize_and_set(state)
+    t = 150 * H
+    for k in range(150, 300):
+        inputs["vx_des"] = 0.5 if k < 150 else 0.8
+        for i, n in enumerate(OFFSET_NAMES):
+            inputs[n] = 0.01 * ((k + i) % 5 - 2)
+        got = other.step(t, inputs)
+        t += H
+        _compare(got, rows[k], t)
+    for p in (plant, other):
+        p.s.terminate()
+        p.s.freeInstance()
+
+
+def _field_with(data: bytes, at: int, fmt: str, value) -> bytes:
+    """The height-field file ``data`` with one field replaced and its CRC-32 made valid again."""
+    body = bytearray(data[:-4])
+    struct.pack_into(fmt, body, at, value)
+    return bytes(body) + struct.pack("<I", zlib.crc32(bytes(body)))
+
+
+def test_bad_height_fields_are_refused_naming_the_parameter(plant_fmu, plant_dir, terrain_field, tmp_path):
+    """Each bad file is refused at ExitInitializationMode with a message naming terrain_field_file
+    (or the terrain parameter it contradicts) and what is allowed; the instance stays in
+    initialization mode and starts once given the right file."""
+    data = terrain_field.read_bytes()
+    n = struct.unpack_from("<I", data, 56)[0]
+    bad = {
+        "cannot be opened": None,
+        "is not a height-field file": b"not a field at all, but long enough to have a header of 68 bytes......",
+        "checksum mismatch": data[:1000] + bytes([data[1000] ^ 4]) + data[1001:],
+        "its header says": data[:-4096],
+        "terrain_seed = 8": _field_with(data, 52, "<I", 8),
+        "terrain_max_slope_deg = 25": _field_with(data, 20, "<d", 25.0),
+        "resolution_m": _field_with(data, 44, "<d", 0.1),
+        "peak height": _field_with(data, 60, "<d", 0.5),
+        "sample 5 = nan": _field_with(data, 68 + 4 * 5, "<f", float("nan")),
+        "sample 7 = 1.5": _field_with(data, 68 + 4 * 7, "<f", 1.5),
+        "format version 2": _field_with(data, 4, "<I", 2),
+    }
+    assert n == 1801
+    plant = _Plant(plant_fmu, plant_dir, TERRAIN_PARAMS)
+    vr = plant.vr["terrain_field_file"]
+    for i, (why, content) in enumerate(bad.items()):
+        path = tmp_path / f"bad{i}.cptf"
+        if content is not None:
+            path.write_bytes(content)
+        plant.s.setString([vr], [str(path)])
+        message = _refused(plant, plant.s.exitInitializationMode)
+        assert why in message and "terrain_field_file" in message, (why, message)
+    assert "at most 4095 bytes" in _refused(plant, plant.s.setString, [vr], ["x" * 5000])
+    plant.s.setString([vr], [str(terrain_field)])
+    assert plant.s.getString([vr]) == [str(terrain_field).encode()]
+    plant.s.exitInitializationMode()  # still in initialization mode after the refusals: now it starts
+    assert "fixed parameter" in _refused(plant, plant.s.setString, [vr], [str(terrain_field)])
+    plant.s.doStep(0.0, H)
+    plant.s.terminate()
+    plant.s.freeInstance()
+
+
+#: AddressSanitizer + UBSan, as the regulator's sanitized build (tests/native/test_native_hosts.py).
+SANITIZE = ("-fsanitize=address,undefined", "-fno-sanitize-recover=all", "-fno-omit-frame-pointer", "-g", "-Wno-error")
+LINUX = {2: "linux64", 3: "x86_64-linux"}
+
+
+@pytest.mark.sanitize
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_sanitized_plant_runs_every_call_in_every_state_and_walks_with_zero_findings(plant_fmus, terrain_field, fmi,
+                                                                                   tmp_path):
+    """The native plant's Linux library rebuilt from its own sources/ with ASan + UBSan: every FMI
+    function in every state (tests/support/fmi/phase_matrix.py, NULL and zero arguments), then
+    walking instances with state round trips and corrupted states, a terrain walk and bad height
+    fields (sanitize_run.py --plant): zero sanitizer findings, and the phase matrix follows the table."""
+    import json
+    import os
+    import sys
+
+    from fmu_src.fmi import phase_rules
+    from fmu_src.plant_fmu.native import build_native_plant
+    from plant.native import native_ctrl
+    from support.paths import SUPPORT_DIR
+
+    unzipped = Path(extract(str(plant_fmus[fmi]), unzipdir=str(tmp_path / "fmu")))
+    lib = build_native_plant.compile_library(unzipped / "sources", fmi, "linux", native_ctrl.mujoco_library(),
+                                             tmp_path / "CassiePlantNative.so", extra_flags=SANITIZE)
+    assert b"__asan_report" in lib.read_bytes() and b"__ubsan_handle" in lib.read_bytes()  # instrumented
+    shutil.copyfile(lib, unzipped / "binaries" / LINUX[fmi] / "CassiePlantNative.so")
+    libasan = subprocess.run([str(require(CC)), "-print-file-name=libasan.so"], capture_output=True,
+                             text=True).stdout.strip()
+    # Python itself is not instrumented and keeps memory until exit: leak checking would report it, not us.
+    env = {**os.environ, "LD_PRELOAD": libasan, "ASAN_OPTIONS": "detect_leaks=0:halt_on_error=1",
+           "UBSAN_OPTIONS": "halt_on_error=1:print_stacktrace=1"}
+    matrix = subprocess.run([sys.executable, str(SUPPORT_DIR / "fmi" / "phase_matrix.py"), str(unzipped), str(fmi)],
+                            env=env, capture_output=True, text=True, timeout=900)
+    findings = matrix.stderr.count("ERROR: AddressSanitizer") + matrix.stderr.count("runtime error:")
+    assert matrix.returncode == 0 and findings == 0, matrix.stderr[-4000:]
+    table = phase_rules.FMI2_ALLOWED if fmi == 2 else phase_rules.FMI3_ALLOWED
+    answers = json.loads(matrix.stdout.strip().splitlines()[-1])
+    assert all(a["status"] != 0 for name, by_state in answers.items() for state, a in by_state.items()
+               if name in table and state not in table[name]), "a call outside its states answered OK"
+    run = subprocess.run([sys.executable, str(SUPPORT_DIR / "native" / "sanitize_run.py"), "--plant", str(unzipped),
+                          str(fmi), str(terrain_field), json.dumps(TERRAIN_PARAMS)], env=env, capture_output=True,
+                         text=True, timeout=900)
+    findings = run.stderr.count("ERROR: AddressSanitizer") + run.stderr.count("runtime error:")
+    assert run.returncode == 0 and findings == 0, run.stderr[-4000:]
+    print(f"\n{run.stdout.splitlines()[-1]}; every function in every state; 0 sanitizer findings")

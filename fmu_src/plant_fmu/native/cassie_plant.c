@@ -12,6 +12,8 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "cp_terrain.h"
+
 static int check_names(const mjModel *m, char *err, int errlen) {
     for (int i = 0; i < CP_N_JOINT_NAMES; i++)
         if (mj_name2id(m, mjOBJ_JOINT, CP_JOINT_NAMES[i]) < 0) {
@@ -58,7 +60,8 @@ static int add_home_key(mjSpec *spec, const mjModel *m, char *err, int errlen) {
     return 0;
 }
 
-static mjModel *load_model(const char *path, const double *v, char *err, int errlen) {
+/* plant.model.load_model: the file, its home key, the terrain (NULL: the flat floor). */
+static mjModel *load_model(const char *path, const double *v, const CpTerrain *terrain, char *err, int errlen) {
     char msg[1000] = "";
     mjSpec *spec = mj_parseXML(path, NULL, msg, sizeof msg);
     if (!spec) {
@@ -76,12 +79,24 @@ static mjModel *load_model(const char *path, const double *v, char *err, int err
         mj_deleteSpec(spec);
         return NULL;
     }
+    int edit = 0;
     if (mj_name2id(m, mjOBJ_KEY, CP_HOME_KEY) < 0) {
         if (add_home_key(spec, m, err, errlen)) {
             mj_deleteModel(m);
             mj_deleteSpec(spec);
             return NULL;
         }
+        edit = 1;
+    }
+    if (terrain != NULL) {
+        if (cp_terrain_add(spec, terrain, err, errlen)) {
+            mj_deleteModel(m);
+            mj_deleteSpec(spec);
+            return NULL;
+        }
+        edit = 1;
+    }
+    if (edit) {
         mj_deleteModel(m);
         m = mj_compile(spec, NULL);
         if (!m) {
@@ -127,18 +142,17 @@ void cp_free(CpWalker *w) {
     w->m = NULL;
 }
 
-int cp_start(CpWalker *w, const char *models_dir, const double *values, char *err, int errlen) {
+int cp_start(CpWalker *w, const char *models_dir, const double *values, const char *terrain_file, char *err,
+             int errlen) {
     memset(w, 0, sizeof *w);
-    if (values[CP_VR_terrain_max_height_m] != 0.0) {
-        snprintf(err, errlen, "terrain_max_height_m = %.17g m: the native CassiePlant has no terrain generator; "
-                 "only 0 (the flat floor) is supported (use the pythonfmu CassiePlant for uneven terrain)",
-                 values[CP_VR_terrain_max_height_m]);
-        return -1;
-    }
+    CpTerrain terrain;
+    const int uneven = values[CP_VR_terrain_max_height_m] != 0.0;
+    if (uneven && cp_terrain_load(&terrain, terrain_file, values, err, errlen)) return -1;
     int model = (int)values[CP_VR_cassie_model];
     char path[4096];
     snprintf(path, sizeof path, "%s/%s", models_dir, CP_MODEL_FILES[model]);
-    w->m = load_model(path, values, err, errlen);
+    w->m = load_model(path, values, uneven ? &terrain : NULL, err, errlen);
+    if (uneven) cp_terrain_free(&terrain);
     if (!w->m) return -1;
     mjModel *m = w->m;
     if (m->opt.timestep != CP_PLANT_STEP_S) {

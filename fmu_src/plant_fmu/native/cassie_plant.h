@@ -20,9 +20,11 @@ typedef struct {
 } CpWalker;
 
 /* fmu_core.start: the model `model_index` (CP_MODEL_FILES) from models_dir with the
- * perturbation of the parameter values (indexed by value reference), at rest in the home
- * pose.  0, or -1 with the reason in err (the walker then holds nothing). */
-int cp_start(CpWalker *w, const char *models_dir, const double *values, char *err, int errlen);
+ * perturbation of the parameter values (indexed by value reference), on the terrain of the
+ * height-field file terrain_file when terrain_max_height_m > 0 (cp_terrain.h), at rest in the
+ * home pose.  0, or -1 with the reason in err (the walker then holds nothing). */
+int cp_start(CpWalker *w, const char *models_dir, const double *values, const char *terrain_file, char *err,
+             int errlen);
 void cp_free(CpWalker *w);
 /* fmu_core.apply_inputs then CassieWalker.advance(n_steps); inputs indexed by value reference. */
 void cp_advance(CpWalker *w, const double *values, long n_steps);

@@ -5,7 +5,8 @@
  *
  * FMU state blob (little endian, every double as its 8 IEEE bytes):
  *   "CPNS" u32 version u32 total bytes  char[40] GUID (NUL padded)     header
- *   u32 phase bit  u32 has walker  f64 time  f64 values[CP_N_VARS]
+ *   u32 phase bit  u32 has walker  f64 time  f64 values[CP_N_VARS]  (version 2; terrain_field_file's
+ *                                       value is 0 there: its text is not part of a state)
  *   walker (has walker only): i32 substep  i32 fell  char[160] fall reason
  *     f64 vx_des_mps vy_des_mps yaw_rate_des_radps
  *     controller memory: f64 offsets[6] vx_ref vy_ref vx_des vy_des yaw_rate_ref yaw_rate_des
@@ -15,7 +16,8 @@
  *     f64 servo gains[20] (-kp, -kd of each motor, actuator order)
  *   u32 CRC-32 (zlib's) of every byte before it
  * A blob is set only if it is one this FMU can have written: the CRC and GUID, a known phase,
- * every variable of its type and in its range, the fixed parameters equal to this instance's,
+ * every variable of its type and in its range, the fixed parameters equal to this instance's
+ * (terrain_field_file's text is the instance's own: a walker the state needs is built on it),
  * and a walker state a run can reach (plant.sim.CassieWalker.state_problems: finite values
  * within MuJoCo's mjMAXVAL, unit quaternions, ordered step times, ...).
  */
@@ -26,6 +28,8 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "fmi_blob.h"
 
 static const char *const TYPE_NAMES[] = {"Real", "Integer", "Boolean", "String"};
 
@@ -58,20 +62,23 @@ void cp_debug(const CpInstance *inst, const char *fmt, ...) {
 }
 
 static const char *phase_name(const CpInstance *inst, CpPhase p) {
-    for (int i = 0; i < 4; i++)
+    for (int i = 0; i < CP_N_PHASES; i++)
         if (p == (CpPhase)(1u << i)) return inst->phase_names[i];
     return "?";
 }
 
 CpStatus cp_allowed(const CpInstance *inst, const char *call, unsigned mask) {
-    if (inst->phase & mask) return CP_OK;
+    if (inst == NULL) return CP_ERROR;
+    if ((unsigned)inst->phase & mask) return CP_OK;
+    if (mask == 0u) return cp_refuse(inst, call, "not provided by this FMU (see its modelDescription.xml)");
     char list[200] = "";
-    for (int i = 0; i < 4; i++)
+    for (int i = 0; i < CP_N_PHASES; i++)
         if (mask & (1u << i)) {
             if (list[0]) strncat(list, ", ", sizeof list - strlen(list) - 1);
             strncat(list, inst->phase_names[i], sizeof list - strlen(list) - 1);
         }
-    return cp_refuse(inst, call, "not allowed in state %s (allowed in: %s)", phase_name(inst, inst->phase), list);
+    return cp_refuse(inst, call, "not allowed in state %s (allowed in: %s)", phase_name(inst, inst->phase),
+                     list[0] ? list : "none");
 }
 
 CpStatus cp_check_categories(const CpInstance *inst, const char *call, size_t n, const char *const categories[]) {
@@ -132,6 +139,7 @@ void cp_free_instance(CpInstance *inst) {
     if (inst == NULL) return;
     if (inst->has_walker) cp_free(&inst->walker);
     free(inst->resources);
+    free(inst->terrain_field);
     free(inst->name);
     free(inst);
 }
@@ -156,7 +164,7 @@ static int start_walker(const CpInstance *inst, const double *values, CpWalker *
     if (param_problem(values, err, (size_t)errlen)) return -1;
     char models[4200];
     snprintf(models, sizeof models, "%s/models", inst->resources);
-    return cp_start(w, models, values, err, errlen);
+    return cp_start(w, models, values, inst->terrain_field, err, errlen);
 }
 
 CpStatus cp_exit_init(CpInstance *inst, const char *call) {
@@ -171,6 +179,8 @@ CpStatus cp_exit_init(CpInstance *inst, const char *call) {
 void cp_reset(CpInstance *inst) {
     if (inst->has_walker) cp_free(&inst->walker);
     inst->has_walker = 0;
+    free(inst->terrain_field);
+    inst->terrain_field = NULL;
     defaults(inst);
     inst->phase = CP_INSTANTIATED;
 }
@@ -201,6 +211,10 @@ static int value_problem(const CpVar *v, double x, char *out, size_t n) {
     if (v->type == CP_BOOLEAN) {
         if (x == 0.0 || x == 1.0) return 0;
         why = "a Boolean must be true (1) or false (0)";
+    } else if (v == &CP_VARS[CP_VR_terrain_field_file]) { /* a text, kept beside the values */
+        if (x == 0.0) return 0;
+        snprintf(out, n, "%s: its place among the values must hold 0", v->name);
+        return 1;
     } else if (v->type == CP_STRING) {
         if (x >= 0 && x < CP_N_MODELS && x == floor(x)) return 0;
         snprintf(out, n, "%s: not one of 'menagerie', 'osu'", v->name);
@@ -233,13 +247,48 @@ CpStatus cp_check_set(const CpInstance *inst, const char *call, uint32_t vr, CpT
     return CP_OK;
 }
 
-CpStatus cp_model_index(const CpInstance *inst, const char *call, const char *text, double *index) {
+/* Why `text` cannot be String variable vr's value (NULL: it can); its value in values[] then. */
+static CpStatus check_text(const CpInstance *inst, const char *call, uint32_t vr, const char *text, double *index) {
+    if (cp_check_set(inst, call, vr, CP_STRING, 0.0) != CP_OK) return CP_ERROR;
+    if (vr == CP_VR_terrain_field_file) {
+        if (text == NULL || strlen(text) > CP_MAX_TEXT_BYTES)
+            return cp_refuse(inst, call, "terrain_field_file: must be a path (text) of at most %d bytes",
+                             CP_MAX_TEXT_BYTES);
+        *index = 0.0;
+        return CP_OK;
+    }
     for (int k = 0; k < CP_N_MODELS && text; k++)
         if (!strcmp(text, CP_MODEL_NAMES[k])) {
             *index = k;
             return CP_OK;
         }
     return cp_refuse(inst, call, "cassie_model = '%.100s': must be one of 'menagerie', 'osu'", text ? text : "(null)");
+}
+
+CpStatus cp_set_strings(CpInstance *inst, const char *call, const uint32_t vr[], const char *const text[], size_t n) {
+    if (n > 0 && (vr == NULL || text == NULL)) return cp_refuse(inst, call, "NULL vr or value array with nvr = %zu", n);
+    if (n > CP_N_VARS) return cp_refuse(inst, call, "%zu values: more than the variables", n);
+    double index[CP_N_VARS];
+    char *copy = NULL; /* the last terrain_field_file text given */
+    for (size_t i = 0; i < n; i++)
+        if (check_text(inst, call, vr[i], text[i], &index[i]) != CP_OK) return CP_ERROR;
+    for (size_t i = n; i-- > 0;)
+        if (vr[i] == CP_VR_terrain_field_file) {
+            if ((copy = malloc(strlen(text[i]) + 1)) == NULL) return cp_refuse(inst, call, "out of memory");
+            strcpy(copy, text[i]);
+            break;
+        }
+    for (size_t i = 0; i < n; i++) inst->values[vr[i]] = index[i];
+    if (copy != NULL) {
+        free(inst->terrain_field);
+        inst->terrain_field = copy;
+    }
+    return CP_OK;
+}
+
+const char *cp_get_string(const CpInstance *inst, uint32_t vr) {
+    if (vr == CP_VR_terrain_field_file) return inst->terrain_field ? inst->terrain_field : "";
+    return CP_MODEL_NAMES[(int)inst->values[vr]];
 }
 
 /* fmu_core.plant_steps: the step as a whole number of plant steps, or -1. */
@@ -276,18 +325,26 @@ CpStatus cp_do_step(CpInstance *inst, const char *call, double t, double h) {
 /* ---- FMU state ------------------------------------------------------------------------------ */
 #define CP_PI 3.141592653589793 /* math.pi */
 #define MAGIC "CPNS"
-#define STATE_VERSION 1u
+#define STATE_VERSION 2u /* 2: the values include terrain_field_file's place */
 #define GUID_BYTES 40
 #define HEADER_BYTES (4 + 4 + 4 + GUID_BYTES)
 #define N_GAINS (CC_NSIDES * CC_NMOTOR * 2)
 
-static uint32_t crc32_of(const unsigned char *p, size_t n) {
-    uint32_t c = 0xFFFFFFFFu;
-    for (size_t i = 0; i < n; i++) {
-        c ^= p[i];
-        for (int k = 0; k < 8; k++) c = (c >> 1) ^ (0xEDB88320u & (0u - (c & 1u)));
-    }
-    return c ^ 0xFFFFFFFFu;
+/* The smallest blob: header, phase, walker flag, time, the values and the CRC (no walker). */
+#define MIN_BLOB_BYTES (HEADER_BYTES + 4 + 4 + 8 + 8 * CP_N_VARS + 4)
+
+/* The framing every C FMU of the project checks alike (fmi_blob.c): magic, version, the size
+ * the header states, the CRC-32 over every byte before it, the GUID of the FMU that saved it. */
+static CpStatus check_frame(const CpInstance *inst, const char *call, const unsigned char *bytes, size_t size) {
+    static const FmiBlobFormat format = {
+        .magic = MAGIC, .magic_bytes = 4, .version_at = 4, .version = STATE_VERSION,
+        .version_note = "(version 1 states predate terrain_field_file)",
+        .size_at = 8, .size_field_bytes = 4, .size_add = 0, .crc_bytes = 4,
+        .guid_at = 12, .guid_bytes = GUID_BYTES, .guid = CP_GUID, .min_bytes = MIN_BLOB_BYTES};
+    char why[400];
+    if (fmi_blob_problem(&format, bytes, size, why, sizeof why) != NULL)
+        return cp_refuse(inst, call, "not a state of this CassiePlantNative FMU: %s", why);
+    return CP_OK;
 }
 
 typedef struct {
@@ -416,7 +473,7 @@ CpStatus cp_fmustate_get(CpInstance *inst, const char *call, void **state) {
     put_f64(&b, inst->time);
     for (int i = 0; i < CP_N_VARS; i++) put_f64(&b, inst->values[i]);
     if (inst->has_walker) put_walker(&b, &inst->walker);
-    put_u32(&b, crc32_of(blob->bytes, b.at));
+    put_u32(&b, fmi_crc32(blob->bytes, b.at));
     return CP_OK;
 }
 
@@ -598,21 +655,8 @@ static void apply_walker(CpWalker *w, const WalkerState *ws) {
 }
 
 static CpStatus check_and_set(CpInstance *inst, const char *call, const unsigned char *bytes, size_t size) {
-    char guid[GUID_BYTES] = {0};
-    strncpy(guid, CP_GUID, GUID_BYTES - 1);
-    if (size < HEADER_BYTES + 4 || memcmp(bytes, MAGIC, 4) != 0)
-        return cp_refuse(inst, call, "not a CassiePlantNative state (%zu bytes, no 'CPNS' header)", size);
-    Buf b = {(unsigned char *)bytes, 4, size, 0};
-    uint32_t version = get_u32(&b), total = get_u32(&b);
-    if (version != STATE_VERSION || total != size)
-        return cp_refuse(inst, call, "state version %u of %u bytes: this FMU reads version %u states of their stated "
-                         "size (%zu bytes given)", version, total, STATE_VERSION, size);
-    uint32_t crc = (uint32_t)bytes[size - 4] | (uint32_t)bytes[size - 3] << 8 | (uint32_t)bytes[size - 2] << 16 |
-                   (uint32_t)bytes[size - 1] << 24;
-    if (crc != crc32_of(bytes, size - 4)) return cp_refuse(inst, call, "the state's CRC-32 does not match: corrupt state");
-    if (memcmp(bytes + 12, guid, GUID_BYTES) != 0) return cp_refuse(inst, call, "the state is from another FMU (GUID)");
-    b.at = HEADER_BYTES;
-    b.size = size - 4;
+    if (check_frame(inst, call, bytes, size) != CP_OK) return CP_ERROR;
+    Buf b = {(unsigned char *)bytes, HEADER_BYTES, size - 4, 0}; /* the body: after the header, before the CRC */
     uint32_t phase = get_u32(&b), has_walker = get_u32(&b);
     double time = get_f64(&b), values[CP_N_VARS];
     for (int i = 0; i < CP_N_VARS; i++) values[i] = get_f64(&b);
@@ -684,13 +728,9 @@ CpStatus cp_fmustate_set(CpInstance *inst, const char *call, const void *state) 
 CpStatus cp_fmustate_deserialize(const CpInstance *inst, const char *call, const unsigned char *bytes, size_t size,
                                  void **state) {
     if (bytes == NULL || state == NULL) return cp_refuse(inst, call, "the byte array or FMUstate pointer is NULL");
-    if (size < HEADER_BYTES + 4 || size > ((size_t)1 << 30))
-        return cp_refuse(inst, call, "size = %zu: not a CassiePlantNative state", size);
-    /* the header and the CRC now; the rest (variables, walker) when the state is set */
-    if (memcmp(bytes, MAGIC, 4) != 0) return cp_refuse(inst, call, "not a CassiePlantNative state (no 'CPNS' header)");
-    uint32_t crc = (uint32_t)bytes[size - 4] | (uint32_t)bytes[size - 3] << 8 | (uint32_t)bytes[size - 2] << 16 |
-                   (uint32_t)bytes[size - 1] << 24;
-    if (crc != crc32_of(bytes, size - 4)) return cp_refuse(inst, call, "the state's CRC-32 does not match: corrupt state");
+    if (size > ((size_t)1 << 30)) return cp_refuse(inst, call, "size = %zu: not a CassiePlantNative state", size);
+    /* the framing now; the contents (variables, walker) when the state is set */
+    if (check_frame(inst, call, bytes, size) != CP_OK) return CP_ERROR;
     CpBlob *blob = malloc(sizeof(CpBlob) + size);
     if (blob == NULL) return cp_refuse(inst, call, "out of memory for a state of %zu bytes", size);
     blob->size = size;

@@ -2,8 +2,8 @@
  * One CassiePlantNative instance, independent of the FMI version: the variable values, the
  * FMI phase, the walker, and every check both FMI layers share (phases, variables and their
  * ranges, step arguments, FMU states).  fmi2_plant.c and fmi3_plant.c are thin layers over it
- * (the pattern of fmu_src/regulator_fmu/native/avr_instance.c and the Reference-FMUs): each converts its
- * types to and from the doubles kept here.
+ * (through fmi_model.h and the shared fmu_src/fmi/fmi_layer.h, as the regulator's avr_instance.c):
+ * each converts its types to and from the doubles kept here.
  *
  * Every refused call logs a message naming the call, the variable and its allowed range,
  * returns CP_ERROR and changes nothing.
@@ -16,13 +16,20 @@
 #include <stddef.h>
 #include <stdint.h>
 
+#include "fmi_phase_rules.h"
+
 typedef enum { CP_OK = 0, CP_WARNING = 1, CP_DISCARD = 2, CP_ERROR = 3, CP_FATAL = 4 } CpStatus;
 
-/* Phases as bits, so that a function's allowed phases are one mask. */
-typedef enum { CP_INSTANTIATED = 1u, CP_INIT_MODE = 2u, CP_STEP_MODE = 4u, CP_TERMINATED = 8u } CpPhase;
-#define CP_ANY_PHASE (CP_INSTANTIATED | CP_INIT_MODE | CP_STEP_MODE | CP_TERMINATED)
-#define CP_SET_PHASES (CP_INSTANTIATED | CP_INIT_MODE | CP_STEP_MODE)
-#define CP_GET_PHASES (CP_INIT_MODE | CP_STEP_MODE | CP_TERMINATED)
+/* Phases as the bits of fmi_phase_rules.h (generated from fmu_src/fmi/phase_rules.py), so that
+ * a function's allowed phases are one mask, its FMI_MASK_<function>.  The bit is stored in
+ * FMU-state blobs.  No stepFailed: a refused doStep changes nothing. */
+typedef enum {
+    CP_INSTANTIATED = FMI_INSTANTIATED,
+    CP_INIT_MODE = FMI_INIT_MODE,
+    CP_STEP_MODE = FMI_STEP_MODE, /* FMI 2.0 stepComplete, FMI 3.0 Step Mode */
+    CP_TERMINATED = FMI_TERMINATED,
+} CpPhase;
+#define CP_N_PHASES 4 /* the bits above: 0 .. 3 */
 /* Relative tolerance on "doStep starts where the last step ended" (fmu_src/fmi/avr_slavebase.py). */
 #define CP_TIME_MATCH_RTOL 1e-9
 
@@ -39,6 +46,7 @@ typedef struct CpInstance {
     double time;
     double values[CP_N_VARS];
     char *resources; /* the resources folder (a file system path) */
+    char *terrain_field; /* terrain_field_file's text (malloc'd); NULL: "" (its start value) */
     CpWalker walker;
     int has_walker;
 } CpInstance;
@@ -76,8 +84,13 @@ void cp_reset(CpInstance *inst);
 /* vr[0..n-1] are variables of `type` (get: any; set: settable now, `value` legal). */
 CpStatus cp_check_get(const CpInstance *inst, const char *call, const uint32_t vr[], size_t n, CpType type);
 CpStatus cp_check_set(const CpInstance *inst, const char *call, uint32_t vr, CpType type, double value);
-/* cassie_model's value for a text (the index of CP_MODEL_NAMES), refused if none. */
-CpStatus cp_model_index(const CpInstance *inst, const char *call, const char *text, double *index);
+/* The String variables: cassie_model (kept in values[] as its index in CP_MODEL_NAMES) and
+ * terrain_field_file (a path of at most CP_MAX_TEXT_BYTES bytes, kept as text).  Set: all or
+ * nothing, every vr settable now and every text legal before any is stored. */
+#define CP_MAX_TEXT_BYTES 4095
+CpStatus cp_set_strings(CpInstance *inst, const char *call, const uint32_t vr[], const char *const text[], size_t n);
+/* The text of String variable vr (checked by cp_check_get). */
+const char *cp_get_string(const CpInstance *inst, uint32_t vr);
 
 CpStatus cp_do_step(CpInstance *inst, const char *call, double t, double h);
 

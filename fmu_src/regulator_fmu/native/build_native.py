@@ -21,7 +21,7 @@ NATIVE_SRC = Path(__file__).resolve().parent
 MODEL_IDENTIFIER = "AdaptiveVelocityRegulatorNative"
 CORE_SOURCES = ("avr_model.c", "avr_instance.c", "avr_state.c", "fmi_blob.c")
 API_SOURCES = {2: ("fmi2_api.c", "fmi2_common.c"), 3: ("fmi3_api.c", "fmi3_common.c")}
-HEADERS = ("avr_types.h", "avr_model.h", "avr_instance.h", "avr_fmi_api.h", "fmi_model.h", "fmi_blob.h")
+HEADERS = ("avr_types.h", "avr_model.h", "avr_instance.h", "fmi_model.h", "fmi_blob.h")
 #: The FMI layer the native FMUs share (fmu_src/fmi/): its C files and headers, found there when
 #: not in the model's own folder.
 SHARED_FMI = Path(phase_rules.__file__).resolve().parent

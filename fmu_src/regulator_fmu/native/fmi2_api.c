@@ -3,8 +3,8 @@
  * over the version-independent instance (avr_instance.c).  Every function starts with
  * the one prologue BEGIN (fmu_src/fmi/fmi_layer.h), which refuses a call outside the phases
  * of its FMI_MASK_<function> (fmi_phase_rules.h, generated from fmu_src/fmi/phase_rules.py);
- * the shapes both FMI versions share are written once in avr_fmi_api.h and fmi_layer.h, the
- * functions no native FMU provides in fmi2_common.c.
+ * the shapes every native FMU shares are written once in fmi_layer.h, the functions no native
+ * FMU provides in fmi2_common.c.
  */
 #include "avr_instance.h" /* first: see avr_types.h */
 
@@ -15,7 +15,7 @@
 
 #define FMI_STATUS fmi2Status
 #define FMI_INSTANCE fmi2Component
-#include "avr_fmi_api.h"
+#include "fmi_layer.h"
 
 /* ---- creation, life cycle (the inquiry functions: fmi2_common.c) ------------------------------ */
 
@@ -59,32 +59,8 @@ TERMINATE(fmi2Terminate)
 RESET(fmi2Reset)
 
 /* ---- variables ------------------------------------------------------------------------------- */
-#define GETTER(fn, ctype, type, FROM_DOUBLE)                                                          \
-    fmi2Status fn(fmi2Component instance, const fmi2ValueReference vr[], size_t nvr, ctype value[]) {        \
-        BEGIN(fn)                                                                                     \
-        if (nvr > 0 && value == NULL) REFUSE("NULL value array with nvr = %zu", nvr);                 \
-        if (avr_check_get(inst, call, vr, nvr, type) != AVR_OK) return fmi2Error;                     \
-        for (size_t i = 0; i < nvr; ++i) value[i] = FROM_DOUBLE(inst->values[vr[i]]);                 \
-        return fmi2OK;                                                                                \
-    }
-#define SETTER(fn, ctype, type)                                                                        \
-    fmi2Status fn(fmi2Component instance, const fmi2ValueReference vr[], size_t nvr, const ctype value[]) {   \
-        BEGIN(fn)                                                                                      \
-        if (nvr > 0 && (vr == NULL || value == NULL)) REFUSE("NULL vr or value array with nvr = %zu", nvr); \
-        for (size_t i = 0; i < nvr; ++i) /* all checked before any is applied */                      \
-            if (avr_check_set(inst, call, vr[i], type, (double)value[i]) != AVR_OK) return fmi2Error;  \
-        for (size_t i = 0; i < nvr; ++i) inst->values[vr[i]] = (double)value[i];                       \
-        return fmi2OK;                                                                                 \
-    }
-#define AS_REAL(x) (x)
-#define AS_INTEGER(x) ((fmi2Integer)(x))
-#define AS_BOOLEAN(x) ((x) != 0.0 ? fmi2True : fmi2False)
-GETTER(fmi2GetReal, fmi2Real, AVR_REAL, AS_REAL)
-GETTER(fmi2GetInteger, fmi2Integer, AVR_INTEGER, AS_INTEGER)
-GETTER(fmi2GetBoolean, fmi2Boolean, AVR_BOOLEAN, AS_BOOLEAN)
-SETTER(fmi2SetReal, fmi2Real, AVR_REAL)
-SETTER(fmi2SetInteger, fmi2Integer, AVR_INTEGER)
-SETTER(fmi2SetBoolean, fmi2Boolean, AVR_BOOLEAN)
+/* a Boolean other than 0/1 is refused by its range check */
+FMI2_NUMERIC_VARIABLES(AVR_REAL, AVR_INTEGER, AVR_BOOLEAN, FMI_TO_DOUBLE)
 
 fmi2Status fmi2GetString(fmi2Component instance, const fmi2ValueReference vr[], size_t nvr, fmi2String value[]) {
     BEGIN(fmi2GetString)
@@ -100,6 +76,6 @@ fmi2Status fmi2SetString(fmi2Component instance, const fmi2ValueReference vr[], 
     return fmi2OK;
 }
 
-/* ---- FMU state (avr_state.c) --------------------------------------------------------------------- */
+/* ---- FMU state (avr_state.c, through FMUSTATE_FUNCTIONS of fmi_layer.h) ---------------------- */
 FMUSTATE_FUNCTIONS(fmi2FMUstate, fmi2Byte, fmi2GetFMUstate, fmi2SetFMUstate, fmi2FreeFMUstate,
                    fmi2SerializedFMUstateSize, fmi2SerializeFMUstate, fmi2DeSerializeFMUstate)

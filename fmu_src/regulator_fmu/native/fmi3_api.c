@@ -15,7 +15,7 @@
 
 #define FMI_STATUS fmi3Status
 #define FMI_INSTANCE fmi3Instance
-#include "avr_fmi_api.h"
+#include "fmi_layer.h"
 
 #define TIME_VR ((fmi3ValueReference)AVR_N_VARS)
 
@@ -62,59 +62,9 @@ EXIT_INITIALIZATION_MODE(fmi3ExitInitializationMode)
 TERMINATE(fmi3Terminate)
 RESET(fmi3Reset)
 
-/* ---- variables of this FMU's types -------------------------------------------------------------- */
-static fmi3Status check_counts(AvrInstance *inst, const char *call, const fmi3ValueReference vr[], size_t nvr,
-                               const void *values, size_t nValues) {
-    if (nvr > 0 && (vr == NULL || values == NULL)) REFUSE("NULL valueReferences or values with %zu references", nvr);
-    if (nValues != nvr) REFUSE("nValues = %zu, but %zu scalar variables were given", nValues, nvr);
-    return fmi3OK;
-}
+/* ---- variables of this FMU's types (FMI3_GETTER, FMI3_SETTER: fmi_layer.h) ---------------------- */
+FMI3_NUMERIC_VARIABLES(AVR_REAL, AVR_INTEGER, AVR_BOOLEAN, TIME_VR)
 
-fmi3Status fmi3GetFloat64(fmi3Instance instance, const fmi3ValueReference valueReferences[],
-                          size_t nValueReferences, fmi3Float64 values[], size_t nValues) {
-    BEGIN(fmi3GetFloat64)
-    if (check_counts(inst, call, valueReferences, nValueReferences, values, nValues) != fmi3OK) return fmi3Error;
-    for (size_t i = 0; i < nValueReferences; ++i)
-        if (valueReferences[i] != TIME_VR && avr_check_get(inst, call, &valueReferences[i], 1, AVR_REAL) != AVR_OK)
-            return fmi3Error;
-    for (size_t i = 0; i < nValueReferences; ++i)
-        values[i] = valueReferences[i] == TIME_VR ? inst->time : inst->values[valueReferences[i]];
-    return fmi3OK;
-}
-
-#define GETTER(fn, ctype, type, FROM_DOUBLE)                                                                  \
-    fmi3Status fn(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences, \
-                  ctype values[], size_t nValues) {                                                           \
-        BEGIN(fn)                                                                                             \
-        if (check_counts(inst, call, valueReferences, nValueReferences, values, nValues) != fmi3OK ||        \
-            avr_check_get(inst, call, valueReferences, nValueReferences, type) != AVR_OK)                     \
-            return fmi3Error;                                                                                 \
-        for (size_t i = 0; i < nValueReferences; ++i) values[i] = FROM_DOUBLE(inst->values[valueReferences[i]]); \
-        return fmi3OK;                                                                                        \
-    }
-/* READ(values, i) reads element i as a double; a Boolean is read as its byte (a bool other than 0/1 is refused, not UB) */
-#define SETTER(fn, ctype, type, READ)                                                                           \
-    fmi3Status fn(fmi3Instance instance, const fmi3ValueReference valueReferences[], size_t nValueReferences,   \
-                  const ctype values[], size_t nValues) {                                                       \
-        BEGIN(fn)                                                                                               \
-        if (check_counts(inst, call, valueReferences, nValueReferences, values, nValues) != fmi3OK) return fmi3Error; \
-        for (size_t i = 0; i < nValueReferences; ++i) {                                                         \
-            if (valueReferences[i] == TIME_VR) REFUSE("time is the independent variable and cannot be set");   \
-            if (avr_check_set(inst, call, valueReferences[i], type, READ(values, i)) != AVR_OK) return fmi3Error; \
-        }                                                                                                       \
-        for (size_t i = 0; i < nValueReferences; ++i) inst->values[valueReferences[i]] = READ(values, i);      \
-        return fmi3OK;                                                                                          \
-    }
-#define AS_INT32(x) ((fmi3Int32)(x))
-#define AS_BOOLEAN(x) ((x) != 0.0)
-#define READ_NUMBER(values, i) ((double)(values)[i])
-#define READ_BYTE(values, i) ((double)((const unsigned char *)(values))[i])
-GETTER(fmi3GetInt32, fmi3Int32, AVR_INTEGER, AS_INT32)
-GETTER(fmi3GetBoolean, fmi3Boolean, AVR_BOOLEAN, AS_BOOLEAN)
-SETTER(fmi3SetFloat64, fmi3Float64, AVR_REAL, READ_NUMBER)
-SETTER(fmi3SetInt32, fmi3Int32, AVR_INTEGER, READ_NUMBER)
-SETTER(fmi3SetBoolean, fmi3Boolean, AVR_BOOLEAN, READ_BYTE)
-
-/* ---- FMU state (avr_state.c) --------------------------------------------------------------------- */
+/* ---- FMU state (avr_state.c, through FMUSTATE_FUNCTIONS of fmi_layer.h) ---------------------- */
 FMUSTATE_FUNCTIONS(fmi3FMUState, fmi3Byte, fmi3GetFMUState, fmi3SetFMUState, fmi3FreeFMUState,
                    fmi3SerializedFMUStateSize, fmi3SerializeFMUState, fmi3DeserializeFMUState)

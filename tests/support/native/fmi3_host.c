@@ -12,11 +12,11 @@
  * Every step's outputs are printed (%.17g, which reads back as the same double).
  */
 #define _POSIX_C_SOURCE 200809L /* dlopen */
-#include <dlfcn.h>
 #include <stdio.h>
 #include <stdlib.h>
 
 #include "fmi3Functions.h"
+#include "host_common.h"
 
 #define MAX_STEPS 200000
 #define MAX_OUT 64
@@ -27,7 +27,7 @@ static void logger(fmi3InstanceEnvironment env, fmi3Status status, fmi3String ca
 }
 
 #define LOAD(fn)                                                          \
-    fn##TYPE *fn = (fn##TYPE *)dlsym(lib, #fn);                           \
+    fn##TYPE *fn = (fn##TYPE *)lib_sym(lib, #fn);                         \
     if (fn == NULL) { fprintf(stderr, "missing %s\n", #fn); return 2; }
 #define CHECK(call)                                                       \
     if ((call) != fmi3OK) { fprintf(stderr, "%s failed\n", #call); return 3; }
@@ -39,7 +39,7 @@ int main(int argc, char **argv) {
         fprintf(stderr, "usage: fmi3_host LIBRARY INSTANTIATION_TOKEN SCRIPT\n");
         return 1;
     }
-    void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
+    Lib lib = lib_open(argv[1]);
     if (lib == NULL) { fprintf(stderr, "cannot load %s: %s\n", argv[1], dlerror()); return 2; }
     LOAD(fmi3InstantiateCoSimulation) LOAD(fmi3EnterInitializationMode) LOAD(fmi3ExitInitializationMode)
     LOAD(fmi3SetFloat64) LOAD(fmi3SetInt32) LOAD(fmi3SetBoolean) LOAD(fmi3GetFloat64) LOAD(fmi3DoStep)
