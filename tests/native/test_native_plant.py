@@ -714,8 +714,9 @@ def test_sanitized_plant_runs_every_call_in_every_state_and_walks_with_zero_find
                                                                                    tmp_path):
     """The native plant's Linux library rebuilt from its own sources/ with ASan + UBSan: every FMI
     function in every state (tests/support/fmi/phase_matrix.py, NULL and zero arguments), then
-    walking instances with state round trips and corrupted states, a terrain walk and bad height
-    fields (sanitize_run.py --plant): zero sanitizer findings, and the phase matrix follows the table."""
+    walking instances with state round trips and corrupted states, a terrain walk (with the floor
+    friction and link mass factors off their defaults), a floor slope refused, and bad height fields
+    (sanitize_run.py --plant): zero sanitizer findings, and the phase matrix follows the table."""
     import json
     import os
     import sys
@@ -744,7 +745,8 @@ def test_sanitized_plant_runs_every_call_in_every_state_and_walks_with_zero_find
     assert all(a["status"] != 0 for name, by_state in answers.items() for state, a in by_state.items()
                if name in table and state not in table[name]), "a call outside its states answered OK"
     run = subprocess.run([sys.executable, str(SUPPORT_DIR / "native" / "sanitize_run.py"), "--plant", str(unzipped),
-                          str(fmi), str(terrain_field), json.dumps(TERRAIN_PARAMS)], env=env, capture_output=True,
+                          str(fmi), str(terrain_field), json.dumps(dict(TERRAIN_PARAMS, **ENVIRONMENT_PARAMS))],
+                         env=env, capture_output=True,
                          text=True, timeout=900)
     findings = run.stderr.count("ERROR: AddressSanitizer") + run.stderr.count("runtime error:")
     assert run.returncode == 0 and findings == 0, run.stderr[-4000:]
