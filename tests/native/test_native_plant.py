@@ -598,6 +598,65 @@ def test_terrain_walk_same_bits_as_the_python_plant(plant_fmus, terrain_field, f
         p.s.freeInstance()
 
 
+#: Floor friction and the six link mass factors, each off its default (fmu_core.LINK_MASS_BODIES).
+ENVIRONMENT_PARAMS = {"floor_friction": 0.3, "link_mass_scale_left_hip_pitch": 1.5, "link_mass_scale_left_shin": 0.7,
+                      "link_mass_scale_left_tarsus": 1.3, "link_mass_scale_right_hip_pitch": 1.2,
+                      "link_mass_scale_right_shin": 1.4, "link_mass_scale_right_tarsus": 0.8}
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+@pytest.mark.parametrize("which", ["floor_friction", "link_mass_scale", "both_osu"])
+def test_floor_friction_and_link_masses_same_bits_as_the_python_plant(plant_fmus, fmi, which, tmp_path):
+    """2 s walking at 0.6 m/s with a slippery floor (friction 0.3), with every link mass factor
+    off 1, and with both on the OSU model: the native plant's outputs carry the Python plant's
+    bits every step, and differ from the nominal walk's (the parameters act, none is ignored)."""
+    if which == "floor_friction":
+        params = {"floor_friction": 0.3}
+    elif which == "link_mass_scale":
+        params = {k: v for k, v in ENVIRONMENT_PARAMS.items() if k != "floor_friction"}
+    else:
+        params = dict(ENVIRONMENT_PARAMS, cassie_model="osu")
+    unzipped = Path(extract(str(plant_fmus[fmi]), unzipdir=str(tmp_path / "fmu")))
+    plant = _Plant3(plant_fmus[fmi], unzipped, params) if fmi == 3 else _Plant(plant_fmus[fmi], unzipped, params)
+    plant.s.exitInitializationMode()
+    walker = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS, **params))
+    nominal = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS, cassie_model=params.get("cassie_model", "menagerie")))
+    _compare(plant.outputs(), fmu_core.outputs(walker), 0.0)
+    inputs = dict.fromkeys(fmu_core.INPUT_NAMES, 0.0)
+    inputs["vx_des"] = 0.6
+    t = 0.0
+    for _ in range(200):
+        got = plant.step(t, inputs)
+        want = fmu_core.advance(walker, inputs, 20)
+        base = fmu_core.advance(nominal, inputs, 20)
+        t += H
+        _compare(got, want, t)
+    assert want["step_index"] >= 2
+    assert _bits(want["pelvis_x"]) != _bits(base["pelvis_x"]) and _bits(got["pelvis_x"]) != _bits(base["pelvis_x"])
+    plant.s.terminate()
+    plant.s.freeInstance()
+
+
+@pytest.mark.parametrize("name, value, why", [
+    ("floor_slope_deg", 5.0, "floor_slope_deg = 5 deg: the native plant supports only 0 deg (the flat floor)"),
+    ("floor_cross_slope_deg", -1.5, "floor_cross_slope_deg = -1.5 deg: the native plant supports only 0 deg"),
+    ("floor_friction", 0.0, "floor_friction = 0: must be in (0, 2]"),
+    ("link_mass_scale_right_shin", 0.0, "link_mass_scale_right_shin = 0: must be in (0, 5]"),
+])
+def test_floor_slopes_and_zero_factors_are_refused_at_initialization(plant_fmu, plant_dir, name, value, why):
+    """A floor slope (which the native plant cannot give with the Python plant's bits) and a zero
+    friction or link factor (the Python plant's ranges are open at 0) are refused at
+    ExitInitializationMode naming the parameter, its value and what is supported; the instance
+    stays in initialization mode and starts once the parameter is back at its default."""
+    plant = _Plant(plant_fmu, plant_dir, {name: value})
+    assert why in _refused(plant, plant.s.exitInitializationMode)
+    plant.s.setReal([plant.vr[name]], [fmu_core.PARAM_DEFAULTS[name]])
+    plant.s.exitInitializationMode()
+    plant.s.doStep(0.0, H)
+    plant.s.terminate()
+    plant.s.freeInstance()
+
+
 def _field_with(data: bytes, at: int, fmt: str, value) -> bytes:
     """The height-field file ``data`` with one field replaced and its CRC-32 made valid again."""
     body = bytearray(data[:-4])
@@ -655,8 +714,9 @@ def test_sanitized_plant_runs_every_call_in_every_state_and_walks_with_zero_find
                                                                                    tmp_path):
     """The native plant's Linux library rebuilt from its own sources/ with ASan + UBSan: every FMI
     function in every state (tests/support/fmi/phase_matrix.py, NULL and zero arguments), then
-    walking instances with state round trips and corrupted states, a terrain walk and bad height
-    fields (sanitize_run.py --plant): zero sanitizer findings, and the phase matrix follows the table."""
+    walking instances with state round trips and corrupted states, a terrain walk (with the floor
+    friction and link mass factors off their defaults), a floor slope refused, and bad height fields
+    (sanitize_run.py --plant): zero sanitizer findings, and the phase matrix follows the table."""
     import json
     import os
     import sys
@@ -685,7 +745,8 @@ def test_sanitized_plant_runs_every_call_in_every_state_and_walks_with_zero_find
     assert all(a["status"] != 0 for name, by_state in answers.items() for state, a in by_state.items()
                if name in table and state not in table[name]), "a call outside its states answered OK"
     run = subprocess.run([sys.executable, str(SUPPORT_DIR / "native" / "sanitize_run.py"), "--plant", str(unzipped),
-                          str(fmi), str(terrain_field), json.dumps(TERRAIN_PARAMS)], env=env, capture_output=True,
+                          str(fmi), str(terrain_field), json.dumps(dict(TERRAIN_PARAMS, **ENVIRONMENT_PARAMS))],
+                         env=env, capture_output=True,
                          text=True, timeout=900)
     findings = run.stderr.count("ERROR: AddressSanitizer") + run.stderr.count("runtime error:")
     assert run.returncode == 0 and findings == 0, run.stderr[-4000:]

@@ -139,6 +139,12 @@ def vars_header(guid: str) -> str:
         f"#define CP_FALL_HEIGHT_M ({c_double(cassie.FALL_HEIGHT_M)})",
         f"#define CP_FALL_TILT_RAD ({c_double(cassie.FALL_TILT_RAD)})",
         f"#define CP_NOMINAL_TORSO_MASS_KG ({c_double(constants.NOMINAL_TORSO_MASS_KG)})",
+        f"#define CP_MODEL_FLOOR_FRICTION ({c_double(fmu_core.MODEL_FLOOR_FRICTION)})",
+        "/* the link mass factors: value reference and body (fmu_core.LINK_MASS_BODIES) */",
+        "typedef struct { int vr; const char *body; } CpLinkMass;",
+        f"#define CP_N_LINK_MASS {len(fmu_core.LINK_MASS_BODIES)}",
+        "static const CpLinkMass CP_LINK_MASS[CP_N_LINK_MASS] = {"
+        + ", ".join(f"{{CP_VR_{fmu_core.link_parameter(b)}, {c_string(b)}}}" for b in fmu_core.LINK_MASS_BODIES) + "};",
         f"#define CP_TERRAIN_NAME {c_string(terrain.TERRAIN_HFIELD)} /* the hfield and its geom */",
         f"#define CP_TERRAIN_FLAT_RADIUS_M ({c_double(_TERRAIN_DEFAULTS.flat_radius_m)})",
         f"#define CP_TERRAIN_RESOLUTION_M ({c_double(_TERRAIN_DEFAULTS.resolution_m)})",
@@ -295,6 +301,10 @@ FFT and PCG64 draws), so the host hands it over: <code>terrain_field_file</code>
 <code>plant.terrain.write_field</code> wrote for the terrain_* parameters; the walk is then CassiePlant's bit for
 bit. {call}ExitInitializationMode refuses a missing, unreadable, corrupted (CRC-32) or mismatched file (another
 seed, slope, height or size; samples outside [0, 1]) naming the parameter, and stays in initialization mode.
+<code>floor_friction</code> and <code>link_mass_scale_*</code> act as in CassiePlant (bit for bit). A floor slope
+(<code>floor_slope_deg</code>, <code>floor_cross_slope_deg</code> other than 0) is not supported by this FMU:
+{call}ExitInitializationMode refuses it naming the parameter (CassiePlant takes it), and the instance stays in
+initialization mode.
 FMU state: MuJoCo's integration
 state, the servo gains, the controller's memory; restore-then-continue is bit-identical; corrupt states (CRC-32,
 GUID) and ones no run can reach (out-of-range values, non-unit quaternions, unordered step times, other fixed

@@ -60,6 +60,55 @@ static int add_home_key(mjSpec *spec, const mjModel *m, char *err, int errlen) {
     return 0;
 }
 
+/* mujoco.mj_setConst on a scratch MjData (the walker's is made afterwards). */
+static void set_const(mjModel *m) {
+    mjData *d = mj_makeData(m);
+    mj_setConst(m, d);
+    mj_deleteData(d);
+}
+
+/* plant.perturbation.apply_environment with the FMU's parameters (fmu_core.perturbation_from_values):
+ * the floor friction (a value other than the models' 1) on every world-body geom, with a contact
+ * priority above every geom's, and each link mass factor other than 1 on its body's mass and inertia
+ * (the inertia times new/old mass), then mj_setConst, in the Python's order.  The floor slopes are
+ * refused before (cp_instance.c: the native plant keeps the flat floor).  0, or -1 with err naming
+ * the parameter of a body the model lacks. */
+static int apply_environment(mjModel *m, const double *v, char *err, int errlen) {
+    double friction = v[CP_VR_floor_friction];
+    int links = 0;
+    for (int i = 0; i < CP_N_LINK_MASS; i++) {
+        const CpLinkMass *l = &CP_LINK_MASS[i];
+        if (v[l->vr] == 1.0) continue;
+        links = 1;
+        if (mj_name2id(m, mjOBJ_BODY, l->body) <= 0) { /* plant.perturbation.model_problems */
+            snprintf(err, errlen, "%s = %.17g: the model has no body '%s'", CP_VARS[l->vr].name, v[l->vr], l->body);
+            return -1;
+        }
+    }
+    if (friction == CP_MODEL_FLOOR_FRICTION && !links) return 0;
+    if (friction != CP_MODEL_FLOOR_FRICTION) { /* plant.perturbation.set_floor_friction */
+        int top = 0;
+        for (int g = 0; g < m->ngeom; g++)
+            if (g == 0 || m->geom_priority[g] > top) top = m->geom_priority[g];
+        for (int g = 0; g < m->ngeom; g++)
+            if (m->geom_bodyid[g] == 0) {
+                m->geom_friction[3 * g] = friction;
+                m->geom_priority[g] = top + 1;
+            }
+    }
+    for (int i = 0; i < CP_N_LINK_MASS; i++) { /* plant.perturbation._set_link_mass */
+        const CpLinkMass *l = &CP_LINK_MASS[i];
+        if (v[l->vr] == 1.0) continue;
+        int b = mj_name2id(m, mjOBJ_BODY, l->body);
+        double mass = m->body_mass[b] * v[l->vr];
+        double ratio = mass / m->body_mass[b];
+        for (int k = 0; k < 3; k++) m->body_inertia[3 * b + k] *= ratio;
+        m->body_mass[b] = mass;
+    }
+    set_const(m);
+    return 0;
+}
+
 /* plant.model.load_model: the file, its home key, the terrain (NULL: the flat floor). */
 static mjModel *load_model(const char *path, const double *v, const CpTerrain *terrain, char *err, int errlen) {
     char msg[1000] = "";
@@ -127,10 +176,10 @@ static mjModel *load_model(const char *path, const double *v, const CpTerrain *t
         for (int i = 0; i < m->nv; i++) m->dof_damping[i] *= damping;
         changed = 1;
     }
-    if (changed) {
-        mjData *d = mj_makeData(m);
-        mj_setConst(m, d);
-        mj_deleteData(d);
+    if (changed) set_const(m);
+    if (apply_environment(m, v, err, errlen)) {
+        mj_deleteModel(m);
+        return NULL;
     }
     return m;
 }

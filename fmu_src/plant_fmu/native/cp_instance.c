@@ -150,13 +150,36 @@ CpStatus cp_setup(CpInstance *inst, const char *call, double start_time) {
     return CP_OK;
 }
 
-/* plant.perturbation.Perturbation.problems beyond the declared ranges: the mass is > 0. */
+/* plant.perturbation.Perturbation.problems beyond the declared ranges: the torso mass, the floor
+ * friction and the link mass factors are > 0.  And what this FMU does not do: a floor slope (the
+ * Python plant's tilt goes through numpy's tan and arccos, which on x86-64 CPUs with AVX-512 are
+ * SIMD routines that round some inputs differently from the C library's by an ulp, so the native
+ * plant could not give the Python plant's bits; docs/native.md). */
 static int param_problem(const double *v, char *out, size_t n) {
-    if (!(v[CP_VR_torso_mass_kg] > 0.0)) {
-        snprintf(out, n, "torso_mass_kg = %.17g kg: must be in (0, %g] kg", v[CP_VR_torso_mass_kg],
-                 CP_VARS[CP_VR_torso_mass_kg].max);
-        return 1;
+    static const int positive[] = {CP_VR_torso_mass_kg, CP_VR_floor_friction};
+    for (size_t i = 0; i < sizeof positive / sizeof positive[0]; i++) {
+        const CpVar *p = &CP_VARS[positive[i]];
+        const char *unit = strcmp(p->unit, "1") ? p->unit : ""; /* "1": dimensionless */
+        if (!(v[positive[i]] > 0.0)) {
+            snprintf(out, n, "%s = %.17g%s%s: must be in (0, %g]%s%s", p->name, v[positive[i]], unit[0] ? " " : "", unit,
+                     p->max, unit[0] ? " " : "", unit);
+            return 1;
+        }
     }
+    for (int i = 0; i < CP_N_LINK_MASS; i++) {
+        const CpVar *p = &CP_VARS[CP_LINK_MASS[i].vr];
+        if (!(v[CP_LINK_MASS[i].vr] > 0.0)) {
+            snprintf(out, n, "%s = %.17g: must be in (0, %g]", p->name, v[CP_LINK_MASS[i].vr], p->max);
+            return 1;
+        }
+    }
+    static const int slopes[] = {CP_VR_floor_slope_deg, CP_VR_floor_cross_slope_deg};
+    for (size_t i = 0; i < sizeof slopes / sizeof slopes[0]; i++)
+        if (v[slopes[i]] != 0.0) {
+            snprintf(out, n, "%s = %.17g deg: the native plant supports only 0 deg (the flat floor); a sloped floor "
+                     "needs the pythonfmu CassiePlant (docs/native.md)", CP_VARS[slopes[i]].name, v[slopes[i]]);
+            return 1;
+        }
     return 0;
 }
 

@@ -79,7 +79,8 @@ def plant(fmu_dir, fmi, field=None, terrain_params=None):
     """The native CassiePlant FMU in this process: 4 instances walking 300 steps of 10 ms, a state
     taken, serialized, restored (same outputs after), and every byte-flipped state refused.  With
     a height-field file (and the terrain parameters it was made for): an instance walking on it,
-    and the file cut short at every length class and with flipped bytes refused at initialization."""
+    one with a floor slope refused, and the file cut short at every length class and with flipped
+    bytes refused at initialization."""
     import json
     import random
     import tempfile
@@ -156,6 +157,12 @@ def plant(fmu_dir, fmi, field=None, terrain_params=None):
         walk(s, 0.0, 100)
         s.terminate()
         s.freeInstance()
+        try:  # the native plant keeps the flat floor: a slope is refused at initialization
+            make(30, dict(params, floor_slope_deg=5.0))
+        except FMICallException:
+            pass
+        else:
+            raise AssertionError("accepted floor_slope_deg = 5")
         data, bad_files = Path(field).read_bytes(), 0
         with tempfile.TemporaryDirectory(dir=Path(fmu_dir).parent) as tmp:  # under the test's tmp_path
             cuts = [data[:n] for n in (0, 10, 67, 68, 72, 1000, len(data) // 2, len(data) - 1)]
@@ -173,7 +180,7 @@ def plant(fmu_dir, fmi, field=None, terrain_params=None):
                     bad_files += 1
                 else:
                     raise AssertionError(f"accepted a bad height field ({len(content)} bytes)")
-        note = f", a terrain walk, {bad_files} bad height fields refused"
+        note = f", a terrain walk, a floor slope and {bad_files} bad height fields refused"
     print(f"plant FMI {fmi}.0: 4 x 300 steps, a state round trip, {refused} corrupted states refused{note}")
 
 
