@@ -17,6 +17,7 @@ the model it compiles, and :func:`apply_to_compiled` reports the torso mass befo
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass
 
 import mujoco
@@ -264,11 +265,19 @@ def model_problems(model: mujoco.MjModel, p: Perturbation) -> list[str]:
     return out
 
 
-def slope_normal(slope_deg: float, cross_slope_deg: float) -> np.ndarray:
-    """Unit normal of the plane rising ``tan(slope_deg)`` per metre along +x and
-    ``tan(cross_slope_deg)`` along +y."""
-    n = np.array([-np.tan(np.radians(slope_deg)), -np.tan(np.radians(cross_slope_deg)), 1.0])
-    return n / np.linalg.norm(n)
+def slope_quat(slope_deg: float, cross_slope_deg: float) -> np.ndarray:
+    """Orientation (w, x, y, z) of the plane rising ``tan(slope_deg)`` per metre along +x and
+    ``tan(cross_slope_deg)`` along +y: the rotation of +z onto the plane's unit normal, about
+    their cross product.  Scalar ``math`` (the C library's ``tan``/``acos``, as the native
+    plant's C), never numpy's vector loops or BLAS, whose last bits depend on the CPU."""
+    tx, ty = -math.tan(math.radians(slope_deg)), -math.tan(math.radians(cross_slope_deg))
+    norm = math.sqrt((tx * tx + ty * ty) + 1.0)
+    n0, n1, n2 = tx / norm, ty / norm, 1.0 / norm
+    a0, a1 = -n1, n0  # +z x n
+    a_len = math.sqrt(a0 * a0 + a1 * a1)
+    quat = np.zeros(4)
+    mujoco.mju_axisAngle2Quat(quat, np.array([a0 / a_len, a1 / a_len, 0.0]), math.acos(min(1.0, max(-1.0, n2))))
+    return quat
 
 
 def _set_link_mass(model: mujoco.MjModel, bid: int, mass: float) -> None:
@@ -293,12 +302,7 @@ def apply_environment(model: mujoco.MjModel, p: Perturbation) -> None:
     if p.slope_deg != 0 or p.cross_slope_deg != 0:
         planes = world_geoms(model)
         planes = planes[model.geom_type[planes] == mujoco.mjtGeom.mjGEOM_PLANE]
-        n = slope_normal(p.slope_deg, p.cross_slope_deg)
-        quat = np.zeros(4)
-        axis = np.cross([0.0, 0.0, 1.0], n)
-        angle = float(np.arccos(np.clip(n[2], -1.0, 1.0)))
-        axis /= np.linalg.norm(axis)
-        mujoco.mju_axisAngle2Quat(quat, axis, angle)
+        quat = slope_quat(p.slope_deg, p.cross_slope_deg)
         for g in planes:  # tilted about the point under the origin: the robot starts there
             model.geom_quat[g] = quat
     for body, scale in p.link_mass_scale:
