@@ -116,6 +116,7 @@ SCENARIOS = {
     "push": ("menagerie", Perturbation(joint_damping_scale=1.5),
              {2.0: _push([60.0, 30.0, 0.0]), 2.2: _push([0.0, 0.0, 0.0])}),
     "osu": ("osu", None, {}),
+    "slope": ("menagerie", Perturbation(slope_deg=3.0, cross_slope_deg=-2.0), {}),
 }
 
 
@@ -138,6 +139,17 @@ def test_ground_height_is_the_plant_s(native):
     for x, y in points:
         assert struct.pack("<d", c.ground_height_m(x, y)) == struct.pack("<d", walker.physics.ground_height_m(x, y))
     assert math.isnan(c.ground_height_m(math.nan, 0.0))
+
+
+def test_ground_height_on_a_tilted_floor_is_the_plant_s(native):
+    """On a sloped floor (no terrain) the C lookup gives the plant's tilted-plane heights, not the level floor's."""
+    model = load_model("menagerie", Perturbation(slope_deg=4.0, cross_slope_deg=-3.0))
+    walker = CassieWalker(model)
+    c = NativeController(native, walker.physics, walker.params)
+    rng = np.random.default_rng(1)
+    for x, y in [*rng.uniform(-20.0, 20.0, (500, 2)).tolist(), (0.0, 0.0)]:
+        assert struct.pack("<d", c.ground_height_m(x, y)) == struct.pack("<d", walker.physics.ground_height_m(x, y))
+    assert c.ground_height_m(10.0, 0.0) > 0.5, "the floor rises along +x"
 
 
 def test_offsets_must_be_finite(native):
