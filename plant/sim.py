@@ -86,6 +86,12 @@ class CassieWalker:
             self.controller = NativeController(native_library, self.physics, self.params)
         else:
             self.controller = NominalController(self.physics, self.params)
+        c_sense = controller == "native"
+        #: The sensing the walker reports, from the C controller when it runs (its own, the same bits).
+        self._heading_state = self.controller.heading_state if c_sense else self.physics.heading_state
+        self._foot_forces = self.controller.foot_normal_forces_n if c_sense else self.physics.foot_normal_forces_n
+        #: Simulated time of the state whose fall check :meth:`advance` made (None: not checked).
+        self._fall_checked_t = None
         self._substep = 0
         self._fall_reason = None
         self.vx_des = 0.0
@@ -122,7 +128,7 @@ class CassieWalker:
     def regulator_inputs(self) -> dict:
         """Signals for the regulator (see ``plant/controller.py`` for definitions)."""
         c = self.controller
-        _, pitch, roll, _, _, roll_rate, pitch_rate, _ = self.physics.heading_state()
+        _, pitch, roll, _, _, roll_rate, pitch_rate, _ = self._heading_state()
         return {"vx": float(c.vx_step_avg), "vy": float(c.vy_filt), "pitch": pitch,
                 "roll": roll, "pitch_rate": pitch_rate, "roll_rate": roll_rate,
                 "step_index": int(c.step_index)}
@@ -144,6 +150,7 @@ class CassieWalker:
                 c.update()
         if self._fall_reason is None:
             self._fall_reason = ph.fall_reason()
+            self._fall_checked_t = ph.data.time
             if self._fall_reason:
                 log.info("fall at t=%.3f s: %s", self.time_s, self._fall_reason)
 
@@ -219,6 +226,7 @@ class CassieWalker:
         self.controller.restore_memory(state["controller"])
         self._substep = substep
         self._fall_reason = walker["fall_reason"]
+        self._fall_checked_t = None
         self.vx_des, self.vy_des = float(walker["vx_des"]), float(walker["vy_des"])
         self.yaw_rate_des = float(walker["yaw_rate_des"])
 
@@ -250,8 +258,8 @@ class CassieWalker:
 
     def fell(self) -> bool:
         """True once a fall has been detected (latched; checked at the end of ``advance``)."""
-        if self._fall_reason is None:
-            self._fall_reason = self.physics.fall_reason()
+        if self._fall_reason is None and self._fall_checked_t != self.physics.data.time:
+            self._fall_reason = self.physics.fall_reason()  # a state advance did not check
         return self._fall_reason is not None
 
     @property
@@ -266,8 +274,8 @@ class CassieWalker:
         """Named floats for logging (SI units; stance 0 = left, 1 = right)."""
         ph, c = self.physics, self.controller
         p = ph.pelvis_position()
-        yaw, pitch, roll, vx, vy, _, _, yaw_rate = ph.heading_state()
-        fl, fr = ph.foot_normal_forces_n()
+        yaw, pitch, roll, vx, vy, _, _, yaw_rate = self._heading_state()
+        fl, fr = self._foot_forces()
         return {
             "t": self.time_s,
             "pelvis_x": float(p[0]), "pelvis_y": float(p[1]), "pelvis_z": float(p[2]),

@@ -317,6 +317,8 @@ class NativeLibrary:
         lib.cc_update.argtypes = [vp]
         lib.cc_ground_height.argtypes = [vp, d, d]
         lib.cc_ground_height.restype = d
+        lib.cc_foot_forces.argtypes = [vp, ctypes.POINTER(d * 2)]
+        lib.cc_heading_state.argtypes = [vp, ctypes.POINTER(d * 8)]
         lib.cc_memory_ptr.argtypes = [vp]
         lib.cc_memory_ptr.restype = ctypes.POINTER(CcMemory)
         lib.cc_targets_ptr.argtypes = [vp]
@@ -342,6 +344,9 @@ class NativeController:
                        err, len(err)):
             raise ValueError(f"C controller: {err.value.decode()}")
         self._mem = lib.cc_memory_ptr(self._buf).contents
+        self._offsets = (ctypes.c_double * 6)()
+        self._forces = (ctypes.c_double * 2)()
+        self._heading = (ctypes.c_double * 8)()
 
     def set_command(self, vx: float, vy: float, gaits, yaw_rate: float = 0.0) -> None:
         key = id(gaits)
@@ -351,6 +356,15 @@ class NativeController:
                                         ctypes.byref(self._libs[key][1]))
 
     def set_offsets(self, offsets) -> None:
+        if len(offsets) == len(OFFSET_NAMES):  # every offset given (the master's case): no merging
+            try:
+                values = [float(offsets[k]) for k in OFFSET_NAMES]
+            except KeyError:
+                values = None
+            if values is not None and all(map(math.isfinite, values)):
+                self._offsets[:] = values
+                self._native.lib.cc_set_offsets(self._buf, self._offsets)
+                return
         for k in offsets:
             if k not in OFFSET_NAMES:
                 raise KeyError(f"unknown offset key {k!r}; allowed: {', '.join(OFFSET_NAMES)}")
@@ -362,6 +376,16 @@ class NativeController:
 
     def update(self) -> None:
         self._native.lib.cc_update(self._buf)
+
+    def foot_normal_forces_n(self) -> tuple[float, float]:
+        """``CassiePhysics.foot_normal_forces_n`` in C (the same contacts in the same order: the same bits)."""
+        self._native.lib.cc_foot_forces(self._buf, self._forces)
+        return tuple(self._forces)
+
+    def heading_state(self) -> tuple:
+        """``CassiePhysics.heading_state`` in C (the same operations: the same bits)."""
+        self._native.lib.cc_heading_state(self._buf, self._heading)
+        return tuple(self._heading)
 
     def ground_height_m(self, x: float, y: float) -> float:
         return self._native.lib.cc_ground_height(self._buf, float(x), float(y))
