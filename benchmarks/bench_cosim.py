@@ -13,6 +13,8 @@ Measured on the same machine in the same process, one after the other:
 - ``FMU``: the same loop through the built FMU (fmpy);
 - ``native FMU``: the same loop through the native FMI 2.0 FMU (C, ``fmu_src/native``) via
   the master's own FMU path (``scenarios.cosim.master.FmuRegulator`` takes any FMI 2.0 FMU);
+- ``native FMU + C controller``: the same with the walker's C controller (``CassieWalker(controller=
+  "native")``): the run's default path (target: >= 0.8 x bare mj_step);
 - ``lean loop``: ``plant.sim.CassieWalker`` stepped directly with zero offsets and with the
   native FMU called through its raw C functions (``LeanNativeFmu``): what the FMU itself
   adds to a closed loop, without the master's per-step Python bookkeeping.
@@ -92,8 +94,9 @@ def bare_mj_step(seconds: float, model=None) -> dict[str, float]:
     return {"sim_s": sim, "wall_s": wall, "cpu_s": cpu, "rtf": sim / wall, "rtf_cpu": sim / cpu}
 
 
-def closed_loop_all(scenario: Scenario, makers: dict[str, Any], repeat: int) -> dict[str, dict[str, float]]:
-    """Best of ``repeat`` runs per regulator path, the paths interleaved (fair under load)."""
+def closed_loop_all(scenario: Scenario, makers: dict[str, Any], repeat: int, plant=None) -> dict[str, dict[str, float]]:
+    """Best of ``repeat`` runs per regulator path, the paths interleaved (fair under load); ``plant``:
+    ``run_arm``'s plant factory (None: the walker with the Python controller)."""
     from scenarios.lang.plantio import load_plant_model
 
     model, summary = load_plant_model(scenario)
@@ -101,7 +104,7 @@ def closed_loop_all(scenario: Scenario, makers: dict[str, Any], repeat: int) -> 
     for _ in range(repeat):
         for key, make in makers.items():
             c0 = time.process_time()
-            r = master.run_arm(scenario, "adaptive", make(), model=model, model_summary=summary)
+            r = master.run_arm(scenario, "adaptive", make(), model=model, model_summary=summary, plant=plant)
             cpu = time.process_time() - c0
             # without a regulator the walker may fall: the rate is over the simulated part
             m = {"sim_s": r.sim_s, "wall_s": r.wall_s, "cpu_s": cpu, "rtf": r.sim_s / r.wall_s,
@@ -314,6 +317,11 @@ def main(argv=None) -> int:
         "fmu": lambda: FmuRegulator(fmu),
         "native_fmu": lambda: FmuRegulator(native_fmu),
     }, args.repeat))
+    from plant.sim import CassieWalker
+
+    c_walker = lambda scenario, model: CassieWalker(model, controller="native")  # noqa: E731
+    res["native_fmu_c_controller"] = closed_loop_all(scenario, {"native_fmu": lambda: FmuRegulator(native_fmu)},
+                                                     args.repeat, plant=c_walker)["native_fmu"]
     res["regulator_step_us"] = {
         "inprocess": 1e6 * regulator_step_cost(InProcessRegulator),
         "fmu": 1e6 * regulator_step_cost(lambda: FmuRegulator(fmu)),
@@ -331,6 +339,8 @@ def main(argv=None) -> int:
         "plant_only_rate_over_bare_mj_step": res["plant_only"]["rtf_cpu"] / res["bare_mj_step"]["rtf_cpu"],
         "fmu_over_inprocess_wall": res["inprocess"]["rtf"] / res["fmu"]["rtf"],
         "native_fmu_rate_over_plant_only": res["native_fmu"]["rtf_cpu"] / res["plant_only"]["rtf_cpu"],
+        "native_fmu_c_controller_over_bare_mj_step": (res["native_fmu_c_controller"]["rtf_cpu"]
+                                                      / res["bare_mj_step"]["rtf_cpu"]),
     }
     res["lean_loop"] = lean_loop({"plant_only": LeanZero, "native_fmu": lambda: LeanNativeFmu(native_fmu)},
                                  args.duration, args.repeat)
@@ -354,7 +364,8 @@ def main(argv=None) -> int:
     b = res["bare_mj_step"]
     print(f"  bare mj_step          {b['rtf_cpu']:10.2f}   {b['rtf']:10.2f}")
     for key, label in (("plant_only", "plant only (zero)"), ("inprocess", "in-process regulator"),
-                       ("fmu", "FMU regulator"), ("native_fmu", "native FMU regulator")):
+                       ("fmu", "FMU regulator"), ("native_fmu", "native FMU regulator"),
+                       ("native_fmu_c_controller", "native FMU + C ctrl")):
         m = res[key]
         fell = f"  (fell at {m['fell_at_s']:.2f} s)" if m["fell_at_s"] is not None else ""
         print(f"  {label:21s} {m['rtf_cpu']:10.2f}   {m['rtf']:10.2f}   {m['sim_s']:.2f} simulated s{fell}")
@@ -370,6 +381,8 @@ def main(argv=None) -> int:
     ok3 = r["native_fmu_rate_over_plant_only"] >= 0.9
     print(f"native FMU rate / plant-only rate     {r['native_fmu_rate_over_plant_only']:.3f}  (target >= 0.90: "
           f"{'met' if ok3 else 'MISSED'})")
+    print(f"native FMU + C controller (the run's default path) / bare mj_step  "
+          f"{r['native_fmu_c_controller_over_bare_mj_step']:.3f}  (target >= 0.80)")
     lean = res["lean_loop"]
     print(f"lean loop (plant.sim + the FMU's C functions, no master): plant only {lean['plant_only']['rtf_cpu']:.2f}, "
           f"native FMU {lean['native_fmu']['rtf_cpu']:.2f} sim s / CPU s: ratio "

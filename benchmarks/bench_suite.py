@@ -1,6 +1,7 @@
 """Where the main job's wall time goes: the suite against the physics and the loop, in one run.
 
     python benchmarks/bench_suite.py [TARGET ...] [--jobs 2] [--duration S] [--fmu PATH]
+                                     [--regulator fmu|native] [--controller python|native]
                                      [--repeat 3] [--compare DIR] [--keep DIR] [--json FILE]
                                      [--code CHECKOUT]
 
@@ -14,7 +15,9 @@ one run, one after the other:
   the simulated seconds run on each plant;
 - the loop benchmark (``bench_cosim.closed_loop_all``: ``run_arm`` through the FMU,
   10 simulated s, best of ``--repeat``) on the flat nominal plant and, when a target
-  has terrain, on its terrain;
+  has terrain, on its terrain, on the path the suite takes (``--regulator``, ``--controller``:
+  the run's defaults, the native regulator FMU and the C walking controller; ``--regulator fmu
+  --controller python`` is the reference path);
 - the suite: ``python -m scenarios run TARGET... --jobs N`` in a subprocess: its wall
   time, the CPU time of it and its workers (``RUSAGE_CHILDREN``), and from each
   ``summary.json`` every arm's ``timings`` (``scenarios.cosim.master.TIMINGS``; start-up =
@@ -54,7 +57,7 @@ from scenarios.lang.scenario import Scenario
 
 #: summary.json keys that differ between runs of the same thing (time, where the file was).
 VOLATILE_ARM_KEYS = ("wall_s", "realtime_factor", "timings", "status")
-VOLATILE_TOP_KEYS = ("source", "timings", "status", "error")
+VOLATILE_TOP_KEYS = ("source", "timings", "status", "error", "regulator", "path")  # path: not the results
 
 
 def floor_kind(scenario: Scenario) -> str:
@@ -75,24 +78,28 @@ def physics_rates(scenarios: list[Scenario], repeat: int) -> dict[str, dict[str,
     return {name: best[id(model)] for name, model in plants.items()}
 
 
-def loop_rates(scenarios: list[Scenario], fmu: Path, repeat: int) -> dict[str, dict[str, float]]:
-    """The FMU loop benchmark on the flat nominal plant and on each terrain of the targets."""
+def loop_rates(scenarios: list[Scenario], fmu: Path, repeat: int, controller: str = "python") -> dict[str, dict[str, float]]:
+    """The FMU loop benchmark on the flat nominal plant and on each terrain of the targets, with
+    the walking controller ``controller``."""
+    from plant.sim import CassieWalker
+
+    plant = None if controller == "python" else lambda scenario, model: CassieWalker(model, controller=controller)
     benches = {"flat": spec.resolve_targets(["nominal"])[0]}
     benches.update({"terrain": s for s in scenarios if s.terrain is not None})
     out = {}
     for kind, s in benches.items():
         short = spec.override(s, duration_s=10.0)
-        out[kind] = bench_cosim.closed_loop_all(short, {"fmu": lambda: FmuRegulator(fmu)}, repeat)["fmu"]
+        out[kind] = bench_cosim.closed_loop_all(short, {"fmu": lambda: FmuRegulator(fmu)}, repeat, plant=plant)["fmu"]
     return out
 
 
 # --------------------------------------------------------------------------- the suite
 def run_suite(targets: list[str], jobs: int, fmu: Path, out: Path, duration: float | None,
-              code: Path = REPO_ROOT) -> dict[str, Any]:
-    """``python -m scenarios run`` (of the checkout ``code``) in a subprocess: wall, CPU of it
-    and its workers, its output."""
+              code: Path = REPO_ROOT, path: tuple[str, ...] = ()) -> dict[str, Any]:
+    """``python -m scenarios run`` (of the checkout ``code``, with the ``path`` options) in a
+    subprocess: wall, CPU of it and its workers, its output."""
     cmd = [sys.executable, "-m", "scenarios", "run", *targets, "--jobs", str(jobs), "--out", str(out),
-           "--fmu", str(fmu)]
+           "--fmu", str(fmu), *path]
     if duration is not None:
         cmd += ["--duration", str(duration)]
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
@@ -214,7 +221,7 @@ def print_summary(res: dict[str, Any], jobs: int) -> None:
     rates = sorted(res["physics"].items(), key=lambda kv: kv[1]["rtf_cpu"])
     print(f"  bare mj_step: {rates[0][1]['rtf_cpu']:.2f} ({rates[0][0]}) .. {rates[-1][1]['rtf_cpu']:.2f} "
           f"({rates[-1][0]}) sim s / CPU s")
-    print(f"\nsuite, --jobs {jobs}: {f['sim_s']:.0f} simulated s in {f['wall_s']:.1f} s wall (the tasks: "
+    print(f"\nsuite, --jobs {jobs}, --regulator {res['regulator']} --controller {res['controller']}: {f['sim_s']:.0f} simulated s in {f['wall_s']:.1f} s wall (the tasks: "
           f"{res['suite']['tasks_wall_s']} s), {f['cpu_s']:.1f} CPU s in all its processes")
     if "arms_cpu_s" in f:
         print(f"  CPU: arms {f['arms_cpu_s']:.1f} s, worker start-up {f['worker_startup_cpu_s']:.1f} s, writing the "
@@ -234,7 +241,11 @@ def main(argv=None) -> int:
     ap.add_argument("targets", nargs="*", default=["all"], help="what `run` takes (default: all)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--duration", type=float, default=None, help="override every scenario's duration (quick run)")
-    ap.add_argument("--fmu", default=None, help="FMU file (default: build one into a temp folder)")
+    ap.add_argument("--fmu", default=None, help="FMU file (default: build one of --regulator's kind into a temp folder)")
+    ap.add_argument("--regulator", choices=("fmu", "native"), default="native",
+                    help="the regulator FMU's kind (default native, the run's default)")
+    ap.add_argument("--controller", choices=("python", "native"), default="native",
+                    help="the walking controller (default native, the run's default)")
     ap.add_argument("--repeat", type=int, default=3, help="best of N for the yardsticks")
     ap.add_argument("--compare", type=Path, default=None, help="an earlier results folder: bit-identity check")
     ap.add_argument("--keep", type=Path, default=None, help="write the results here (default: a temp folder)")
@@ -243,16 +254,18 @@ def main(argv=None) -> int:
                     help="run the suite of this checkout instead (e.g. the code before, for a before/after)")
     args = ap.parse_args(argv)
 
-    fmu = bench_cosim.ensure_fmu(args.fmu)
+    fmu = bench_cosim.ensure_fmu(args.fmu, native=args.regulator == "native")
+    path = ("--regulator", args.regulator, "--controller", args.controller)
     scenarios = spec.resolve_targets(args.targets)
     if args.duration is not None:
         scenarios = [spec.override(s, duration_s=args.duration) for s in scenarios]
-    res: dict[str, Any] = {"targets": args.targets, "jobs": args.jobs, "duration": args.duration}
+    res: dict[str, Any] = {"targets": args.targets, "jobs": args.jobs, "duration": args.duration,
+                           "regulator": args.regulator, "controller": args.controller}
     res["physics"] = physics_rates(scenarios, args.repeat)
-    res["loop"] = loop_rates(scenarios, fmu, args.repeat)
+    res["loop"] = loop_rates(scenarios, fmu, args.repeat, args.controller)
     with tempfile.TemporaryDirectory(prefix="bench_suite_") as tmp:
         out = args.keep or Path(tmp) / "runs"
-        res["suite"] = run_suite(args.targets, args.jobs, fmu, out, args.duration, args.code)
+        res["suite"] = run_suite(args.targets, args.jobs, fmu, out, args.duration, args.code, path)
         res["arms"], res["writes"] = read_arms(out, scenarios)
         res["worker_pids"] = sorted({(a.get("timings") or {}).get("pid") for a in res["arms"]} - {None})
         if args.compare is not None:

@@ -419,7 +419,7 @@ class CassiePhysics:
         :data:`FALL_TILT_RAD`, or a non-finite state.
         """
         d = self.data
-        if not np.all(np.isfinite(d.qpos)) or not np.all(np.isfinite(d.qvel)):
+        if not (np.isfinite(d.qpos).all() and np.isfinite(d.qvel).all()):
             return "non-finite state"
         h = self.pelvis_height_above_ground_m()
         if h < FALL_HEIGHT_M:

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import logging
 import math
+from pathlib import Path
 from typing import Mapping
 
 import mujoco
@@ -35,6 +36,12 @@ from plant.controller import NominalController
 from plant.gaits import GaitLibrary
 
 log = logging.getLogger(__name__)
+
+#: The nominal controller's implementations (``CassieWalker(controller=...)``).
+CONTROLLERS = ("python", "native")
+#: Where the C controller is built when no library is given: ``build/`` of the checkout
+#: (ignored by git), one folder per version of its sources.
+NATIVE_CACHE = Path(__file__).resolve().parents[1] / "build" / "native_ctrl"
 
 
 class CassieWalker:
@@ -47,19 +54,44 @@ class CassieWalker:
             servos on the copy), the caller's object is not changed.
         params: controller parameters (``ControllerParams``); defaults if None.
         gaits: gait library; the committed ``plant/data/gait_library.json`` if None.
+        controller: the nominal controller's implementation, one of :data:`CONTROLLERS`:
+            ``python`` (:class:`plant.controller.NominalController`) or ``native`` (the C
+            controller of ``plant/native/``, the same doubles operation for operation:
+            ``tests/plant/test_native_controller.py``).
+        native_library: the loaded C controller (``plant.native.native_ctrl.NativeLibrary``) for
+            ``controller="native"``; None: built once under :data:`NATIVE_CACHE` and loaded once
+            per process.
 
     The fall check runs at the end of every :meth:`advance` and is latched.
     Pelvis forces from :meth:`set_pelvis_force` persist until changed.
     """
 
     def __init__(self, model: mujoco.MjModel, params: ControllerParams | None = None,
-                 gaits: GaitLibrary | None = None):
+                 gaits: GaitLibrary | None = None, controller: str = "python", native_library=None):
+        if controller not in CONTROLLERS:
+            raise ValueError(f"controller = {controller!r}: must be one of {', '.join(CONTROLLERS)}")
         self.physics = CassiePhysics(model)
         #: Plant step (s), 0.5 ms for Cassie.
         self.SIM_DT_S = self.physics.SIM_DT_S
         self.params = params or ControllerParams()
         self.gaits = gaits or GaitLibrary.default()
-        self.controller = NominalController(self.physics, self.params)
+        #: The controller's implementation, one of :data:`CONTROLLERS`.
+        self.controller_kind = controller
+        if controller == "native":
+            from plant.native.native_ctrl import NativeController, cached_library_path, load_library
+
+            if native_library is None:
+                native_library = load_library(cached_library_path(NATIVE_CACHE))
+            self.physics.configure_pd_servos()  # as NominalController does before its first update
+            self.controller = NativeController(native_library, self.physics, self.params)
+        else:
+            self.controller = NominalController(self.physics, self.params)
+        c_sense = controller == "native"
+        #: The sensing the walker reports, from the C controller when it runs (its own, the same bits).
+        self._heading_state = self.controller.heading_state if c_sense else self.physics.heading_state
+        self._foot_forces = self.controller.foot_normal_forces_n if c_sense else self.physics.foot_normal_forces_n
+        #: Simulated time of the state whose fall check :meth:`advance` made (None: not checked).
+        self._fall_checked_t = None
         self._substep = 0
         self._fall_reason = None
         self.vx_des = 0.0
@@ -96,7 +128,7 @@ class CassieWalker:
     def regulator_inputs(self) -> dict:
         """Signals for the regulator (see ``plant/controller.py`` for definitions)."""
         c = self.controller
-        _, pitch, roll, _, _, roll_rate, pitch_rate, _ = self.physics.heading_state()
+        _, pitch, roll, _, _, roll_rate, pitch_rate, _ = self._heading_state()
         return {"vx": float(c.vx_step_avg), "vy": float(c.vy_filt), "pitch": pitch,
                 "roll": roll, "pitch_rate": pitch_rate, "roll_rate": roll_rate,
                 "step_index": int(c.step_index)}
@@ -118,12 +150,20 @@ class CassieWalker:
                 c.update()
         if self._fall_reason is None:
             self._fall_reason = ph.fall_reason()
+            self._fall_checked_t = ph.data.time
             if self._fall_reason:
                 log.info("fall at t=%.3f s: %s", self.time_s, self._fall_reason)
 
+    def _python_controller_only(self, what: str) -> None:
+        if self.controller_kind != "python":
+            raise NotImplementedError(f"{what}: the C controller's memory is not saved or restored; "
+                                      "build the walker with controller='python' (the same trajectory)")
+
     def get_state(self) -> dict:
         """Everything needed to continue exactly from here: MuJoCo's integration state with
-        the servo gains, the walker's and the controller's memory (plain Python values)."""
+        the servo gains, the walker's and the controller's memory (plain Python values).
+        The Python controller only (NotImplementedError with the C one)."""
+        self._python_controller_only("get_state")
         return {"physics": self.physics.physics_state().tolist(),
                 "walker": {"substep": self._substep, "fall_reason": self._fall_reason,
                            "vx_des": self.vx_des, "vy_des": self.vy_des,
@@ -135,8 +175,9 @@ class CassieWalker:
 
         Raises ValueError naming every problem (:meth:`state_problems`) when the state is not
         one this walker can have reached, ValueError/KeyError/TypeError when it does not fit;
-        the walker is then as it was.
+        the walker is then as it was.  The Python controller only (NotImplementedError with the C one).
         """
+        self._python_controller_only("set_state")
         backup = self.get_state()
         try:
             self._apply_state(state)
@@ -152,6 +193,7 @@ class CassieWalker:
         problem, each naming the field and its allowed values), or [] if it is: the physics
         (``CassiePhysics.physics_state_problems``), the controller's memory
         (``NominalController.memory_problems``) and the walker's own fields."""
+        self._python_controller_only("state_problems")
         if not (isinstance(state, Mapping) and set(state) == {"physics", "walker", "controller"}):
             return ["walker state must be a table of exactly physics, walker and controller"]
         walker = state["walker"]
@@ -184,6 +226,7 @@ class CassieWalker:
         self.controller.restore_memory(state["controller"])
         self._substep = substep
         self._fall_reason = walker["fall_reason"]
+        self._fall_checked_t = None
         self.vx_des, self.vy_des = float(walker["vx_des"]), float(walker["vy_des"])
         self.yaw_rate_des = float(walker["yaw_rate_des"])
 
@@ -215,8 +258,8 @@ class CassieWalker:
 
     def fell(self) -> bool:
         """True once a fall has been detected (latched; checked at the end of ``advance``)."""
-        if self._fall_reason is None:
-            self._fall_reason = self.physics.fall_reason()
+        if self._fall_reason is None and self._fall_checked_t != self.physics.data.time:
+            self._fall_reason = self.physics.fall_reason()  # a state advance did not check
         return self._fall_reason is not None
 
     @property
@@ -231,8 +274,8 @@ class CassieWalker:
         """Named floats for logging (SI units; stance 0 = left, 1 = right)."""
         ph, c = self.physics, self.controller
         p = ph.pelvis_position()
-        yaw, pitch, roll, vx, vy, _, _, yaw_rate = ph.heading_state()
-        fl, fr = ph.foot_normal_forces_n()
+        yaw, pitch, roll, vx, vy, _, _, yaw_rate = self._heading_state()
+        fl, fr = self._foot_forces()
         return {
             "t": self.time_s,
             "pelvis_x": float(p[0]), "pelvis_y": float(p[1]), "pelvis_z": float(p[2]),

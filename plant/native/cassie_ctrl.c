@@ -244,7 +244,10 @@ void cc_heading_state(const CcController *c, double out[8]) {
 
 double cc_ground_height(const CcController *c, double x, double y) {
     const CcFixed *f = &c->fx;
-    if (!f->has_terrain) return f->flat_m;
+    if (!f->has_terrain) {
+        if (!f->has_plane) return f->flat_m;
+        return f->flat_m + f->pl_sx * (x - f->pl_x0) + f->pl_sy * (y - f->pl_y0);
+    }
     if (!(isfinite(x) && isfinite(y))) return NAN;
     double sx = f->hf_sx, sy = f->hf_sy;
     int nrow = f->hf_nrow, ncol = f->hf_ncol;
@@ -293,7 +296,8 @@ int cc_controller_size(void) { return (int)sizeof(CcController); }
 CcMemory *cc_memory_ptr(CcController *c) { return &c->mem; }
 CcTargets *cc_targets_ptr(CcController *c) { return &c->targets; }
 
-/* GroundHeight.__init__: the terrain hfield, or the first world-body plane's height. */
+/* GroundHeight.__init__: the terrain hfield, or the first world-body plane's height (and its
+ * slope when the plane is tilted). */
 static void ground_setup(CcFixed *f, const mjModel *m) {
     int gid = mj_name2id(m, mjOBJ_GEOM, "terrain");
     f->has_terrain = gid >= 0;
@@ -310,9 +314,20 @@ static void ground_setup(CcFixed *f, const mjModel *m) {
         f->hf_gz = m->geom_pos[3 * gid + 2];
     } else {
         f->flat_m = 0.0;
+        f->has_plane = 0;
         for (int g = 0; g < m->ngeom; g++)
             if (m->geom_type[g] == mjGEOM_PLANE && m->geom_bodyid[g] == 0) {
                 f->flat_m = m->geom_pos[3 * g + 2];
+                mjtNum mat[9];
+                mju_quat2Mat(mat, m->geom_quat + 4 * g);
+                double nx = mat[2], ny = mat[5], nz = mat[8]; /* the plane's z axis in the world */
+                if (nx != 0.0 || ny != 0.0) {
+                    f->has_plane = 1;
+                    f->pl_x0 = m->geom_pos[3 * g];
+                    f->pl_y0 = m->geom_pos[3 * g + 1];
+                    f->pl_sx = -nx / nz;
+                    f->pl_sy = -ny / nz;
+                }
                 break;
             }
     }

@@ -47,10 +47,12 @@ typedef struct {
     int act[CC_NSIDES][CC_NMOTOR];
     int hip_pitch_jid[CC_NSIDES], foot_jid[CC_NSIDES], foot_geom0[CC_NSIDES];
     int foot_body[CC_NSIDES];
-    /* ground: hfield (has_terrain) or a flat height */
-    int has_terrain, hf_nrow, hf_ncol;
+    /* ground: hfield (has_terrain), or a flat height, tilted (has_plane: plant.perturbation's slope,
+       height flat_m + pl_sx (x - pl_x0) + pl_sy (y - pl_y0)) or level */
+    int has_terrain, hf_nrow, hf_ncol, has_plane;
     const float *hf_data;
     double hf_sx, hf_sy, hf_sz, hf_gx, hf_gy, hf_gz, flat_m;
+    double pl_x0, pl_y0, pl_sx, pl_sy;
     /* leg kinematics fits (highest power first) and ranges */
     double length_poly[CC_NSIDES][CC_FIT_DEGREE + 1], angle_poly[CC_NSIDES][CC_FIT_DEGREE + 1];
     double knee_poly[CC_NSIDES][CC_FIT_DEGREE + 1], length_lo[CC_NSIDES], length_hi[CC_NSIDES];

@@ -15,11 +15,13 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
+import hashlib
 import logging
 import math
 import os
 import shutil
 import subprocess
+import tempfile
 from pathlib import Path
 
 import mujoco
@@ -170,20 +172,80 @@ def write_sources(out_dir: Path, params: ControllerParams | None = None,
     return [out_dir / n for n in C_SOURCES + ("cc_data.c",)]
 
 
+class CompilerMissing(RuntimeError):
+    """No C compiler to build the C controller with."""
+
+
+def find_compiler() -> str | None:
+    """The C compiler the library is built with: ``$CC`` (default ``cc``), else ``gcc``; None if neither."""
+    return shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+
+
 def build_library(out_dir: Path) -> Path:
     """``libcassie_ctrl.so`` in ``out_dir``, linked against the wheel's libmujoco (rpath to it)."""
     src = write_sources(Path(out_dir) / "src")
     out = Path(out_dir) / "libcassie_ctrl.so"
     lib = mujoco_library()
-    cc = shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
+    cc = find_compiler()
     if cc is None:
-        raise RuntimeError("building the C controller needs a C compiler (cc or gcc; set CC)")
+        raise CompilerMissing("building the C controller needs a C compiler (cc or gcc; set CC)")
     cmd = [cc, *CFLAGS, "-shared", "-fPIC", f"-I{mujoco_dir() / 'include'}", f"-I{src[0].parent}",
            *map(str, src), "-o", str(out), str(lib), f"-Wl,-rpath,{lib.parent}", "-lm"]
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode:
         raise RuntimeError(f"building the C controller failed:\n{' '.join(cmd)}\n{res.stderr}")
     return out
+
+
+#: The library's folder under a cache root: one per :func:`library_key`.
+CACHE_PREFIX = "cassie_ctrl-"
+
+
+def library_key() -> str:
+    """What the library is built from, hashed: the sources, the generated parameter header and
+    data, the compiler options and the libmujoco it links to (a change in any gives a new build)."""
+    h = hashlib.sha256()
+    for name in C_SOURCES + HEADERS:
+        h.update(name.encode() + b"\0" + (NATIVE_DIR / name).read_bytes() + b"\0")
+    h.update(params_header().encode() + b"\0" + data_source().encode() + b"\0")
+    h.update(" ".join(CFLAGS).encode() + b"\0" + str(mujoco_library()).encode() + mujoco.__version__.encode())
+    return h.hexdigest()[:16]
+
+
+def cached_library_path(cache_root: Path) -> Path:
+    """``libcassie_ctrl.so`` of the checkout's sources under ``cache_root``, built there once (in a
+    scratch folder beside it, renamed into place, so that processes building it at the same time
+    each get a whole library). CompilerMissing without a C compiler; RuntimeError if it fails."""
+    cache_root = Path(cache_root)
+    final = cache_root / f"{CACHE_PREFIX}{library_key()}"
+    lib = final / "libcassie_ctrl.so"
+    if lib.is_file():
+        return lib
+    cache_root.mkdir(parents=True, exist_ok=True)
+    scratch = Path(tempfile.mkdtemp(prefix=".build-", dir=cache_root))
+    try:
+        build_library(scratch)
+        try:
+            os.rename(scratch, final)
+        except OSError:  # another process renamed its build into place first
+            if not lib.is_file():
+                raise
+    finally:
+        if scratch.exists():
+            shutil.rmtree(scratch, ignore_errors=True)
+    log.info("built the C controller in %s", final)
+    return lib
+
+
+_LOADED: dict[Path, "NativeLibrary"] = {}
+
+
+def load_library(path: Path) -> "NativeLibrary":
+    """The library at ``path`` loaded once per process."""
+    path = Path(path).resolve()
+    if path not in _LOADED:
+        _LOADED[path] = NativeLibrary(path)
+    return _LOADED[path]
 
 
 # ------------------------------------------------------------------------- ctypes
@@ -255,6 +317,8 @@ class NativeLibrary:
         lib.cc_update.argtypes = [vp]
         lib.cc_ground_height.argtypes = [vp, d, d]
         lib.cc_ground_height.restype = d
+        lib.cc_foot_forces.argtypes = [vp, ctypes.POINTER(d * 2)]
+        lib.cc_heading_state.argtypes = [vp, ctypes.POINTER(d * 8)]
         lib.cc_memory_ptr.argtypes = [vp]
         lib.cc_memory_ptr.restype = ctypes.POINTER(CcMemory)
         lib.cc_targets_ptr.argtypes = [vp]
@@ -280,6 +344,9 @@ class NativeController:
                        err, len(err)):
             raise ValueError(f"C controller: {err.value.decode()}")
         self._mem = lib.cc_memory_ptr(self._buf).contents
+        self._offsets = (ctypes.c_double * 6)()
+        self._forces = (ctypes.c_double * 2)()
+        self._heading = (ctypes.c_double * 8)()
 
     def set_command(self, vx: float, vy: float, gaits, yaw_rate: float = 0.0) -> None:
         key = id(gaits)
@@ -289,6 +356,15 @@ class NativeController:
                                         ctypes.byref(self._libs[key][1]))
 
     def set_offsets(self, offsets) -> None:
+        if len(offsets) == len(OFFSET_NAMES):  # every offset given (the master's case): no merging
+            try:
+                values = [float(offsets[k]) for k in OFFSET_NAMES]
+            except KeyError:
+                values = None
+            if values is not None and all(map(math.isfinite, values)):
+                self._offsets[:] = values
+                self._native.lib.cc_set_offsets(self._buf, self._offsets)
+                return
         for k in offsets:
             if k not in OFFSET_NAMES:
                 raise KeyError(f"unknown offset key {k!r}; allowed: {', '.join(OFFSET_NAMES)}")
@@ -300,6 +376,16 @@ class NativeController:
 
     def update(self) -> None:
         self._native.lib.cc_update(self._buf)
+
+    def foot_normal_forces_n(self) -> tuple[float, float]:
+        """``CassiePhysics.foot_normal_forces_n`` in C (the same contacts in the same order: the same bits)."""
+        self._native.lib.cc_foot_forces(self._buf, self._forces)
+        return tuple(self._forces)
+
+    def heading_state(self) -> tuple:
+        """``CassiePhysics.heading_state`` in C (the same operations: the same bits)."""
+        self._native.lib.cc_heading_state(self._buf, self._heading)
+        return tuple(self._heading)
 
     def ground_height_m(self, x: float, y: float) -> float:
         return self._native.lib.cc_ground_height(self._buf, float(x), float(y))

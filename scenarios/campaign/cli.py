@@ -15,6 +15,7 @@ from pathlib import Path
 
 from scenarios.errors import ScenarioError
 from scenarios.cosim.fmus import REGULATOR_FMUS
+from scenarios.run.options import CONTROLLERS, DEFAULT_CONTROLLER, DEFAULT_REGULATOR, resolve_regulator
 
 log = logging.getLogger("scenarios.campaign")
 
@@ -30,7 +31,11 @@ def add_parser(sub) -> None:
     where.add_argument("--scheduler", metavar="ADDRESS", default=None,
                        help="an existing Dask scheduler (e.g. tcp://host:8786); workers need a shared file system")
     sp.add_argument("--resume", action="store_true", help="continue the campaign in --out (skips complete samples)")
-    sp.add_argument("--regulator", choices=(*REGULATOR_FMUS, "inprocess"), default="fmu")
+    sp.add_argument("--regulator", choices=(*REGULATOR_FMUS, "inprocess"), default=None,
+                    help=f"as for run (default: the kind of the --fmu file, else {DEFAULT_REGULATOR}; every path "
+                         "gives the same bits)")
+    sp.add_argument("--controller", choices=CONTROLLERS, default=DEFAULT_CONTROLLER,
+                    help=f"the walking controller, as for run: python or native (C; default {DEFAULT_CONTROLLER})")
     sp.add_argument("--fmu", type=Path, default=None, help="FMU file (default: dist/, built if missing or stale)")
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--task-timeout", type=float, default=None, help="seconds per sample (overrides the file)")
@@ -52,6 +57,10 @@ def _check_args(args) -> list[str]:
         problems.append(f"--task-timeout {args.task_timeout:g}: must be within (0, {MAX_TASK_TIMEOUT_S:g}] s")
     if args.retries is not None and not 0 <= args.retries <= 10:
         problems.append(f"--retries {args.retries}: must be within [0, 10]")
+    if args.controller == "native":
+        from scenarios.run.options import controller_problem
+
+        problems += filter(None, [controller_problem()])
     if args.fmu is not None and not Path(args.fmu).is_file():
         problems.append(f"--fmu {args.fmu}: no such file")
     elif args.fmu is not None and args.regulator in REGULATOR_FMUS:
@@ -75,6 +84,7 @@ def cmd_campaign(args) -> int:
     from scenarios.campaign.report import text_table, write_report
     from scenarios.campaign.store import CampaignDir, CampaignDirError
 
+    args.regulator = resolve_regulator(args.regulator, args.fmu)
     problems = _check_args(args)
     try:
         import distributed  # noqa: F401  (the optional `campaign` extra)
@@ -111,7 +121,10 @@ def cmd_campaign(args) -> int:
         fmu = _fmu(args)
         if fmu is False:
             return 1
+        if not _controller_ready(args):
+            return 1
         opts = execute.RunOptions(workers=args.workers, scheduler=args.scheduler, regulator=args.regulator,
+                                  controller=args.controller,
                                   fmu=fmu, timeout_s=args.task_timeout, retries=args.retries,
                                   fork_runs=args.fork_runs)
         execute.run(campaign, cdir, values, opts, fmu)
@@ -127,6 +140,22 @@ def cmd_campaign(args) -> int:
         cdir.finish()
         cdir.close()
     return _finish(out, write_report, text_table)
+
+
+def _controller_ready(args) -> bool:
+    """With ``--controller native``: the C controller built once here, before the tasks load it."""
+    if args.controller != "native":
+        return True
+    from plant.native.native_ctrl import cached_library_path
+    from plant.sim import NATIVE_CACHE
+
+    try:
+        cached_library_path(NATIVE_CACHE)
+    except Exception as exc:
+        print(f"--controller native: cannot build the C walking controller: {exc}; --controller python runs the "
+              "same controller in Python (the same results)", file=sys.stderr)
+        return False
+    return True
 
 
 def _fmu(args):

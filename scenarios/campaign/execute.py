@@ -30,6 +30,7 @@ from typing import Any, Iterator
 from scenarios.campaign import task as task_mod
 from scenarios.campaign.spec import Campaign
 from scenarios.campaign.store import CampaignDir
+from scenarios.run.options import DEFAULT_CONTROLLER, DEFAULT_REGULATOR
 
 log = logging.getLogger(__name__)
 
@@ -48,7 +49,8 @@ class CampaignInterrupted(Exception):
 class RunOptions:
     workers: int | None = None  # LocalCluster size (default: CPU count)
     scheduler: str | None = None  # or an existing scheduler's address
-    regulator: str = "fmu"
+    regulator: str = DEFAULT_REGULATOR
+    controller: str = DEFAULT_CONTROLLER
     fmu: str | None = None
     timeout_s: float | None = None  # per task; default from the campaign
     retries: int | None = None  # default from the campaign
@@ -224,7 +226,7 @@ def make_tasks(campaign: Campaign, cdir: CampaignDir, todo: list[str], opts: Run
     timeout = opts.timeout_s if opts.timeout_s is not None else default_timeout_s(campaign)
     return [task_mod.Task(sample=sid, scenario_file=str(cdir.sample_file(sid).resolve()),
                           runs_dir=str((cdir.runs_dir / sid).resolve()), arms=tuple(campaign.arm_names()),
-                          regulator=opts.regulator, fmu=fmu, timeout_s=timeout,
+                          regulator=opts.regulator, controller=opts.controller, fmu=fmu, timeout_s=timeout,
                           tmp_root=str(cdir.tmp_dir.resolve()), env=task_mod.client_env(), fork=opts.fork_runs,
                           warm_models=(str(campaign.base_doc.get("model") or "menagerie"),))
             for sid in todo]

@@ -62,6 +62,7 @@ class Task:
     env: tuple[tuple[str, str], ...] = ()  # the client's settings the run must share (MENAGERIE_ROOT)
     fork: bool = False  # run forked from the worker's warm server (--fork-runs), not as a new interpreter
     warm_models: tuple[str, ...] = ()  # the models that server checks (compiles) once, ahead of the runs
+    controller: str = "native"  # the walking controller (run --controller)
 
 
 def client_env() -> tuple[tuple[str, str], ...]:
@@ -89,7 +90,7 @@ def _claim_out(runs_dir: Path) -> Path:
 def run_command(task: Task, out: Path) -> list[str]:
     """``python -m scenarios run ...`` for ``task`` (from index 4: the ``run`` command's own arguments)."""
     cmd = [sys.executable, "-m", "scenarios", "run", task.scenario_file, "--out", str(out),
-           "--regulator", task.regulator, "--no-plots"]  # the campaign's report plots the campaign
+           "--regulator", task.regulator, "--controller", task.controller, "--no-plots"]  # the campaign's report plots the campaign
     return cmd + (["--fmu", task.fmu] if task.fmu else [])
 
 

@@ -86,6 +86,21 @@ def fmu_version_problem(regulator: str, fmu: Path) -> str | None:
     return None
 
 
+def regulator_kind(fmu: Path, default: str) -> str:
+    """The ``--regulator`` that runs the regulator FMU file ``fmu``: ``native-fmi3`` for an FMI 3.0
+    FMU, ``fmu`` for a pythonfmu one (its generationTool), else ``native``; ``default`` when the
+    file cannot be read (the options' checks then say why)."""
+    from fmpy import read_model_description
+
+    try:
+        md = read_model_description(str(fmu))
+    except Exception:
+        return default
+    if md.fmiVersion.startswith("3"):
+        return "native-fmi3"
+    return "fmu" if (md.generationTool or "").startswith("PythonFMU") else "native"
+
+
 def _role_variables(role: str) -> tuple[str, dict[str, tuple[str, ...]]]:
     """(what the role is, in words; the variables by causality the master sets or reads)."""
     if role == "plant":

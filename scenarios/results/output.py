@@ -2,7 +2,9 @@
 
 ``<dir>/timeseries.csv``: the rows of every complete arm, the ``arm`` column first
 (no file when no arm completed).
-``<dir>/summary.json``: ``scenario``, ``model``, ``regulator``, the claim, ``status``,
+``<dir>/summary.json``: ``scenario``, ``model``, ``regulator``, ``path`` (the implementations the
+results come from: regulator and its FMU file and SHA-256, plant, walking controller; the
+results do not depend on them), the claim, ``status``,
 per arm its ``status`` and, when complete, the metrics of :mod:`scenarios.results.metrics` and
 its ``timings`` (where its time went, :data:`scenarios.cosim.master.TIMINGS`), the verdict of
 the claim's checks, and ``timings`` of the writing (``csv_s``, ``plots_s``, their
@@ -115,10 +117,14 @@ def summary_commands(summary: Mapping[str, Any]) -> list[list[float]]:
     return [[*c, 0.0] if len(c) == 3 else list(c) for c in summary.get("commands") or []]
 
 
-def build_summary(scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome]) -> dict[str, Any]:
+def build_summary(scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome],
+                  path: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """summary.json content: every arm of ``scenario`` with its status (an arm without an
-    outcome is ``interrupted``, not started), metrics for the complete ones."""
+    outcome is ``interrupted``, not started), metrics for the complete ones; ``path``: the
+    implementations the run used (``RunOptions.path_record``), under ``path``."""
     out = scenario_header(scenario, regulator)
+    if path is not None:
+        out["path"] = dict(path)
     by_arm = {o.arm: o for o in outcomes}
     arms: dict[str, Any] = {}
     for arm in scenario.arms:
@@ -220,7 +226,7 @@ def column_text(column: np.ndarray) -> list[str]:
 
 
 def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequence[ArmOutcome], *,
-                  plots: bool = True, videos: bool = False) -> dict[str, Any]:
+                  plots: bool = True, videos: bool = False, path: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Write csv, plots (unless ``plots`` is false: ``--no-plots``), the videos of the
     arms that carry states to render (``videos``: ``--render``) and summary (last) into
     the folder ``dest``; return the summary (its ``timings``: seconds spent writing the
@@ -230,7 +236,7 @@ def write_results(dest: Path, scenario: Scenario, regulator: str, outcomes: Sequ
     :mod:`scenarios.results.store` renames into place once this returns.
     """
     dest = Path(dest)
-    summary = build_summary(scenario, regulator, outcomes)
+    summary = build_summary(scenario, regulator, outcomes, path=path)
     by_arm = {o.arm: o for o in outcomes}  # the scenario's arm order, not the order the arms ended in
     ordered = [by_arm[a.name] for a in scenario.arms if a.name in by_arm]
     results = [o.result for o in ordered if o.status == "complete" and len(o.result.rows)]
@@ -392,6 +398,8 @@ SUMMARY_SCHEMA = _obj(
     status=_one_of("complete", "failed", "interrupted"), error=_opt(STR), arms=_map(_ARM),
     model_summary=_obj(pelvis_mass_kg=_opt(_num(gt=0.0)), pelvis_com_m=_opt(_VEC3), total_mass_kg=_num(gt=0.0)),
     verdict=ANY_OBJECT, plots=_list(_one_of(*PLOTS)),
+    path=_obj(regulator=STR, plant=STR, controller=STR, regulator_fmu=_opt(STR), regulator_fmu_sha256=_opt(STR),
+              plant_fmu=_opt(STR), plant_fmu_sha256=_opt(STR)),
     videos=_list(_Kind(lambda v: isinstance(v, str) and is_result_file(v) and v not in RESULT_FILES,
                        "a file name <arm>.mp4 or <arm>.gif")),
 )

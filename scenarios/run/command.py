@@ -17,7 +17,8 @@ from typing import Sequence
 from fmu_src.core.avr_errors import AvrError
 from scenarios.cosim.fmus import REGULATOR_FMUS, REPO_ROOT, ensure_fmu, ensure_plant_fmu
 from scenarios.errors import USER_ERRORS, ScenarioError
-from scenarios.run.options import DEFAULT_OUT, PLANTS, REGULATORS, RunOptions
+from scenarios.run.options import (CONTROLLERS, DEFAULT_CONTROLLER, DEFAULT_OUT, DEFAULT_REGULATOR, PLANTS,
+                                   REGULATORS, RunOptions)
 
 
 def add_arguments(sp: argparse.ArgumentParser) -> None:
@@ -25,10 +26,16 @@ def add_arguments(sp: argparse.ArgumentParser) -> None:
     sp.add_argument("targets", nargs="+", metavar="NAME|FILE")
     sp.add_argument("--model", default=None, help="menagerie, osu or an MJCF path (overrides the files)")
     sp.add_argument("--out", default=str(DEFAULT_OUT), help="results folder (default: runs)")
-    sp.add_argument("--regulator", choices=REGULATORS, default="fmu",
+    sp.add_argument("--regulator", choices=REGULATORS, default=None,
                     help="; ".join(f"{k}: {r.help} (default file {r.default.relative_to(REPO_ROOT)})"
                                    for k, r in REGULATOR_FMUS.items())
-                    + "; inprocess: the regulator core called in-process, no FMU. Default: fmu")
+                    + f"; inprocess: the regulator core called in-process, no FMU. Default: the kind of the --fmu "
+                      f"file, else {DEFAULT_REGULATOR} (every path gives the same bits)")
+    sp.add_argument("--controller", choices=CONTROLLERS, default=None,
+                    help="the nominal walking controller of the in-process plant: python (plant/controller.py) or "
+                         "native (the same operations in C, plant/native/, built once under build/native_ctrl/ "
+                         f"with cc). Default: {DEFAULT_CONTROLLER} (python with --plant fmu, whose FMU carries "
+                         "its own); both give the same bits")
     sp.add_argument("--jobs", type=int, default=1, help="parallel worker processes (default 1)")
     sp.add_argument("--fmu", type=Path, default=None,
                     help="the regulator FMU file, of the --regulator's FMI version (default: the regulator's "
@@ -161,4 +168,15 @@ def _with_fmus(options: RunOptions) -> RunOptions:
             plant_fmu = ensure_plant_fmu(options.plant_fmu, rebuild=options.rebuild_fmu)
         except Exception as exc:
             raise AvrError(f"cannot get the plant FMU: {exc}") from exc
-    return options.with_fmus(None if fmu is None else Path(fmu), None if plant_fmu is None else Path(plant_fmu))
+    controller_lib = None
+    if options.controller == "native" and options.plant == "inprocess":
+        from plant.native.native_ctrl import cached_library_path
+        from plant.sim import NATIVE_CACHE
+
+        try:
+            controller_lib = cached_library_path(NATIVE_CACHE)
+        except Exception as exc:
+            raise AvrError(f"--controller native: cannot build the C walking controller: {exc}; "
+                           "--controller python runs the same controller in Python (the same results)") from exc
+    return options.with_fmus(None if fmu is None else Path(fmu),
+                             None if plant_fmu is None else Path(plant_fmu)).with_controller_lib(controller_lib)

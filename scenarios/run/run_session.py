@@ -34,6 +34,8 @@ class RunSession:
         self.left_as_were: list[str] = []
         self.write_errors: list[str] = []
         self.wall_s = 0.0
+        #: summary.json's ``path``: the implementations the results come from (the FMUs hashed once).
+        self.path = options.path_record()
 
     def run(self) -> None:
         from tqdm import tqdm
@@ -73,14 +75,16 @@ class RunSession:
         if replace and any(o.status != "complete" for o in outcomes):
             self.left_as_were.append(scenario.name)
             if not self.stop.requested:  # for the table and the exit status
-                self.summaries[scenario.name] = output.build_summary(scenario, self.options.regulator, outcomes)
+                self.summaries[scenario.name] = output.build_summary(scenario, self.options.regulator, outcomes,
+                                                                     path=self.path)
             return None
         try:
             staged = self.results_dir.stage(scenario.name)
         except OSError as exc:
             self.write_errors.append(f"{scenario.name}: results not written: {exc}")
             return None
-        write = partial(output.write_results, plots=self.options.plots, videos=self.options.render)
+        write = partial(output.write_results, plots=self.options.plots, videos=self.options.render,
+                        path=self.path)
         return runner.Job(write, (staged, scenario, self.options.regulator, outcomes),
                           partial(self.published, scenario.name, replace))
 
@@ -118,7 +122,8 @@ class RunSession:
                   for m in self.summaries[s.name]["arms"].values())
         kept = f"{len(self.plan.kept)} kept as complete (--resume), " if self.plan.kept else ""
         print(f"\n{len(scenarios)} scenario(s), {kept}{n_arms} arm run(s), {sim:.1f} simulated s in "
-              f"{self.wall_s:.1f} s wall (--jobs {self.options.jobs}, regulator {self.options.regulator}); results in "
+              f"{self.wall_s:.1f} s wall (--jobs {self.options.jobs}, regulator {self.options.regulator}, controller "
+              f"{self.options.controller}); results in "
               f"{out_root}/ (python -m scenarios report {out_root})")
         failed = self.write_errors or any(su["status"] != "complete" for su in ordered)
         if failed:

@@ -104,6 +104,8 @@ def run_task(scenario: Scenario, arm: str, options: RunOptions, stop: Callable[[
             from scenarios.cosim.plant_fmu import plant_factory
 
             plant = plant_factory(options.plant_fmu, unpack_dir=unpack)
+        elif options.controller == "native":
+            plant = _native_walker(options.controller_lib)
         recorder = None
         if options.render:
             from scenarios.results.render import StateRecorder
@@ -120,6 +122,16 @@ def run_task(scenario: Scenario, arm: str, options: RunOptions, stop: Callable[[
     result.timings.update(model_s=model_s, task_cpu_s=time.process_time() - cpu0, started_s=started - base,
                           ended_s=time.perf_counter() - base, pid=os.getpid())
     return ArmOutcome(arm, "complete", result=result)
+
+
+def _native_walker(controller_lib) -> Callable[[Scenario, Any], Any]:
+    """A plant factory for ``run_arm``: the in-process walker with the C controller, the
+    library at ``controller_lib`` (None: built under ``plant.sim.NATIVE_CACHE``) loaded once per process."""
+    from plant.native.native_ctrl import cached_library_path, load_library
+    from plant.sim import NATIVE_CACHE, CassieWalker
+
+    native = load_library(controller_lib if controller_lib is not None else cached_library_path(NATIVE_CACHE))
+    return lambda scenario, model: CassieWalker(model, controller="native", native_library=native)
 
 
 def _init_worker(event: Any, origin: float) -> None:

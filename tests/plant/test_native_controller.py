@@ -116,6 +116,7 @@ SCENARIOS = {
     "push": ("menagerie", Perturbation(joint_damping_scale=1.5),
              {2.0: _push([60.0, 30.0, 0.0]), 2.2: _push([0.0, 0.0, 0.0])}),
     "osu": ("osu", None, {}),
+    "slope": ("menagerie", Perturbation(slope_deg=3.0, cross_slope_deg=-2.0), {}),
 }
 
 
@@ -140,6 +141,17 @@ def test_ground_height_is_the_plant_s(native):
     assert math.isnan(c.ground_height_m(math.nan, 0.0))
 
 
+def test_ground_height_on_a_tilted_floor_is_the_plant_s(native):
+    """On a sloped floor (no terrain) the C lookup gives the plant's tilted-plane heights, not the level floor's."""
+    model = load_model("menagerie", Perturbation(slope_deg=4.0, cross_slope_deg=-3.0))
+    walker = CassieWalker(model)
+    c = NativeController(native, walker.physics, walker.params)
+    rng = np.random.default_rng(1)
+    for x, y in [*rng.uniform(-20.0, 20.0, (500, 2)).tolist(), (0.0, 0.0)]:
+        assert struct.pack("<d", c.ground_height_m(x, y)) == struct.pack("<d", walker.physics.ground_height_m(x, y))
+    assert c.ground_height_m(10.0, 0.0) > 0.5, "the floor rises along +x"
+
+
 def test_offsets_must_be_finite(native):
     walker = CassieWalker(load_model("menagerie"))
     c = NativeController(native, walker.physics, walker.params)
@@ -148,3 +160,45 @@ def test_offsets_must_be_finite(native):
     with pytest.raises(KeyError, match="allowed: " + ", ".join(OFFSET_NAMES)):
         c.set_offsets({"delta_knee": 0.0})
     assert list(c.memory.offsets) == [0.0] * 6
+
+
+def _walk_telemetry(model, events, **walker_kwargs):
+    """Walk 4 s on a CassieWalker with the regulator core (PD only) every 10 ms; ``events`` maps a
+    time (s) to a function of the walker. Returns the telemetry of every 10 ms, packed as doubles."""
+    walker = CassieWalker(model, **walker_kwargs)
+    walker.set_command(0.5, 0.0)
+    regulator = Regulator(RegulatorParams(adaptation_enabled=False))
+    pending, out = sorted(events.items()), []
+    for _ in range(int(round(WALK_S / (REGULATOR_STEPS * walker.SIM_DT_S)))):
+        while pending and pending[0][0] <= walker.time_s + 1e-9:
+            pending.pop(0)[1](walker)
+        walker.set_offsets(apply_regulator(walker, regulator, REGULATOR_STEPS * walker.SIM_DT_S))
+        walker.advance(REGULATOR_STEPS)
+        out.append(struct.pack(f"<{len(walker.telemetry())}d", *walker.telemetry().values()))
+    assert not walker.fell(), walker.fall_reason
+    return out, walker
+
+
+def test_walker_with_the_c_controller_walks_the_python_walker_s_bits(native):
+    """CassieWalker(controller="native") gives the Python walker's telemetry bit for bit through what the
+    scenarios and campaigns change: link masses, floor friction, a slope, a mid-walk plant change
+    (mass, COM, damping, friction), a push on a link and a command change."""
+    model = load_model("menagerie", Perturbation(link_mass_scale=(("left-shin", 1.5),), floor_friction=0.7,
+                                                 slope_deg=2.0, torso_added_mass_kg=4.0))
+    events = {1.5: lambda w: w.change_plant(torso_mass_kg=16.0, torso_com_shift_m=(0.02, 0.0, 0.0),
+                                            damping_factor=2.0, floor_friction=0.9),
+              2.0: lambda w: w.set_body_force("left-knee", [30.0, 10.0, 0.0]),
+              2.1: lambda w: w.set_body_force("left-knee", [0.0, 0.0, 0.0]),
+              2.5: lambda w: w.set_command(0.8, 0.05, 0.2)}
+    python, _ = _walk_telemetry(model, events)
+    c, walker = _walk_telemetry(model, events, controller="native", native_library=native)
+    assert walker.controller_kind == "native" and walker.controller.step_index >= 8
+    first = next((i for i, (a, b) in enumerate(zip(python, c)) if a != b), None)
+    assert first is None, f"telemetry differs from t = {first * 0.01:.2f} s"
+    with pytest.raises(NotImplementedError, match="controller='python'"):
+        walker.get_state()
+
+
+def test_walker_refuses_an_unknown_controller():
+    with pytest.raises(ValueError, match="controller = 'c': must be one of python, native"):
+        CassieWalker(load_model("menagerie"), controller="c")

@@ -20,16 +20,35 @@ from support.paths import REPO_ROOT
 def test_every_problem_of_the_options_is_named_at_once(tmp_path):
     bad = RunOptions(targets=("nominal",), regulator="matlab", plant="fmu", jobs=0, render=True,
                      fmu=tmp_path / "missing.fmu", plant_fmu=tmp_path / "nope.fmu", mode="later",
-                     exchange="random")
+                     exchange="random", controller="cpp")
     found = bad.problems()
     for said in ("--regulator matlab: must be one of fmu, native, native-fmi3, inprocess",
+                 "--controller cpp: must be one of python, native",
                  "mode later: must be one of new, overwrite, resume",
                  "exchange random: must be one of gauss-seidel, jacobi", "--jobs 0: must be >= 1",
                  "--render with --plant fmu", f"--fmu {tmp_path / 'missing.fmu'}: no such file",
                  f"--plant-fmu {tmp_path / 'nope.fmu'}: no such file"):
         assert sum(p.startswith(said) for p in found) == 1, (said, found)
-    assert len(found) == 7
+    assert len(found) == 8
     assert RunOptions(targets=("nominal",)).problems() == []
+
+
+def test_the_c_controller_is_refused_up_front_where_it_cannot_run(tmp_path, monkeypatch):
+    """With the CassiePlant FMU (its own Python controller), and without a C compiler to build it:
+    each named, with the way to the Python controller."""
+    import plant.sim
+
+    found = RunOptions(targets=("nominal",), plant="fmu", controller="native").problems()
+    assert found == ["--controller native with --plant fmu: the CassiePlant FMU runs its own (Python) controller; "
+                     "use --plant inprocess, or --controller python"]
+    assert RunOptions(targets=("nominal",), plant="fmu", controller="python").problems() == []
+    monkeypatch.setattr(plant.sim, "NATIVE_CACHE", tmp_path / "cache")  # nothing built there
+    monkeypatch.setenv("CC", "no-such-compiler")
+    monkeypatch.setenv("PATH", str(tmp_path))  # neither cc nor gcc on it
+    found = RunOptions(targets=("nominal",)).problems()
+    assert len(found) == 1 and found[0].startswith("--controller native: no C compiler (cc or gcc; set CC)")
+    assert "choose --controller python" in found[0]
+    assert RunOptions(targets=("nominal",), controller="python").problems() == []
 
 
 def test_the_options_are_built_from_the_command_line_once():
