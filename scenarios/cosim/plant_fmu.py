@@ -12,7 +12,9 @@ regulate, apply, advance: Gauss-Seidel) does not change.
 The scenario's plant (its ``model`` key and perturbation) becomes the FMU's parameters
 (``cassie_model``, ``torso_mass_kg``, ...) through
 :func:`fmu_src.plant_fmu.fmu_core.values_from_perturbation`; a model given as an MJCF path cannot go
-into the FMU (its models travel inside it) and is refused.
+into the FMU (its models travel inside it) and is refused.  The native CassiePlant FMU
+cannot generate uneven terrain: for it the height field is written here and handed over
+in its ``terrain_field_file`` parameter (:meth:`FmuPlant._with_terrain_field`).
 """
 from __future__ import annotations
 
@@ -24,6 +26,10 @@ from plant.constants import OFFSET_NAMES as OFFSET_NAMES
 from fmu_src.plant_fmu.fmu_core import INPUT_NAMES, MODEL_FILES, PLANT_STEP_S, values_from_perturbation
 from scenarios.cosim.fmi_host import FmuInstance
 
+#: The native CassiePlant's String parameter holding the height-field file's path
+#: (docs/native.md), and the name the master gives the file it writes.
+FIELD_PARAMETER = "terrain_field_file"
+FIELD_FILE_NAME = "terrain_field.cptf"
 REGULATOR_NAMES = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
 
 
@@ -73,6 +79,7 @@ class FmuPlant(FmuInstance):
         if unknown:
             raise CosimError(f"CassiePlant has no parameter(s) {', '.join(unknown)}")
         self._instantiate()
+        parameters = self._with_terrain_field(parameters)
         fmu = self._fmu
         for name, value in parameters.items():
             var = self.vars[name]
@@ -83,6 +90,25 @@ class FmuPlant(FmuInstance):
         self.time_s = float(t0)
         self._prepare_buffers()
         self._read_outputs()
+
+    def _with_terrain_field(self, parameters: Mapping[str, Any]) -> Mapping[str, Any]:
+        """``parameters`` with ``terrain_field_file`` set, when the FMU takes the terrain as a
+        file (the native CassiePlant: it declares that parameter) and the parameters ask for
+        terrain (``terrain_max_height_m`` > 0) without naming a file: the field of their
+        ``terrain_*`` values (:func:`plant.terrain.write_field`) is written into this
+        instance's extracted folder (under ``unpack_dir``: the run's scratch folder), which
+        :meth:`close` removes.  Any other FMU or parameter set is returned unchanged."""
+        var = self.vars.get(FIELD_PARAMETER)
+        if var is None or var.causality != "parameter" or parameters.get(FIELD_PARAMETER):
+            return parameters
+        from fmu_src.plant_fmu.fmu_core import PARAM_DEFAULTS, perturbation_from_values
+        from plant.terrain import write_field
+
+        terrain = perturbation_from_values({**PARAM_DEFAULTS, **parameters}).terrain
+        if terrain is None:
+            return parameters
+        path = write_field(terrain, Path(self._unzip) / FIELD_FILE_NAME)
+        return {**parameters, FIELD_PARAMETER: path}
 
     def _prepare_buffers(self) -> None:
         """ctypes arrays for the per-step calls (value references from the model description)."""

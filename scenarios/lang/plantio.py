@@ -253,7 +253,12 @@ def plant_fmu_problems(scenario: "Scenario") -> list[str]:
     pert = build_perturbation(scenario)
     if pert is None or pert.terrain is None:
         return []
-    carried = fmu_core.perturbation_from_values(fmu_core.values_from_perturbation(scenario.model, pert)).terrain
+    from plant.constants import NOMINAL_TORSO_MASS_KG
+    from plant.perturbation import resolved
+
+    # the FMU takes the absolute torso mass: an added mass is resolved as fmu_parameters does
+    values = fmu_core.values_from_perturbation(scenario.model, resolved(pert, NOMINAL_TORSO_MASS_KG))
+    carried = fmu_core.perturbation_from_values(values).terrain
     return [f"terrain.{f.name} = {getattr(pert.terrain, f.name)!r}: the CassiePlant FMU has no parameter for it "
             f"(it uses {getattr(carried, f.name)!r}); --plant inprocess runs it"
             for f in dataclasses.fields(pert.terrain) if getattr(pert.terrain, f.name) != getattr(carried, f.name)]
