@@ -13,7 +13,8 @@
     X(mj_parseXML) X(mj_compile) X(mjs_getError) X(mj_deleteSpec) X(mj_deleteModel) X(mj_name2id) \
     X(mj_id2name) X(mjs_addKey) X(mjs_setName) X(mjs_setDouble) X(mj_makeData) X(mj_setConst)     \
     X(mj_deleteData) X(mj_resetData) X(mj_resetDataKeyframe) X(mj_kinematics) X(mj_forward)      \
-    X(mj_step) X(mj_contactForce) X(mj_stateSize) X(mj_getState) X(mj_setState) X(mju_quat2Mat)
+    X(mj_step) X(mj_contactForce) X(mj_stateSize) X(mj_getState) X(mj_setState) X(mju_quat2Mat)  \
+    X(mju_axisAngle2Quat)
 
 /* 0 once MuJoCo's functions can be called, else -1 with the reason in err. */
 int cp_mujoco_load(char *err, int errlen);
@@ -44,6 +45,7 @@ CP_MJ_FUNCTIONS(CP_MJ_DECLARE)
 #define mj_getState (*cpmj_mj_getState)
 #define mj_setState (*cpmj_mj_setState)
 #define mju_quat2Mat (*cpmj_mju_quat2Mat)
+#define mju_axisAngle2Quat (*cpmj_mju_axisAngle2Quat)
 #endif
 
 #endif

@@ -637,18 +637,49 @@ def test_floor_friction_and_link_masses_same_bits_as_the_python_plant(plant_fmus
     plant.s.freeInstance()
 
 
-@pytest.mark.parametrize("name, value, why", [
-    ("floor_slope_deg", 5.0, "floor_slope_deg = 5 deg: the native plant supports only 0 deg (the flat floor)"),
-    ("floor_cross_slope_deg", -1.5, "floor_cross_slope_deg = -1.5 deg: the native plant supports only 0 deg"),
-    ("floor_friction", 0.0, "floor_friction = 0: must be in (0, 2]"),
-    ("link_mass_scale_right_shin", 0.0, "link_mass_scale_right_shin = 0: must be in (0, 5]"),
-])
-def test_floor_slopes_and_zero_factors_are_refused_at_initialization(plant_fmu, plant_dir, name, value, why):
-    """A floor slope (which the native plant cannot give with the Python plant's bits) and a zero
-    friction or link factor (the Python plant's ranges are open at 0) are refused at
-    ExitInitializationMode naming the parameter, its value and what is supported; the instance
-    stays in initialization mode and starts once the parameter is back at its default."""
-    plant = _Plant(plant_fmu, plant_dir, {name: value})
+@pytest.mark.parametrize("fmi", [2, 3])
+@pytest.mark.parametrize("params", [{"floor_slope_deg": 5.0}, {"floor_cross_slope_deg": -4.0},
+                                    {"floor_slope_deg": -3.0, "floor_cross_slope_deg": 2.5, "floor_friction": 0.6}],
+                         ids=["slope", "cross_slope", "both_friction"])
+def test_floor_slopes_same_bits_as_the_python_plant(plant_fmus, fmi, params, tmp_path):
+    """2 s walking at 0.6 m/s uphill (5 deg), on a cross slope (-4 deg), and on both with the floor
+    friction changed: the native plant's outputs carry the Python plant's bits every step, and
+    differ from the flat floor's walk (the slope acts, it is not ignored)."""
+    unzipped = Path(extract(str(plant_fmus[fmi]), unzipdir=str(tmp_path / "fmu")))
+    plant = _Plant3(plant_fmus[fmi], unzipped, params) if fmi == 3 else _Plant(plant_fmus[fmi], unzipped, params)
+    plant.s.exitInitializationMode()
+    walker = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS, **params))
+    flat = fmu_core.start(dict(fmu_core.PARAM_DEFAULTS))
+    _compare(plant.outputs(), fmu_core.outputs(walker), 0.0)
+    inputs = dict.fromkeys(fmu_core.INPUT_NAMES, 0.0)
+    inputs["vx_des"] = 0.6
+    t = 0.0
+    for _ in range(200):
+        got = plant.step(t, inputs)
+        want = fmu_core.advance(walker, inputs, 20)
+        base = fmu_core.advance(flat, inputs, 20)
+        t += H
+        _compare(got, want, t)
+    assert want["step_index"] >= 2
+    assert _bits(want["pelvis_x"]) != _bits(base["pelvis_x"]) and _bits(got["pelvis_x"]) != _bits(base["pelvis_x"])
+    plant.s.terminate()
+    plant.s.freeInstance()
+
+
+@pytest.mark.parametrize("params, name, why", [
+    ({"floor_friction": 0.0}, "floor_friction", "floor_friction = 0: must be in (0, 2]"),
+    ({"link_mass_scale_right_shin": 0.0}, "link_mass_scale_right_shin",
+     "link_mass_scale_right_shin = 0: must be in (0, 5]"),
+    ({"floor_cross_slope_deg": -1.5, "terrain_max_height_m": 0.1}, "terrain_max_height_m",
+     "floor_slope_deg = 0 deg, floor_cross_slope_deg = -1.5 deg with terrain_max_height_m = 0.10000000000000001 m: "
+     "the slopes tilt the flat floor; give a slope or a terrain, not both"),
+], ids=["zero_friction", "zero_link_mass", "slope_with_terrain"])
+def test_zero_factors_and_a_slope_on_terrain_are_refused_at_initialization(plant_fmu, plant_dir, params, name, why):
+    """A zero friction or link factor (the Python plant's ranges are open at 0) and a floor slope
+    given with an uneven terrain (the Python plant's "a slope or a terrain, not both") are refused
+    at ExitInitializationMode naming the parameters, their values and what is allowed; the
+    instance stays in initialization mode and starts once ``name`` is back at its default."""
+    plant = _Plant(plant_fmu, plant_dir, params)
     assert why in _refused(plant, plant.s.exitInitializationMode)
     plant.s.setReal([plant.vr[name]], [fmu_core.PARAM_DEFAULTS[name]])
     plant.s.exitInitializationMode()
@@ -714,8 +745,9 @@ def test_sanitized_plant_runs_every_call_in_every_state_and_walks_with_zero_find
                                                                                    tmp_path):
     """The native plant's Linux library rebuilt from its own sources/ with ASan + UBSan: every FMI
     function in every state (tests/support/fmi/phase_matrix.py, NULL and zero arguments), then
-    walking instances with state round trips and corrupted states, a terrain walk (with the floor
-    friction and link mass factors off their defaults), a floor slope refused, and bad height fields
+    walking instances with state round trips and corrupted states, a terrain walk and a walk on a
+    floor sloped both ways (each with the floor friction and link mass factors off their defaults),
+    a slope on the terrain refused, and bad height fields
     (sanitize_run.py --plant): zero sanitizer findings, and the phase matrix follows the table."""
     import json
     import os

@@ -301,10 +301,9 @@ FFT and PCG64 draws), so the host hands it over: <code>terrain_field_file</code>
 <code>plant.terrain.write_field</code> wrote for the terrain_* parameters; the walk is then CassiePlant's bit for
 bit. {call}ExitInitializationMode refuses a missing, unreadable, corrupted (CRC-32) or mismatched file (another
 seed, slope, height or size; samples outside [0, 1]) naming the parameter, and stays in initialization mode.
-<code>floor_friction</code> and <code>link_mass_scale_*</code> act as in CassiePlant (bit for bit). A floor slope
-(<code>floor_slope_deg</code>, <code>floor_cross_slope_deg</code> other than 0) is not supported by this FMU:
-{call}ExitInitializationMode refuses it naming the parameter (CassiePlant takes it), and the instance stays in
-initialization mode.
+<code>floor_friction</code>, <code>link_mass_scale_*</code> and the floor slopes (<code>floor_slope_deg</code>,
+<code>floor_cross_slope_deg</code>) act as in CassiePlant (bit for bit). A slope with an uneven terrain is refused at
+{call}ExitInitializationMode (a slope or a terrain, not both), and the instance stays in initialization mode.
 FMU state: MuJoCo's integration
 state, the servo gains, the controller's memory; restore-then-continue is bit-identical; corrupt states (CRC-32,
 GUID) and ones no run can reach (out-of-range values, non-unit quaternions, unordered step times, other fixed

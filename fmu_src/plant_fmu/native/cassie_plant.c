@@ -67,12 +67,29 @@ static void set_const(mjModel *m) {
     mj_deleteData(d);
 }
 
+/* plant.perturbation.slope_quat: the orientation (w, x, y, z) of the plane rising tan(slope) per
+ * metre along +x and tan(cross_slope) along +y, the rotation of +z onto the plane's unit normal
+ * about their cross product.  The same operations in the same order as the Python's scalar math:
+ * math.radians is x * (pi / 180), math.tan/acos/sqrt are the C library's. */
+static void slope_quat(double slope_deg, double cross_slope_deg, double quat[4]) {
+    const double deg_to_rad = 3.141592653589793238462643383279502884 / 180.0;
+    double tx = -tan(slope_deg * deg_to_rad), ty = -tan(cross_slope_deg * deg_to_rad);
+    double norm = sqrt((tx * tx + ty * ty) + 1.0);
+    double n0 = tx / norm, n1 = ty / norm, n2 = 1.0 / norm;
+    double a0 = -n1, a1 = n0; /* +z x n */
+    double a_len = sqrt(a0 * a0 + a1 * a1);
+    double axis[3] = {a0 / a_len, a1 / a_len, 0.0};
+    double c = n2 > 1.0 ? 1.0 : n2 < -1.0 ? -1.0 : n2;
+    mju_axisAngle2Quat(quat, axis, acos(c));
+}
+
 /* plant.perturbation.apply_environment with the FMU's parameters (fmu_core.perturbation_from_values):
  * the floor friction (a value other than the models' 1) on every world-body geom, with a contact
- * priority above every geom's, and each link mass factor other than 1 on its body's mass and inertia
- * (the inertia times new/old mass), then mj_setConst, in the Python's order.  The floor slopes are
- * refused before (cp_instance.c: the native plant keeps the flat floor).  0, or -1 with err naming
- * the parameter of a body the model lacks. */
+ * priority above every geom's, the floor slopes (either other than 0) as the orientation of every
+ * world-body plane (tilted about the point under the origin, where the robot starts), and each link
+ * mass factor other than 1 on its body's mass and inertia (the inertia times new/old mass), then
+ * mj_setConst, in the Python's order.  0, or -1 with err naming the parameter of a body the model
+ * lacks. */
 static int apply_environment(mjModel *m, const double *v, char *err, int errlen) {
     double friction = v[CP_VR_floor_friction];
     int links = 0;
@@ -85,7 +102,9 @@ static int apply_environment(mjModel *m, const double *v, char *err, int errlen)
             return -1;
         }
     }
-    if (friction == CP_MODEL_FLOOR_FRICTION && !links) return 0;
+    double slope = v[CP_VR_floor_slope_deg], cross_slope = v[CP_VR_floor_cross_slope_deg];
+    int sloped = slope != 0.0 || cross_slope != 0.0;
+    if (friction == CP_MODEL_FLOOR_FRICTION && !sloped && !links) return 0;
     if (friction != CP_MODEL_FLOOR_FRICTION) { /* plant.perturbation.set_floor_friction */
         int top = 0;
         for (int g = 0; g < m->ngeom; g++)
@@ -95,6 +114,13 @@ static int apply_environment(mjModel *m, const double *v, char *err, int errlen)
                 m->geom_friction[3 * g] = friction;
                 m->geom_priority[g] = top + 1;
             }
+    }
+    if (sloped) {
+        double quat[4];
+        slope_quat(slope, cross_slope, quat);
+        for (int g = 0; g < m->ngeom; g++)
+            if (m->geom_bodyid[g] == 0 && m->geom_type[g] == mjGEOM_PLANE)
+                memcpy(m->geom_quat + 4 * g, quat, sizeof quat);
     }
     for (int i = 0; i < CP_N_LINK_MASS; i++) { /* plant.perturbation._set_link_mass */
         const CpLinkMass *l = &CP_LINK_MASS[i];

@@ -151,10 +151,8 @@ CpStatus cp_setup(CpInstance *inst, const char *call, double start_time) {
 }
 
 /* plant.perturbation.Perturbation.problems beyond the declared ranges: the torso mass, the floor
- * friction and the link mass factors are > 0.  And what this FMU does not do: a floor slope (the
- * Python plant's tilt goes through numpy's tan and arccos, which on x86-64 CPUs with AVX-512 are
- * SIMD routines that round some inputs differently from the C library's by an ulp, so the native
- * plant could not give the Python plant's bits; docs/native.md). */
+ * friction and the link mass factors are > 0, and a floor slope tilts the flat floor, so it is not
+ * given with an uneven terrain. */
 static int param_problem(const double *v, char *out, size_t n) {
     static const int positive[] = {CP_VR_torso_mass_kg, CP_VR_floor_friction};
     for (size_t i = 0; i < sizeof positive / sizeof positive[0]; i++) {
@@ -173,13 +171,13 @@ static int param_problem(const double *v, char *out, size_t n) {
             return 1;
         }
     }
-    static const int slopes[] = {CP_VR_floor_slope_deg, CP_VR_floor_cross_slope_deg};
-    for (size_t i = 0; i < sizeof slopes / sizeof slopes[0]; i++)
-        if (v[slopes[i]] != 0.0) {
-            snprintf(out, n, "%s = %.17g deg: the native plant supports only 0 deg (the flat floor); a sloped floor "
-                     "needs the pythonfmu CassiePlant (docs/native.md)", CP_VARS[slopes[i]].name, v[slopes[i]]);
-            return 1;
-        }
+    double slope = v[CP_VR_floor_slope_deg], cross_slope = v[CP_VR_floor_cross_slope_deg];
+    if (v[CP_VR_terrain_max_height_m] != 0.0 && (slope != 0.0 || cross_slope != 0.0)) {
+        snprintf(out, n, "floor_slope_deg = %.17g deg, floor_cross_slope_deg = %.17g deg with terrain_max_height_m = "
+                 "%.17g m: the slopes tilt the flat floor; give a slope or a terrain, not both", slope, cross_slope,
+                 v[CP_VR_terrain_max_height_m]);
+        return 1;
+    }
     return 0;
 }
 

@@ -79,7 +79,8 @@ def plant(fmu_dir, fmi, field=None, terrain_params=None):
     """The native CassiePlant FMU in this process: 4 instances walking 300 steps of 10 ms, a state
     taken, serialized, restored (same outputs after), and every byte-flipped state refused.  With
     a height-field file (and the terrain parameters it was made for): an instance walking on it,
-    one with a floor slope refused, and the file cut short at every length class and with flipped
+    one walking the flat floor sloped both ways (the other parameters kept, the terrain off), one
+    with a slope on the terrain refused, and the file cut short at every length class and with flipped
     bytes refused at initialization."""
     import json
     import random
@@ -107,12 +108,16 @@ def plant(fmu_dir, fmi, field=None, terrain_params=None):
                           instanceName=f"p{i}")
             s.instantiate()
             s.enterInitializationMode(startTime=0.0)
-        (s.setReal if fmi == 2 else s.setFloat64)([vr["vx_des"]], [0.3 + 0.1 * i])
-        for name, value in (params or {}).items():
+        # every setting is legal: a refusal below comes from ExitInitializationMode, not a setter
+        settings = dict(vx_des=0.3 + 0.1 * (i % 4), **(params or {}))
+        for name, value in settings.items():
             kind = type(value).__name__
             setter = {"str": s.setString, "int": s.setInteger if fmi == 2 else s.setInt32,
                       "float": s.setReal if fmi == 2 else s.setFloat64}[kind]
-            setter([vr[name]], [value])
+            try:
+                setter([vr[name]], [value])
+            except FMICallException as e:
+                raise AssertionError(f"instance p{i}: setting {name} = {value!r} refused") from e
         s.exitInitializationMode()
         return s
 
@@ -157,12 +162,18 @@ def plant(fmu_dir, fmi, field=None, terrain_params=None):
         walk(s, 0.0, 100)
         s.terminate()
         s.freeInstance()
-        try:  # the native plant keeps the flat floor: a slope is refused at initialization
+        sloped = dict(params, terrain_max_height_m=0.0, floor_slope_deg=5.0, floor_cross_slope_deg=-4.0)
+        del sloped["terrain_field_file"]
+        s = make(29, sloped)
+        walk(s, 0.0, 100)
+        s.terminate()
+        s.freeInstance()
+        try:  # a slope tilts the flat floor: with a terrain it is refused at initialization
             make(30, dict(params, floor_slope_deg=5.0))
         except FMICallException:
             pass
         else:
-            raise AssertionError("accepted floor_slope_deg = 5")
+            raise AssertionError("accepted floor_slope_deg = 5 with a terrain")
         data, bad_files = Path(field).read_bytes(), 0
         with tempfile.TemporaryDirectory(dir=Path(fmu_dir).parent) as tmp:  # under the test's tmp_path
             cuts = [data[:n] for n in (0, 10, 67, 68, 72, 1000, len(data) // 2, len(data) - 1)]
@@ -180,7 +191,7 @@ def plant(fmu_dir, fmi, field=None, terrain_params=None):
                     bad_files += 1
                 else:
                     raise AssertionError(f"accepted a bad height field ({len(content)} bytes)")
-        note = f", a terrain walk, a floor slope and {bad_files} bad height fields refused"
+        note = f", a terrain walk, a sloped walk, a slope on the terrain and {bad_files} bad height fields refused"
     print(f"plant FMI {fmi}.0: 4 x 300 steps, a state round trip, {refused} corrupted states refused{note}")
 
 
