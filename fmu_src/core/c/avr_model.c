@@ -281,24 +281,20 @@ VECTOR_CLONES static void leak_row(double *restrict w, int n, double keep) {
     for (int i = 0; i < n; ++i) w[i] = w[i] * keep + 0.0;
 }
 
-/* coef + amount (w . h) / |h|^2 for a row w reading network k's rates h
- * (avr_regulator._keep_current_output): after the leak w -> (1 - amount) w, adding that
- * multiple of h gives back w's part along h, so the row's output at this call is kept.  Both
- * sums in neuron order over the active neurons; a network with no active neuron adds nothing. */
-static double keep_current_output(const AvrCore *core, int k, const double *restrict w, double coef,
-                                  double amount) {
+/* |h|^2 of network k's rates, summed in neuron order over the active neurons. */
+static double rates_squared(const AvrCore *core, int k) {
     const double *restrict rates = core->rates + (size_t)k * core->n;
     double squares = 0.0;
     for (int i = 0; i < core->n_active[k]; ++i) squares += rates[i] * rates[i];
-    if (squares == 0.0) return coef;
-    return coef + (amount * sparse_dot(core, k, w)) / squares;
+    return squares;
 }
 
 /* Learning with anti-windup (avr_regulator._adapt, _pes_update): raw = unsaturated outputs.
  * A silent neuron's weight would change by coef * 0: it is left as it is.  The remedies
  * against drift (each off at 0): the dead-zone on the velocity errors, the leak before the
  * PES step, the norm projection after it. */
-static void learn(AvrCore *core, const double *values, double dt, const double raw[AVR_N_ROWS]) {
+static void learn(AvrCore *core, const double *values, double dt, const double dots[AVR_N_ROWS],
+                  const double raw[AVR_N_ROWS]) {
     int n = core->n;
     double alpha = -V(learning_rate) * dt / (double)n * INV_TAU_RC;
     double lim = V(psi_limit);
@@ -310,13 +306,19 @@ static void learn(AvrCore *core, const double *values, double dt, const double r
     if (zone != 0.0) e_x = dead_zone(e_x, zone), e_y = dead_zone(e_y, zone);
     double err[AVR_N_ROWS] = {e_x, e_y, V(pitch_des) - V(pitch), e_roll};
     double keep = leak_factor(V(leakage_per_s), dt);
+    /* leakage_mode 1 (avr_regulator._keep_current_output): coef + amount (w . h) / |h|^2 for a row
+     * w reading rates h, so that after the leak w -> (1 - amount) w the part of w along h is back
+     * and the row's output at this call is kept; a network with no active neuron adds nothing. */
     int keep_output = keep != 1.0 && V(leakage_mode) == 1.0;
+    double squares[AVR_N_NETS];
+    if (keep_output)
+        for (int k = 0; k < AVR_N_NETS; ++k) squares[k] = rates_squared(core, k);
     for (int r = 0; r < AVR_N_ROWS; ++r) {
         int saturated_outward = (raw[r] >= lim || raw[r] <= -lim) && raw[r] * err[r] < 0.0;
         double coef = saturated_outward ? 0.0 : alpha * err[r];
         double *restrict w = core->weights + (size_t)r * n;
         int k = NET_OF_ROW[r];
-        if (keep_output) coef = keep_current_output(core, k, w, coef, 1.0 - keep);
+        if (keep_output && squares[k] != 0.0) coef = coef + ((1.0 - keep) * dots[r]) / squares[k];
         if (keep != 1.0) leak_row(w, n, keep);
         if (coef == 0.0) continue;
         const double *restrict rates = core->rates + (size_t)k * n;
@@ -335,12 +337,14 @@ static void network_outputs(AvrCore *core, const AvrNetworks *net, double *value
     for (int k = 0; k < AVR_N_NETS; ++k)
         core->n_active[k] = network_rates(net, k, x, core->currents, core->rates + (size_t)k * n,
                                           core->active + (size_t)k * n);
-    double raw[AVR_N_ROWS];
-    for (int r = 0; r < AVR_N_ROWS; ++r)
-        raw[r] = sparse_dot(core, NET_OF_ROW[r], core->weights + (size_t)r * n) * INV_TAU_RC;
+    double dots[AVR_N_ROWS], raw[AVR_N_ROWS];
+    for (int r = 0; r < AVR_N_ROWS; ++r) {
+        dots[r] = sparse_dot(core, NET_OF_ROW[r], core->weights + (size_t)r * n);
+        raw[r] = dots[r] * INV_TAU_RC;
+    }
     double lim = V(psi_limit);
     for (int r = 0; r < AVR_N_ROWS; ++r) psi[r] = raw[r] > lim ? lim : (raw[r] < -lim ? -lim : raw[r]);
-    if (V(learning_rate) != 0.0 && si >= (int64_t)V(learn_from_step)) learn(core, values, dt, raw);
+    if (V(learning_rate) != 0.0 && si >= (int64_t)V(learn_from_step)) learn(core, values, dt, dots, raw);
 }
 
 /* The safety bound +-delta_limit_rad on the six joint offsets (as the numpy core: values
