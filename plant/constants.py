@@ -72,3 +72,7 @@ HOME_JOINT_QPOS: dict[str, tuple[float, ...]] = {
     "right-plantar-rod": (1.50645,),
     "right-foot": (-1.59681,),
 }
+
+#: The nominal walking controller's implementations: ``python`` (``plant/controller.py``) and
+#: ``native`` (the same operations in C, ``plant/native/``); ``CassieWalker(controller=...)``.
+CONTROLLERS = ("python", "native")

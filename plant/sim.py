@@ -31,14 +31,13 @@ from typing import Mapping
 import mujoco
 
 from plant.cassie import CassiePhysics
+from plant.constants import CONTROLLERS
 from plant.controller_params import ControllerParams
 from plant.controller import NominalController
 from plant.gaits import GaitLibrary
 
 log = logging.getLogger(__name__)
 
-#: The nominal controller's implementations (``CassieWalker(controller=...)``).
-CONTROLLERS = ("python", "native")
 #: Where the C controller is built when no library is given: ``build/`` of the checkout
 #: (ignored by git), one folder per version of its sources.
 NATIVE_CACHE = Path(__file__).resolve().parents[1] / "build" / "native_ctrl"

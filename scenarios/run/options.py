@@ -8,12 +8,12 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
+from fmu_src.packing.archive import sha256_of
+from plant.constants import CONTROLLERS
 from scenarios.cosim.fmus import REGULATOR_FMUS, fmu_role_problem, fmu_version_problem, regulator_kind
 
 #: ``--regulator``: an FMU kind (:data:`scenarios.cosim.fmus.REGULATOR_FMUS`) or the core in-process.
 REGULATORS = (*REGULATOR_FMUS, "inprocess")
-#: ``--controller``: the nominal walking controller in Python or in C (``plant.sim.CONTROLLERS``).
-CONTROLLERS = ("python", "native")
 #: The defaults: the fastest path whose results are byte-identical to the reference path
 #: (``--regulator fmu --controller python``): the native regulator FMU (the C twin of the numpy
 #: core) and the C walking controller (the Python controller's operations in C).
@@ -119,7 +119,7 @@ class RunOptions:
                   "controller": self.controller}
         for key, path in (("regulator_fmu", self.fmu), ("plant_fmu", self.plant_fmu)):
             if path is not None and Path(path).is_file():
-                record[key], record[f"{key}_sha256"] = str(Path(path).resolve()), _sha256(Path(path))
+                record[key], record[f"{key}_sha256"] = str(Path(path).resolve()), sha256_of(Path(path))
         return record
 
     def with_unpack_dir(self, unpack_dir: Path | None) -> "RunOptions":
@@ -147,13 +147,3 @@ def controller_problem() -> str | None:
         return None
     return ("--controller native: no C compiler (cc or gcc; set CC) to build the C walking controller; "
             "install one, or choose --controller python (the same controller in Python, the same results)")
-
-
-def _sha256(path: Path) -> str:
-    import hashlib
-
-    h = hashlib.sha256()
-    with open(path, "rb") as f:
-        for block in iter(lambda: f.read(1 << 20), b""):
-            h.update(block)
-    return h.hexdigest()
