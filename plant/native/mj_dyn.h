@@ -14,7 +14,8 @@
     X(mj_id2name) X(mjs_addKey) X(mjs_setName) X(mjs_setDouble) X(mj_makeData) X(mj_setConst)     \
     X(mj_deleteData) X(mj_resetData) X(mj_resetDataKeyframe) X(mj_kinematics) X(mj_forward)      \
     X(mj_step) X(mj_contactForce) X(mj_stateSize) X(mj_getState) X(mj_setState) X(mju_quat2Mat)  \
-    X(mju_axisAngle2Quat)
+    X(mju_axisAngle2Quat) X(mjs_findBody) X(mjs_firstChild) X(mjs_nextChild) X(mjs_asGeom)       \
+    X(mjs_addHField) X(mjs_setFloat) X(mjs_addGeom) X(mjs_setString) X(mjs_delete)
 
 /* 0 once MuJoCo's functions can be called, else -1 with the reason in err. */
 int cp_mujoco_load(char *err, int errlen);
@@ -46,6 +47,15 @@ CP_MJ_FUNCTIONS(CP_MJ_DECLARE)
 #define mj_setState (*cpmj_mj_setState)
 #define mju_quat2Mat (*cpmj_mju_quat2Mat)
 #define mju_axisAngle2Quat (*cpmj_mju_axisAngle2Quat)
+#define mjs_findBody (*cpmj_mjs_findBody)
+#define mjs_firstChild (*cpmj_mjs_firstChild)
+#define mjs_nextChild (*cpmj_mjs_nextChild)
+#define mjs_asGeom (*cpmj_mjs_asGeom)
+#define mjs_addHField (*cpmj_mjs_addHField)
+#define mjs_setFloat (*cpmj_mjs_setFloat)
+#define mjs_addGeom (*cpmj_mjs_addGeom)
+#define mjs_setString (*cpmj_mjs_setString)
+#define mjs_delete (*cpmj_mjs_delete)
 #endif
 
 #endif

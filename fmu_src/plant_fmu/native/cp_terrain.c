@@ -16,46 +16,6 @@
 
 #include "fmi_blob.h"
 
-#if defined(_WIN32)
-#include <windows.h>
-/* The model-editing functions only terrain needs, from the mujoco.dll cp_mujoco_load loaded
- * (plant/native/mj_dyn.h resolves the others the same way). */
-#define CP_TERRAIN_MJ_FUNCTIONS(X)                                                                 \
-    X(mjs_findBody) X(mjs_firstChild) X(mjs_nextChild) X(mjs_asGeom) X(mjs_addHField) X(mjs_setFloat) \
-    X(mjs_addGeom) X(mjs_setString) X(mjs_delete)
-#define CP_TERRAIN_MJ_DEFINE(f) static __typeof__(&f) tmj_##f;
-CP_TERRAIN_MJ_FUNCTIONS(CP_TERRAIN_MJ_DEFINE)
-
-static int resolve_mujoco(char *err, int errlen) {
-    HMODULE m = GetModuleHandleW(L"mujoco.dll");
-    if (m == NULL) {
-        snprintf(err, errlen, "mujoco.dll is not loaded");
-        return -1;
-    }
-#define CP_TERRAIN_MJ_RESOLVE(f)                                                                   \
-    if ((tmj_##f = (__typeof__(&f))(void *)GetProcAddress(m, #f)) == NULL) {                       \
-        snprintf(err, errlen, "mujoco.dll has no function %s (another MuJoCo version?)", #f);     \
-        return -1;                                                                                 \
-    }
-    CP_TERRAIN_MJ_FUNCTIONS(CP_TERRAIN_MJ_RESOLVE)
-    return 0;
-}
-#define mjs_findBody (*tmj_mjs_findBody)
-#define mjs_firstChild (*tmj_mjs_firstChild)
-#define mjs_nextChild (*tmj_mjs_nextChild)
-#define mjs_asGeom (*tmj_mjs_asGeom)
-#define mjs_addHField (*tmj_mjs_addHField)
-#define mjs_setFloat (*tmj_mjs_setFloat)
-#define mjs_addGeom (*tmj_mjs_addGeom)
-#define mjs_setString (*tmj_mjs_setString)
-#define mjs_delete (*tmj_mjs_delete)
-#else
-static int resolve_mujoco(char *err, int errlen) {
-    (void)err, (void)errlen; /* linked at build time */
-    return 0;
-}
-#endif
-
 #define FIELD_MAGIC "CPTF"
 #define FIELD_VERSION 1u
 #define FIELD_HEADER_BYTES 68 /* plant.terrain.FIELD_HEADER.size */
@@ -208,7 +168,6 @@ void cp_terrain_free(CpTerrain *t) {
 /* plant.terrain.add_terrain: the hfield and its geom, with the contact parameters of the first
  * world-body plane, which it replaces (every world plane is deleted). */
 int cp_terrain_add(mjSpec *spec, const CpTerrain *t, char *err, int errlen) {
-    if (resolve_mujoco(err, errlen)) return -1;
     mjsBody *world = mjs_findBody(spec, "world");
     if (world == NULL) {
         snprintf(err, errlen, "the model has no world body");
