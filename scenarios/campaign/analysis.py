@@ -197,6 +197,35 @@ def verdicts(rows: Sequence[dict[str, Any]], a: str, b: str) -> dict[str, Any]:
     }
 
 
+def mcnemar_exact(k: int, m: int) -> float | None:
+    """Two-sided exact McNemar p-value of ``k`` against ``m`` discordant pairs: the
+    probability, if either arm were as likely as the other to be the one that fell, of a
+    split at least as uneven (binomial with p = 1/2 on k + m pairs). None when no pair
+    is discordant."""
+    n = k + m
+    if n == 0:
+        return None
+    tail = sum(math.comb(n, i) for i in range(min(k, m) + 1)) / 2 ** n
+    return min(1.0, 2.0 * tail)
+
+
+def fall_agreement(rows: Sequence[dict[str, Any]], b: str, arms: Sequence[str]) -> list[dict[str, Any]]:
+    """Every arm of ``arms`` other than ``b`` against ``b``, counted on falls only: the
+    samples where it fell and ``b`` walked, the samples where ``b`` fell and it walked,
+    and the exact McNemar p-value of that split. An arm that differs from ``b`` only by a
+    small change of one gain shows how many such samples chance alone gives: near the
+    edge of falling, any change of the walk tips some samples either way."""
+    out = []
+    for arm in arms:
+        if arm == b:
+            continue
+        p = paired(rows, arm, b)
+        k, m = len(p["only_a_fell"]), len(p["only_b_fell"])
+        out.append({"arm": arm, "n": p["n"], "only_arm_fell": p["only_a_fell"], "only_b_fell": p["only_b_fell"],
+                    "p_value": mcnemar_exact(k, m)})
+    return out
+
+
 def _paired_diffs(rows: Sequence[dict[str, Any]], a: str, b: str) -> list[float]:
     """sse_vx of ``a`` minus ``b`` on the samples both completed and walked."""
     by = {(r["sample"], r["arm"]): r for r in rows if r["status"] == COMPLETE}

@@ -74,6 +74,7 @@ def _paired_lines(data: analysis.CampaignData) -> list[str]:
              f"{p['a_lower_vy']} (median difference {_f(p['median_diff_vy'], 4)} m/s, largest "
              f"{_f(p['max_diff_vy'], 4)} m/s).", ""]
     lines += _verdict_lines(data, a, b)
+    lines += _agreement_lines(data, b)
     if p["not_better"]:
         lines += [f"Every sample where {a} is not better ({len(p['not_better'])}):", ""]
         rows = [[f"[{s}](samples/{s}.toml)", why, _f(ra["steady_state_error_vx"]), _f(rb["steady_state_error_vx"]),
@@ -102,6 +103,23 @@ def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
             f"{a}'s sse_vx is lower). Median sse_vx difference {a} - {b} over the samples both walked: "
             f"{_f(v['median_diff_vx'], 4)} m/s (bootstrap 95 % interval "
             f"{'-' if ci is None else f'[{ci[0]:.4f}, {ci[1]:.4f}]'} m/s).", ""]
+
+
+def _agreement_lines(data: analysis.CampaignData, b: str) -> list[str]:
+    """Every other arm against ``b``, on falls only (:func:`scenarios.campaign.analysis.fall_agreement`)."""
+    if len(data.arms) < 3:
+        return []
+    rows = []
+    for g in analysis.fall_agreement(data.rows, b, data.arms):
+        p = g["p_value"]
+        rows.append([g["arm"], str(g["n"]), str(len(g["only_arm_fell"])), str(len(g["only_b_fell"])),
+                     "-" if p is None else f"{p:.3g}",
+                     ", ".join(g["only_arm_fell"]) or "none"])
+    return ([f"Falls of every arm against {b} on the same samples (two-sided exact McNemar test of the "
+             f"split; an arm that differs from {b} by a small change of one gain shows how many such "
+             "samples chance alone gives):", ""]
+            + _md_table(["arm", "paired", f"fell where {b} walked", f"{b} fell where it walked", "McNemar p",
+                         f"samples where it fell and {b} walked"], rows) + [""])
 
 
 def _worst_lines(data: analysis.CampaignData) -> list[str]:

@@ -7,6 +7,7 @@ import tomllib
 
 import pytest
 
+from fmu_src.core.avr_specs import PARAM_SPECS
 from scenarios.campaign import sampling, spec
 from scenarios.errors import ScenarioError
 from scenarios.lang import spec as scenario_spec
@@ -125,7 +126,8 @@ high = 1.2
 
 def test_robustness_random_campaign_is_what_the_issue_asks():
     c = spec.load_campaign(spec.resolve_campaign("robustness_random"))
-    assert c.n_samples >= 100 and c.arm_names() == ["adaptive", "pd_only", "rl_hzd"]
+    assert c.n_samples >= 100
+    assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd", "pd_kpx_105", "pd_kpx_095"]
     names = {f.name for f in c.factors}
     for needed in ("model", "floor_friction", "torso_mass_kg", "torso_com_offset_x_m", "torso_com_offset_y_m",
                    "joint_damping_scale", "floor", "command_profile", "random_pushes", "random_pushes_count",
@@ -135,3 +137,10 @@ def test_robustness_random_campaign_is_what_the_issue_asks():
     texts = sampling.build_samples(c, samples[:10])
     s = scenario_spec.parse_scenario(tomllib.loads(texts[samples[0].id]), check_plant=False)
     assert s.duration_s == 25.0 and s.random_pushes is not None and s.command_profile is not None
+    # the reference arms: PD-only with Kp_x 5 % off its default, nothing else changed
+    kp = next(p for p in PARAM_SPECS if p.name == "Kp_x").default
+    arms = {a.name: a for a in s.arms}
+    for name, factor in (("pd_kpx_105", 1.05), ("pd_kpx_095", 0.95)):
+        given = dict(arms[name].overrides)
+        assert given.pop("seed") == dict(arms["adaptive"].overrides)["seed"]  # the sample's, as every arm
+        assert given == {"adaptation_enabled": False, "Kp_x": pytest.approx(kp * factor)}

@@ -412,3 +412,45 @@ def test_paired_verdicts_never_falls_where_pd_walks_and_beats_pd():
     v = analysis.verdicts(rows, "adaptive", "pd_only")
     assert (v["wins"], v["contested"]) == (19, 22) and not v["beats"]  # 86.4 %
     assert [x[0] for x in v["not_better"]] == ["af", "pb", "pb2"]
+
+
+def test_mcnemar_exact_matches_the_binomial_test():
+    # values of a two-sided exact binomial test with p = 1/2 (scipy.stats.binomtest)
+    assert analysis.mcnemar_exact(4, 11) == pytest.approx(0.11846923828125)
+    assert analysis.mcnemar_exact(0, 6) == pytest.approx(0.03125)
+    assert analysis.mcnemar_exact(3, 3) == 1.0 and analysis.mcnemar_exact(0, 0) is None
+
+
+def test_fall_agreement_counts_falls_against_the_reference_arm():
+    def r(sample, arm, fell):
+        return {"sample": sample, "arm": arm, "status": "complete", "fell": fell, "t_fall_s": 3.0 if fell else None,
+                "steady_state_error_vx": None if fell else 0.05, "steady_state_error_vy": None,
+                "convergence_time_s": None}
+    falls = {"s1": (True, False, False), "s2": (False, True, True), "s3": (True, True, False),
+             "s4": (False, False, True), "s5": (False, True, False)}
+    rows = [r(s, arm, f) for s, fs in falls.items() for arm, f in zip(("adaptive", "pd_only", "pd_gain"), fs)]
+    rows.append({**r("s6", "adaptive", True), "status": "failed"})  # not paired
+    got = {g["arm"]: g for g in analysis.fall_agreement(rows, "pd_only", ["adaptive", "pd_only", "pd_gain"])}
+    assert set(got) == {"adaptive", "pd_gain"}
+    assert got["adaptive"]["only_arm_fell"] == ["s1"] and got["adaptive"]["only_b_fell"] == ["s2", "s5"]
+    assert got["pd_gain"]["only_arm_fell"] == ["s4"] and got["pd_gain"]["only_b_fell"] == ["s3", "s5"]
+    assert got["adaptive"]["n"] == 5 and got["adaptive"]["p_value"] == 1.0
+
+
+def test_report_tables_every_arm_against_the_second_on_falls(tmp_path):
+    from scenarios.campaign import report
+
+    def r(sample, arm, fell):
+        return {"sample": sample, "arm": arm, "status": "complete", "fell": fell, "t_fall_s": 3.0 if fell else None,
+                "steady_state_error_vx": None if fell else 0.05, "steady_state_error_vy": None,
+                "convergence_time_s": None, "run_dir": None}
+    falls = {"s1": (True, False, False), "s2": (False, True, True), "s3": (False, True, False)}
+    arms = ["adaptive", "pd_only", "pd_gain"]
+    rows = [r(s, arm, f) for s, fs in falls.items() for arm, f in zip(arms, fs)]
+    data = analysis.CampaignData(tmp_path, {"name": "t", "n_samples": 3, "arms": arms}, rows, [])
+    text = report.render(data, [])
+    assert "| adaptive | 3 | 1 | 2 | 1 | s1 |" in text
+    assert "| pd_gain | 3 | 0 | 1 | 1 | none |" in text
+    two = report.render(analysis.CampaignData(tmp_path, {"name": "t", "n_samples": 3, "arms": arms[:2]},
+                                              [x for x in rows if x["arm"] != "pd_gain"], []), [])
+    assert "McNemar" not in two  # one pair only: the verdicts say it all
