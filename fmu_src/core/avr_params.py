@@ -58,6 +58,7 @@ class RegulatorParams:
     delta_limit_rad: float = _default("delta_limit_rad")  # rad
     leakage_per_s: float = _default("leakage_per_s")  # 1/s
     leakage_mode: int = _default("leakage_mode")
+    command_accel_limit_mps2: float = _default("command_accel_limit_mps2")  # m/s^2
     error_deadzone_mps: float = _default("error_deadzone_mps")  # m/s
     weight_norm_max: float = _default("weight_norm_max")  # rad/Hz
 

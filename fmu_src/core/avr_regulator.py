@@ -70,6 +70,10 @@ class RegulatorState:
       number of calls and sums of vy and roll in the current step;
       ``vy_mean_prev``/``vy_mean_last`` (m/s) and ``roll_mean_prev``/``roll_mean_last``
       (rad): the means over the last two completed steps.
+    * The command reference (``command_accel_limit_mps2``, see :func:`_advance_reference`):
+      ``ref_vx``/``ref_vy`` (m/s) after the last call, ``ref_sum_vx`` the sum of ``ref_vx``
+      over the calls of the current step, ``ref_vx_step`` its mean over the step before
+      (held, as ``vx`` is).
     """
 
     weights: np.ndarray
@@ -89,6 +93,10 @@ class RegulatorState:
     vy_mean_last: float = 0.0
     roll_mean_prev: float = 0.0
     roll_mean_last: float = 0.0
+    ref_vx: float = 0.0
+    ref_vy: float = 0.0
+    ref_sum_vx: float = 0.0
+    ref_vx_step: float = 0.0
 
     def __post_init__(self):
         weights = self.weights
@@ -154,7 +162,13 @@ def step(state: RegulatorState, inputs, dt: float, params, networks) -> tuple[Re
     if state.weights.shape[1] != networks.n_neurons:
         raise StateError(f"state has n_neurons = {state.weights.shape[1]}, networks have "
                          f"{networks.n_neurons}")
-    pd_x, pd_y, vx_at, vy_at = _held_pd_terms(state, params, vx, vy, vx_des, vy_des, step_index)
+    reference = _advance_reference(state, params, vx, vy, vx_des, vy_des, step_index, dt)
+    if params.command_accel_limit_mps2 != 0.0:
+        ref_x, ref_y = reference["ref_vx_step"], reference["ref_vy"]
+        values = (vx, vy, ref_x, ref_y, pitch, roll, pitch_rate, roll_rate, step_index)
+    else:
+        ref_x, ref_y = vx_des, vy_des
+    pd_x, pd_y, vx_at, vy_at = _held_pd_terms(state, params, vx, vy, ref_x, ref_y, step_index)
     stride = _advance_stride(state, step_index, vy, roll)
     pd_pitch, pd_roll = _torso_pd_terms(params, pitch, roll, pitch_rate, roll_rate)
     weights, psi = state.weights, None
@@ -172,7 +186,7 @@ def step(state: RegulatorState, inputs, dt: float, params, networks) -> tuple[Re
         weights=weights, last_step_index=step_index, vx_at_step=vx_at, vy_at_step=vy_at,
         pd_x=pd_x, pd_y=pd_y, n_calls=state.n_calls + 1 if state.n_calls < MAX_CALLS else MAX_CALLS,
         time_s=state.time_s + dt,
-        network_key=state.network_key, **stride)
+        network_key=state.network_key, **stride, **reference)
     return new_state, out
 
 
@@ -226,6 +240,45 @@ def _held_pd_terms(state: RegulatorState, params, vx, vy, vx_des, vy_des, step_i
     pd_x = params.Kp_x * (vx - vx_des) + params.Kd_x * (vx - vx_prev)
     pd_y = params.Kp_y * (vy - vy_des) + params.Kd_y * (vy - vy_prev)
     return pd_x, pd_y, vx, vy
+
+
+def _toward(value: float, target: float, amount: float) -> float:
+    """``value`` moved toward ``target`` by at most ``amount`` (>= 0)."""
+    change = target - value
+    if change > amount:
+        change = amount
+    elif change < -amount:
+        change = -amount
+    return value + change
+
+
+def _advance_reference(state: RegulatorState, params, vx: float, vy: float, vx_des: float,
+                       vy_des: float, step_index: int, dt: float) -> dict:
+    """The command reference after this call (``RegulatorState``'s ``ref_*`` fields).
+
+    With ``command_accel_limit_mps2`` = a > 0 the reference moves toward (vx_des, vy_des)
+    by at most a dt per call, from the measured (vx, vy) at the first call: it follows a
+    command step as the walking controller's gait does, so the regulator's error is the
+    robot's lag behind the gait, not the distance to where the gait is still ramping to.
+    With a = 0 the reference is the command itself (kept up to date, so that switching
+    the limit on mid-run starts from the command in force).  ``ref_vx_step`` is the mean
+    of ``ref_vx`` over the calls of the step before the current one: the longitudinal
+    error compares it with ``vx``, the robot's mean velocity over that same step."""
+    limit = params.command_accel_limit_mps2
+    first = state.last_step_index < 0
+    if limit == 0.0:
+        ref_vx, ref_vy = vx_des, vy_des
+    else:
+        amount = limit * dt
+        ref_vx = _toward(vx if first else state.ref_vx, vx_des, amount)
+        ref_vy = _toward(vy if first else state.ref_vy, vy_des, amount)
+    if step_index == state.last_step_index:
+        ref_sum_vx, ref_vx_step = state.ref_sum_vx + ref_vx, state.ref_vx_step
+    elif first:
+        ref_sum_vx, ref_vx_step = ref_vx, ref_vx
+    else:  # the step that ends now had stride_calls calls
+        ref_sum_vx, ref_vx_step = ref_vx, state.ref_sum_vx / float(state.stride_calls)
+    return dict(ref_vx=ref_vx, ref_vy=ref_vy, ref_sum_vx=ref_sum_vx, ref_vx_step=ref_vx_step)
 
 
 def _torso_pd_terms(params, pitch, roll, pitch_rate, roll_rate) -> tuple[float, float]:

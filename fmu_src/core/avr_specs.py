@@ -157,6 +157,15 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
            "orthogonal to its current presynaptic rates (the row's output at this call is "
            "kept; what the current state does not use decays at leakage_per_s)",
            type="Integer"),
+    _param("command_accel_limit_mps2", 0.0, 0.0, 10.0, "m/s2",
+           "Rate limit of the regulator's own command reference, m/s^2, in [0, 10]: the "
+           "reference follows (vx_des, vy_des) changing by at most command_accel_limit_mps2 dt "
+           "per call (from the measured velocity at the first call), and the longitudinal PD "
+           "term, error and network input use the reference averaged over the last completed "
+           "step (as vx is), the lateral ones the reference now; 0.5 matches the walking "
+           "controller's gait ramp, so a command step is not answered twice (once by the gait, "
+           "once by an offset against an error the gait is already removing); 0 switches it "
+           "off (vx_des and vy_des are used as they come, the paper's rule)"),
     _param("error_deadzone_mps", 0.0, 0.0, 1.0, "m/s",
            "Dead-zone on the two velocity learning errors (x: vx_des - vx; y: vy_des - the "
            "stride-averaged vy), m/s, in [0, 1]: an error e learns as e - d if e > d, e + d "

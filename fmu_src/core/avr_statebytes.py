@@ -1,13 +1,13 @@
 """The regulator state as bytes: :func:`state_to_bytes` and its checked inverse.
 
-Deterministic (identical states give identical bytes), no pickle, format version 2.
+Deterministic (identical states give identical bytes), no pickle, format version 3.
 Layout (little-endian): header ``_HEADER`` (magic ``b"AVRSTATE"``, format version
 uint16, number of weight rows (4) uint16, n_neurons uint32, then the network key:
 seed uint32 and the three input scales float64 (NaN = unknown), then
 last_step_index int64, n_calls int64, vx_at_step, vy_at_step, pd_x, pd_y, time_s
 float64, stride_boundaries int64, stride_calls int64, stride_sum_vy,
-stride_sum_roll, vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last
-float64), the weights as 4*n float64 in C order, then a CRC-32 (uint32) of
+stride_sum_roll, vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last,
+ref_vx, ref_vy, ref_sum_vx, ref_vx_step float64), the weights as 4*n float64 in C order, then a CRC-32 (uint32) of
 everything before it.
 """
 from __future__ import annotations
@@ -26,17 +26,18 @@ from fmu_src.core.avr_specs import INPUT_SPECS
 __all__ = ["state_to_bytes", "state_from_bytes"]
 
 _MAGIC = b"AVRSTATE"
-_VERSION = 2  # 2: the stride accumulators (version 1 had none)
+_VERSION = 3  # 2: the stride accumulators (version 1 had none); 3: the command reference
 # magic, version, n_rows, n_neurons, seed, velocity/angle/rate scales,
 # last_step_index, n_calls, vx_at_step, vy_at_step, pd_x, pd_y, time_s,
 # stride_boundaries, stride_calls, stride_sum_vy, stride_sum_roll,
-# vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last
-_HEADER = struct.Struct("<8sHHII3dqq5dqq6d")
+# vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last, ref_vx, ref_vy, ref_sum_vx,
+# ref_vx_step
+_HEADER = struct.Struct("<8sHHII3dqq5dqq10d")
 #: The magic and the version: what can be read before the size is known; then the counts.
 _PREFIX = struct.Struct("<8sH")
 _COUNTS = struct.Struct("<8sHHI")  # magic, version, n_rows, n_neurons
 _STRIDE_FLOATS = ("stride_sum_vy", "stride_sum_roll", "vy_mean_prev", "vy_mean_last",
-                  "roll_mean_prev", "roll_mean_last")
+                  "roll_mean_prev", "roll_mean_last", "ref_vx", "ref_vy", "ref_sum_vx", "ref_vx_step")
 _CRC = struct.Struct("<I")
 _FLOAT64_BYTES = 8
 _UNKNOWN_SCALES = (math.nan,) * 3
@@ -122,8 +123,9 @@ def _checked_frame(blob) -> bytes:
         raise StateError(f"not a regulator state (magic {magic!r}, expected {_MAGIC!r})")
     if version != _VERSION:
         raise StateError(f"unsupported state format version {version} (this build reads "
-                         f"{_VERSION}; version 1 states predate the stride-averaged "
-                         f"lateral/roll learning and cannot be continued)")
+                         f"{_VERSION}; older states predate the stride-averaged lateral/roll "
+                         f"learning (version 1) or the command reference (version 2) and "
+                         f"cannot be continued)")
     if len(blob) < _HEADER.size + _CRC.size:
         raise StateError(f"state blob too short ({len(blob)} bytes)")
     _, _, n_rows, n_neurons = _COUNTS.unpack_from(blob, 0)

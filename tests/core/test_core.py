@@ -110,7 +110,8 @@ def test_specs_match_dataclasses_and_api_order():
         "psi_gain_stance_hip_roll", "psi_gain_stance_hip_pitch", "psi_gain_stance_knee",
         "adaptation_enabled", "velocity_scale_mps", "angle_scale_rad",
         "rate_scale_radps", "n_neurons", "seed", "delta_limit_rad",
-        "leakage_per_s", "leakage_mode", "error_deadzone_mps", "weight_norm_max"]
+        "leakage_per_s", "leakage_mode", "command_accel_limit_mps2", "error_deadzone_mps",
+        "weight_norm_max"]
     assert [f.name for f in dataclasses.fields(RegulatorParams)] == [s.name for s in PARAM_SPECS]
     p = RegulatorParams()
     for s in PARAM_SPECS:
@@ -868,6 +869,65 @@ def test_leakage_mode_is_inert_without_leakage():
 def test_leakage_mode_range_is_named():
     with pytest.raises(ParameterError, match=r"leakage_mode = 2: must be an integer in \[0, 1\]"):
         small(leakage_mode=2)
+
+
+def _pd_walk(limit, commands, vx=0.5, calls_per_step=50):
+    """delta_swing_hip_pitch of a PD-only regulator (Kp_x 0.1) fed a constant vx and the
+    command sequence ``commands`` (one per call), a new step every ``calls_per_step`` calls."""
+    reg = Regulator(small(adaptation_enabled=False, command_accel_limit_mps2=limit))
+    return [reg.step(RegulatorInputs(vx=vx, vx_des=c, step_index=k // calls_per_step), DT)["delta_swing_hip_pitch"]
+            for k, c in enumerate(commands)], reg
+
+
+def test_command_reference_follows_a_command_step_at_the_limit_and_averages_over_the_step():
+    """With the limit a, a command step 0.5 -> 1.0 m/s is followed at a dt per call; the held
+    PD term compares vx with the reference's mean over the step before, as vx is a mean."""
+    commands = [0.5] * 100 + [1.0] * 300  # the step at call 100, the start of walking step 2
+    plain, _ = _pd_walk(0.0, commands)
+    limited, reg = _pd_walk(0.5, commands)
+    assert plain[100] == pytest.approx(0.1 * (0.5 - 1.0))  # the whole step at once
+    assert limited[100] == pytest.approx(0.0, abs=1e-15)  # the step before had the old command
+    ref = [min(1.0, 0.5 + 0.5 * DT * (j + 1)) for j in range(50)]  # calls 100..149
+    assert limited[150] == pytest.approx(0.1 * (0.5 - sum(ref) / 50), rel=1e-12)
+    assert limited[149] == limited[100]  # held within a step
+    assert reg.state.ref_vx == pytest.approx(1.0) and reg.state.ref_vy == 0.0  # reached after 200 calls
+    # error_vx stays the distance to the command itself
+    assert reg.step(RegulatorInputs(vx=0.5, vx_des=1.0, step_index=8), DT)["error_vx"] == -0.5
+
+
+def test_command_reference_starts_at_the_measured_velocity_and_is_off_at_zero():
+    _, reg = _pd_walk(0.5, [1.0], vx=0.2)
+    assert reg.state.ref_vx == pytest.approx(0.2 + 0.5 * DT) and reg.state.ref_vx_step == reg.state.ref_vx
+    out, _ = _pd_walk(0.5, [1.0], vx=0.2)
+    assert out[0] == pytest.approx(0.1 * (0.2 - (0.2 + 0.5 * DT)))
+    # at 0 the reference is the command, kept up to date, and nothing else changes
+    u = [RegulatorInputs(vx=0.5, vx_des=0.1 + 0.01 * (k // 30), pitch=0.1, step_index=k // 7) for k in range(90)]
+    a, b = Regulator(small(learning_rate=1e-4)), Regulator(small(learning_rate=1e-4, command_accel_limit_mps2=0.0))
+    assert run(a, u) == run(b, u) and b.state.ref_vx == u[-1].vx_des
+
+
+def test_command_reference_is_learned_against_and_saved_in_the_state():
+    """The networks learn from the reference's error: with a command the reference has not
+    reached yet the x row learns less than against the command; the reference survives a
+    state round trip and the run continues identically."""
+    u = [RegulatorInputs(vx=0.5, vx_des=0.5 if k < 20 else 1.5, step_index=k // 10) for k in range(80)]
+    plain, limited = Regulator(small(learning_rate=1e-4)), Regulator(small(learning_rate=1e-4, command_accel_limit_mps2=0.5))
+    run(plain, u), run(limited, u)
+    # after the step the reference moves 0.0025 m/s per call: over the 60 calls its error is a
+    # few percent of the command's 1 m/s; the bound leaves room for the other presynaptic
+    # rates (the network reads the reference as its command input)
+    assert 0.0 < np.abs(limited.state.weights[0]).max() < 0.25 * np.abs(plain.state.weights[0]).max()
+    blob = state_to_bytes(limited.state)
+    again = Regulator(small(learning_rate=1e-4, command_accel_limit_mps2=0.5))
+    again.load_state(blob)
+    assert again.state == limited.state and again.state.ref_vx == limited.state.ref_vx != 0.0
+    more = [RegulatorInputs(vx=0.6, vx_des=1.5, step_index=8 + k // 10) for k in range(40)]
+    assert run(again, more) == run(limited, more)
+
+
+def test_command_accel_limit_range_is_named():
+    with pytest.raises(ParameterError, match=r"command_accel_limit_mps2 = -0.5: must be a finite number in \[0, 10\]"):
+        small(command_accel_limit_mps2=-0.5)
 
 
 @pytest.mark.parametrize("error", [0.3, -0.3])

@@ -8,7 +8,8 @@
   FMU3Slave): every output is the same double, bit for bit (the issue asked for 1e-9).
 * The fixed elementary functions agree with the C library's to a few ulp.
 * The same recorded run with each remedy against drift (leakage, dead-zone, norm
-  projection, all three): the same bits in C as in the core.
+  projection), with the rate-limited command reference, and with all of them: the same
+  bits in C as in the core.
 * delta_limit_rad binds in C as in the core.  (The importers run every regulator FMU:
   tests/fmu/test_fmu_importers.py.)
 """
@@ -137,8 +138,9 @@ REMEDIES = {
     "leakage_keeps_output": {"leakage_per_s": 0.05, "leakage_mode": 1},
     "deadzone": {"error_deadzone_mps": 0.05},
     "projection": {"weight_norm_max": 3e-6},
+    "command_reference": {"command_accel_limit_mps2": 0.5},  # the run's speed change at 30 s
     "all": {"leakage_per_s": 0.05, "leakage_mode": 1, "error_deadzone_mps": 0.05,
-            "weight_norm_max": 3e-6},
+            "weight_norm_max": 3e-6, "command_accel_limit_mps2": 0.5},
 }
 _remedy_reference = {}
 

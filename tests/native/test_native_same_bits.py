@@ -27,8 +27,10 @@ PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_k
 #: The same with every remedy against drift on, each acting on this sequence: the leak, a
 #: dead-zone the synthetic errors exceed, a bound below the x row's plain norm (7.6e-5 rad/Hz).
 REMEDIES = {**PARAMS, "leakage_per_s": 0.5, "error_deadzone_mps": 0.05, "weight_norm_max": 3e-5}
-#: The leak of the part orthogonal to the current rates (leakage_mode 1) with the dead-zone.
-KEEP_OUTPUT = {**PARAMS, "leakage_per_s": 0.5, "leakage_mode": 1, "error_deadzone_mps": 0.05}
+#: The leak of the part orthogonal to the current rates (leakage_mode 1) with the dead-zone
+#: and the rate-limited command reference.
+KEEP_OUTPUT = {**PARAMS, "leakage_per_s": 0.5, "leakage_mode": 1, "error_deadzone_mps": 0.05,
+               "command_accel_limit_mps2": 0.5}
 RUNS = {"plain": PARAMS, "remedies": REMEDIES, "keep_output": KEEP_OUTPUT}
 N_STEPS = 400
 LIBRARY = "AdaptiveVelocityRegulatorNative.so"

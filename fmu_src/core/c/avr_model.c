@@ -379,9 +379,44 @@ static void advance_stride(AvrCore *c, int64_t si, double vy, double roll) {
     c->stride_sum_vy = vy, c->stride_sum_roll = roll;
 }
 
+/* value moved toward target by at most amount (avr_regulator._toward). */
+static double toward(double value, double target, double amount) {
+    double change = target - value;
+    if (change > amount) change = amount;
+    else if (change < -amount) change = -amount;
+    return value + change;
+}
+
+/* The command reference (avr_regulator._advance_reference), before advance_stride (it reads
+ * the calls of the step that ends). */
+static void advance_reference(AvrCore *c, const double *values, int64_t si, double dt) {
+    double limit = V(command_accel_limit_mps2);
+    int first = c->last_step_index < 0;
+    if (limit == 0.0) {
+        c->ref_vx = V(vx_des), c->ref_vy = V(vy_des);
+    } else {
+        double amount = limit * dt;
+        c->ref_vx = toward(first ? V(vx) : c->ref_vx, V(vx_des), amount);
+        c->ref_vy = toward(first ? V(vy) : c->ref_vy, V(vy_des), amount);
+    }
+    if (si == c->last_step_index) {
+        c->ref_sum_vx = c->ref_sum_vx + c->ref_vx;
+    } else if (first) {
+        c->ref_sum_vx = c->ref_vx, c->ref_vx_step = c->ref_vx;
+    } else { /* the step that ends now had stride_calls calls */
+        c->ref_vx_step = c->ref_sum_vx / (double)c->stride_calls;
+        c->ref_sum_vx = c->ref_vx;
+    }
+}
+
 void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) {
     double vx = V(vx), vy = V(vy);
     int64_t si = (int64_t)V(step_index);
+    advance_reference(core, values, si, dt);
+    /* With the limit on, PD, network inputs and learning read the reference in place of the
+     * command (restored below for the error outputs). */
+    double vx_des = V(vx_des), vy_des = V(vy_des);
+    if (V(command_accel_limit_mps2) != 0.0) V(vx_des) = core->ref_vx_step, V(vy_des) = core->ref_vy;
     if (si != core->last_step_index) { /* PD_x, PD_y: recomputed when step_index changes, held otherwise */
         int first = core->last_step_index < 0;
         double vx_prev = first ? vx : core->vx_at_step, vy_prev = first ? vy : core->vy_at_step;
@@ -412,6 +447,7 @@ void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) 
     }
     clip_offsets(values, V(delta_limit_rad));
     V(psi_x) = psi[0], V(psi_y) = psi[1], V(psi_pitch) = psi[2], V(psi_roll) = psi[3];
+    V(vx_des) = vx_des, V(vy_des) = vy_des;
     V(error_vx) = vx - V(vx_des);
     V(error_vy) = vy - V(vy_des);
     V(error_pitch) = V(pitch) - V(pitch_des);

@@ -52,6 +52,9 @@ typedef struct {
      * calls and sums of vy, roll in the current step, means of the last two complete steps. */
     int64_t stride_boundaries, stride_calls;
     double stride_sum_vy, stride_sum_roll, vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last;
+    /* The command reference (avr_regulator._advance_reference): after the last call, the sum
+     * of ref_vx over the current step's calls, its mean over the step before. */
+    double ref_vx, ref_vy, ref_sum_vx, ref_vx_step;
 } AvrCore;
 
 #define AVR_STRIDE_READY 4 /* stride_boundaries once two steps are complete */

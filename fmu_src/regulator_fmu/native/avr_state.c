@@ -1,8 +1,8 @@
 /*
  * The FMU state of an instance as one self-checking blob (see avr_instance.h).
  *
- * FMU state blob, little-endian, format version 2 (offsets in bytes; version 1, without
- * the stride accumulators, is refused naming both versions):
+ * FMU state blob, little-endian, format version 3 (offsets in bytes; versions 1, without
+ * the stride accumulators, and 2, without the command reference, are refused naming both):
  *     0  "AVRNATIV"            magic
  *     8  u32 version           12  u32 total size in bytes
  *    16  GUID, NUL-padded to 48 bytes (a state of another FMU build is refused)
@@ -12,8 +12,8 @@
  *   104  f64 vx_at_step, vy_at_step, pd_x, pd_y, time_s
  *   144  i64 stride_boundaries (0..4)   152  i64 stride_calls
  *   160  f64 stride_sum_vy, stride_sum_roll, vy_mean_prev, vy_mean_last, roll_mean_prev,
- *        roll_mean_last
- *   208  f64 value of every variable, in value-reference order
+ *        roll_mean_last, ref_vx, ref_vy, ref_sum_vx, ref_vx_step
+ *   240  f64 value of every variable, in value-reference order
  *        f64 weights (4 rows of n_neurons)
  *   end-4: u32 CRC-32 (zlib's) of every byte before it
  * A blob is refused unless its size, checksum, GUID and variable count match and every
@@ -32,12 +32,12 @@
 #include "fmi_blob.h"
 
 #define BLOB_MAGIC "AVRNATIV"
-#define BLOB_VERSION 2u
+#define BLOB_VERSION 3u
 #define BLOB_GUID_BYTES 48
-#define BLOB_HEADER 208
+#define BLOB_HEADER 240
 #define N_CORE_DOUBLES 5
 #define STRIDE_OFFSET 144
-#define N_STRIDE_DOUBLES 6
+#define N_STRIDE_DOUBLES 10
 
 /* zlib's CRC-32 (reflected polynomial 0xEDB88320), table built on the stack per call. */
 static void put_u32(unsigned char *p, uint32_t x) {
@@ -106,7 +106,8 @@ static AvrBlob *state_get(const AvrInstance *inst, AvrBlob *reuse) {
         put_u64(p + STRIDE_OFFSET, (uint64_t)c->stride_boundaries);
         put_u64(p + STRIDE_OFFSET + 8, (uint64_t)c->stride_calls);
         const double stride[N_STRIDE_DOUBLES] = {c->stride_sum_vy, c->stride_sum_roll, c->vy_mean_prev,
-                                                 c->vy_mean_last, c->roll_mean_prev, c->roll_mean_last};
+                                                 c->vy_mean_last, c->roll_mean_prev, c->roll_mean_last,
+                                                 c->ref_vx, c->ref_vy, c->ref_sum_vx, c->ref_vx_step};
         for (int i = 0; i < N_STRIDE_DOUBLES; ++i) put_f64(p + STRIDE_OFFSET + 16 + 8 * i, stride[i]);
     }
     for (int vr = 0; vr < AVR_N_VARS; ++vr) put_f64(p + BLOB_HEADER + 8 * vr, inst->values[vr]);
@@ -127,7 +128,7 @@ static int finite_doubles(const unsigned char *p, size_t count) {
 static AvrStatus check_frame(const AvrInstance *inst, const char *call, const unsigned char *p, size_t size) {
     static const FmiBlobFormat format = {
         .magic = BLOB_MAGIC, .magic_bytes = 8, .version_at = 8, .version = BLOB_VERSION,
-        .version_note = "(version 1 states predate the stride-averaged lateral/roll learning and cannot be continued)",
+        .version_note = "(older states predate the stride-averaged lateral/roll learning (version 1) or the command reference (version 2) and cannot be continued)",
         .size_at = 12, .size_field_bytes = 4, .size_add = 0, .crc_bytes = 4,
         .guid_at = 16, .guid_bytes = BLOB_GUID_BYTES, .guid = AVR_GUID,
         .min_bytes = BLOB_HEADER + 8u * AVR_N_VARS + 4u}; /* blob_size(0) */
@@ -231,7 +232,8 @@ static AvrStatus state_set(AvrInstance *inst, const char *call, const AvrBlob *b
         core.stride_boundaries = (int64_t)get_u64(p + STRIDE_OFFSET);
         core.stride_calls = (int64_t)get_u64(p + STRIDE_OFFSET + 8);
         double *stride[N_STRIDE_DOUBLES] = {&core.stride_sum_vy, &core.stride_sum_roll, &core.vy_mean_prev,
-                                            &core.vy_mean_last, &core.roll_mean_prev, &core.roll_mean_last};
+                                            &core.vy_mean_last, &core.roll_mean_prev, &core.roll_mean_last,
+                                            &core.ref_vx, &core.ref_vy, &core.ref_sum_vx, &core.ref_vx_step};
         for (int i = 0; i < N_STRIDE_DOUBLES; ++i) *stride[i] = get_f64(p + STRIDE_OFFSET + 16 + 8 * i);
         const unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
         for (size_t i = 0; i < (size_t)AVR_N_ROWS * n; ++i) core.weights[i] = get_f64(w + 8 * i);
