@@ -127,7 +127,8 @@ high = 1.2
 def test_robustness_random_campaign_is_what_the_issue_asks():
     c = spec.load_campaign(spec.resolve_campaign("robustness_random"))
     assert c.n_samples >= 100
-    assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd", "pd_kpx_105", "pd_kpx_095"]
+    assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd", "pd_kpx_105", "pd_kpx_095", "adaptive_cmdref",
+                             "pd_only_cmdref"]
     names = {f.name for f in c.factors}
     for needed in ("model", "floor_friction", "torso_mass_kg", "torso_com_offset_x_m", "torso_com_offset_y_m",
                    "joint_damping_scale", "floor", "command_profile", "random_pushes", "random_pushes_count",
@@ -144,3 +145,5 @@ def test_robustness_random_campaign_is_what_the_issue_asks():
         given = dict(arms[name].overrides)
         assert given.pop("seed") == dict(arms["adaptive"].overrides)["seed"]  # the sample's, as every arm
         assert given == {"adaptation_enabled": False, "Kp_x": pytest.approx(kp * factor)}
+    assert dict(arms["adaptive_cmdref"].overrides)["command_accel_limit_mps2"] == 0.5
+    assert dict(arms["pd_only_cmdref"].overrides)["adaptation_enabled"] is False
