@@ -56,7 +56,7 @@ def fall_rate(data: analysis.CampaignData) -> str:
         ax.errorbar(i, 100 * s["fall_rate"], yerr=[[100 * (s["fall_rate"] - lo)], [100 * (hi - s["fall_rate"])]],
                     color="k", capsize=6)
         ax.text(i, 100 * hi + 2, f"{s['fell']}/{s['complete']}", ha="center", fontsize=9)
-    ax.set_xticks(range(len(stats)), [s["arm"] for s in stats])
+    ax.set_xticks(range(len(stats)), [s["arm"] for s in stats], rotation=20, ha="right")  # long arm names
     ax.set_ylim(0, 110)
     ax.set_ylabel("fall rate (%), 95 % CI")
     ax.set_title(f"{data.manifest['name']}: falls per arm")
@@ -82,7 +82,7 @@ def errors(data: analysis.CampaignData) -> str:
             ax.boxplot([series[i] for i in pos], positions=pos, widths=0.15, showfliers=False)
         for i, s in enumerate(series):
             ax.scatter(i + rng.uniform(-0.08, 0.08, len(s)), s, s=8, color=colors[data.arms[i]], alpha=0.6, zorder=3)
-        ax.set_xticks(range(len(data.arms)), data.arms)
+        ax.set_xticks(range(len(data.arms)), data.arms, rotation=20, ha="right")  # long arm names
         ax.set_ylabel(label)
         ax.grid(axis="y", alpha=0.3)
     axes[0].set_title("runs that kept walking", fontsize=9)
