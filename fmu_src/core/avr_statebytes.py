@@ -7,8 +7,8 @@ seed uint32 and the three input scales float64 (NaN = unknown), then
 last_step_index int64, n_calls int64, vx_at_step, vy_at_step, pd_x, pd_y, time_s
 float64, stride_boundaries int64, stride_calls int64, stride_sum_vy,
 stride_sum_roll, vy_mean_prev, vy_mean_last, roll_mean_prev, roll_mean_last,
-ref_vx, ref_vy, ref_sum_vx, ref_vx_step float64), the weights as 4*n float64 in C order, then a CRC-32 (uint32) of
-everything before it.
+ref_vx, ref_vy, ref_sum_vx, ref_vx_step float64), the weights as 4*n float64 in C
+order, then a CRC-32 (uint32) of everything before it.
 """
 from __future__ import annotations
 
@@ -36,7 +36,8 @@ _HEADER = struct.Struct("<8sHHII3dqq5dqq10d")
 #: The magic and the version: what can be read before the size is known; then the counts.
 _PREFIX = struct.Struct("<8sH")
 _COUNTS = struct.Struct("<8sHHI")  # magic, version, n_rows, n_neurons
-_STRIDE_FLOATS = ("stride_sum_vy", "stride_sum_roll", "vy_mean_prev", "vy_mean_last",
+#: The float64 fields after stride_calls: the stride sums and means, then the command reference.
+_TAIL_FLOATS = ("stride_sum_vy", "stride_sum_roll", "vy_mean_prev", "vy_mean_last",
                   "roll_mean_prev", "roll_mean_last", "ref_vx", "ref_vy", "ref_sum_vx", "ref_vx_step")
 _CRC = struct.Struct("<I")
 _FLOAT64_BYTES = 8
@@ -53,7 +54,7 @@ def state_to_bytes(state: RegulatorState) -> bytes:
                         state.last_step_index, state.n_calls, state.vx_at_step,
                         state.vy_at_step, state.pd_x, state.pd_y, state.time_s,
                         state.stride_boundaries, state.stride_calls,
-                        *(getattr(state, name) for name in _STRIDE_FLOATS))
+                        *(getattr(state, name) for name in _TAIL_FLOATS))
     body = head + state.weights.astype("<f8", copy=False).tobytes(order="C")
     return body + _CRC.pack(zlib.crc32(body))
 
@@ -67,12 +68,12 @@ def state_from_bytes(blob: bytes, params) -> RegulatorState:
     """
     blob = _checked_frame(blob)
     (_, _, _, n_neurons, seed, velocity_scale, angle_scale, rate_scale, last, n_calls, vx_at,
-     vy_at, pd_x, pd_y, time_s, boundaries, stride_calls, *stride) = _HEADER.unpack_from(blob, 0)
+     vy_at, pd_x, pd_y, time_s, boundaries, stride_calls, *tail) = _HEADER.unpack_from(blob, 0)
     key = _checked_key(n_neurons, seed, (velocity_scale, angle_scale, rate_scale), params)
     weights = np.frombuffer(blob, dtype="<f8", count=N_WEIGHT_ROWS * n_neurons,
                             offset=_HEADER.size)
     weights = weights.astype(np.float64).reshape(N_WEIGHT_ROWS, n_neurons)  # owned, native-endian
-    scalars = (vx_at, vy_at, pd_x, pd_y, time_s, *stride)
+    scalars = (vx_at, vy_at, pd_x, pd_y, time_s, *tail)
     if not (np.all(np.isfinite(weights)) and all(math.isfinite(value) for value in scalars)):
         raise StateError("state contains non-finite values")
     problems = counter_problems(last, n_calls, time_s, boundaries, stride_calls)
@@ -80,7 +81,7 @@ def state_from_bytes(blob: bytes, params) -> RegulatorState:
         raise StateError("state has invalid counters: " + "; ".join(problems))
     weights.flags.writeable = False
     return RegulatorState(weights, last, vx_at, vy_at, pd_x, pd_y, n_calls, time_s, key,
-                          boundaries, stride_calls, *stride)
+                          boundaries, stride_calls, *tail)
 
 
 #: The largest step_index (the input's declared maximum): the largest last_step_index.

@@ -37,7 +37,7 @@
 #define BLOB_HEADER 240
 #define N_CORE_DOUBLES 5
 #define STRIDE_OFFSET 144
-#define N_STRIDE_DOUBLES 10
+#define N_TAIL_DOUBLES 10 /* after stride_calls: the stride sums and means, then the command reference */
 
 /* zlib's CRC-32 (reflected polynomial 0xEDB88320), table built on the stack per call. */
 static void put_u32(unsigned char *p, uint32_t x) {
@@ -105,10 +105,10 @@ static AvrBlob *state_get(const AvrInstance *inst, AvrBlob *reuse) {
         for (int i = 0; i < N_CORE_DOUBLES; ++i) put_f64(p + 104 + 8 * i, core[i]);
         put_u64(p + STRIDE_OFFSET, (uint64_t)c->stride_boundaries);
         put_u64(p + STRIDE_OFFSET + 8, (uint64_t)c->stride_calls);
-        const double stride[N_STRIDE_DOUBLES] = {c->stride_sum_vy, c->stride_sum_roll, c->vy_mean_prev,
+        const double tail[N_TAIL_DOUBLES] = {c->stride_sum_vy, c->stride_sum_roll, c->vy_mean_prev,
                                                  c->vy_mean_last, c->roll_mean_prev, c->roll_mean_last,
                                                  c->ref_vx, c->ref_vy, c->ref_sum_vx, c->ref_vx_step};
-        for (int i = 0; i < N_STRIDE_DOUBLES; ++i) put_f64(p + STRIDE_OFFSET + 16 + 8 * i, stride[i]);
+        for (int i = 0; i < N_TAIL_DOUBLES; ++i) put_f64(p + STRIDE_OFFSET + 16 + 8 * i, tail[i]);
     }
     for (int vr = 0; vr < AVR_N_VARS; ++vr) put_f64(p + BLOB_HEADER + 8 * vr, inst->values[vr]);
     unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
@@ -160,7 +160,7 @@ static AvrStatus check_contents(const AvrInstance *inst, const char *call, const
     if (n == 0) return AVR_OK;
     if (n != (uint32_t)get_f64(values + 8 * AVR_VR_n_neurons) || get_u32(p + 84) != (uint32_t)get_f64(values + 8 * AVR_VR_seed))
         return avr_refuse(inst, call, "state's networks do not match its n_neurons and seed");
-    if (!finite_doubles(p + 104, N_CORE_DOUBLES) || !finite_doubles(p + STRIDE_OFFSET + 16, N_STRIDE_DOUBLES) || !finite_doubles(values + 8 * AVR_N_VARS, (size_t)AVR_N_ROWS * n))
+    if (!finite_doubles(p + 104, N_CORE_DOUBLES) || !finite_doubles(p + STRIDE_OFFSET + 16, N_TAIL_DOUBLES) || !finite_doubles(values + 8 * AVR_N_VARS, (size_t)AVR_N_ROWS * n))
         return avr_refuse(inst, call, "state contains non-finite values");
     return check_counters(inst, call, p);
 }
@@ -231,10 +231,10 @@ static AvrStatus state_set(AvrInstance *inst, const char *call, const AvrBlob *b
         for (int i = 0; i < N_CORE_DOUBLES; ++i) *scalars[i] = get_f64(p + 104 + 8 * i);
         core.stride_boundaries = (int64_t)get_u64(p + STRIDE_OFFSET);
         core.stride_calls = (int64_t)get_u64(p + STRIDE_OFFSET + 8);
-        double *stride[N_STRIDE_DOUBLES] = {&core.stride_sum_vy, &core.stride_sum_roll, &core.vy_mean_prev,
+        double *tail[N_TAIL_DOUBLES] = {&core.stride_sum_vy, &core.stride_sum_roll, &core.vy_mean_prev,
                                             &core.vy_mean_last, &core.roll_mean_prev, &core.roll_mean_last,
                                             &core.ref_vx, &core.ref_vy, &core.ref_sum_vx, &core.ref_vx_step};
-        for (int i = 0; i < N_STRIDE_DOUBLES; ++i) *stride[i] = get_f64(p + STRIDE_OFFSET + 16 + 8 * i);
+        for (int i = 0; i < N_TAIL_DOUBLES; ++i) *tail[i] = get_f64(p + STRIDE_OFFSET + 16 + 8 * i);
         const unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
         for (size_t i = 0; i < (size_t)AVR_N_ROWS * n; ++i) core.weights[i] = get_f64(w + 8 * i);
         avr_adopt(inst, net, &core);
