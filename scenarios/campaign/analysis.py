@@ -20,7 +20,7 @@ from scenarios.campaign.task import COMPLETE
 
 QUANTILES = (0.5, 0.9)
 Z95 = 1.959964  # two-sided 95 % normal quantile (Wilson interval)
-FLOAT_COLS = ("t_fall_s", "steady_state_error_vx", "steady_state_error_vy", "convergence_time_s",
+FLOAT_COLS = ("t_fall_s", "steady_state_error_vx", "steady_state_error_vy", "settled_error_vx", "convergence_time_s",
               "mean_vx_last_s", "mean_vy_last_s", "max_abs_pitch_rad", "max_abs_roll_rad", "sim_s", "wall_s",
               "task_wall_s")
 
@@ -35,6 +35,15 @@ class CampaignData:
     @property
     def arms(self) -> list[str]:
         return list(self.manifest["arms"])
+
+    @property
+    def metric(self) -> str:
+        """The error the paired verdicts compare (the campaign file's ``metric``)."""
+        return self.manifest.get("metric", "steady_state_error_vx")
+
+    def replicas(self, arm: str) -> list[str]:
+        """The replica arms of ``arm`` (the campaign file's ``[replicas]``), none by default."""
+        return list((self.manifest.get("replicas") or {}).get(arm, ()))
 
 
 def is_campaign_dir(path: Path) -> bool:
@@ -99,8 +108,8 @@ def arm_stats(rows: Sequence[dict[str, Any]], arm: str) -> dict[str, Any]:
     out: dict[str, Any] = {"arm": arm, "rows": len(mine), "complete": len(done), "failed": len(mine) - len(done),
                            "fell": fell, "fall_rate": fell / len(done) if done else None,
                            "fall_ci": wilson(fell, len(done)), "walked": len(walked)}
-    for key in ("steady_state_error_vx", "steady_state_error_vy"):
-        vals = [r[key] for r in walked if r[key] is not None]
+    for key in ("steady_state_error_vx", "steady_state_error_vy", "settled_error_vx"):
+        vals = [r.get(key) for r in walked if r.get(key) is not None]
         out[key] = {**{f"p{int(q * 100)}": quantile(vals, q) for q in QUANTILES}, "max": max(vals, default=None)}
     conv = [r["convergence_time_s"] for r in walked if r["convergence_time_s"] is not None]
     out["converged"] = len(conv)
@@ -170,31 +179,70 @@ def clopper_pearson(k: int, n: int, level: float = 0.95) -> tuple[float, float] 
     return lower, upper
 
 
-def verdicts(rows: Sequence[dict[str, Any]], a: str, b: str) -> dict[str, Any]:
-    """The two paired claims of ``a`` against ``b`` (e.g. adaptive vs PD-only), as verdicts:
+def verdicts(rows: Sequence[dict[str, Any]], a: str, b: str, *, metric: str = "steady_state_error_vx",
+             replicas_a: Sequence[str] = (), replicas_b: Sequence[str] = ()) -> dict[str, Any]:
+    """The two paired claims of ``a`` against ``b`` (e.g. adaptive vs PD-only), as verdicts.
 
-    * ``never_falls_where_b_walks``: no sample where ``a`` fell and ``b`` did not (the
-      samples where it did are listed); with the exact 95 % interval of that rate.
-    * ``beats``: ``a`` wins a sample when ``b`` fell and ``a`` did not, or both walked and
-      ``a``'s sse_vx is lower; a sample both fell on is no contest and left out. The verdict
-      holds when the wins are at least :data:`WIN_SHARE_REQUIRED` of the contested samples;
-      with the exact 95 % interval of the share, and a bootstrap 95 % interval of the median
-      sse_vx difference over the samples both walked.
+    Each arm runs on every sample once, or R times: itself and its replica arms (the same
+    controller under a nuisance change, e.g. a gain 5 % off), replica i of ``a`` paired
+    with replica i of ``b``. Near the edge of falling any change of the walk tips a sample
+    into a fall or out of one, so the claims are judged on each sample's outcomes over its
+    R pairs (with R = 1, on the one run):
+
+    * ``never_falls_where_b_walks``: no sample where ``b`` walked on every replica and ``a``
+      fell on more than half of its replicas (the samples where it did are listed, with
+      the exact 95 % interval of that rate; ``a_fell_some`` lists the samples where ``a``
+      fell on some replica and ``b`` on none).
+    * ``beats``: a pair is contested unless both fell; ``a`` wins it when only ``b`` fell,
+      or both walked and ``a``'s ``metric`` is lower. ``a`` wins a sample when it wins more
+      than half of the sample's contested pairs; a sample with none is no contest. The
+      verdict holds when the wins are at least :data:`WIN_SHARE_REQUIRED` of the contested
+      samples; with the exact 95 % interval of the share, and a bootstrap 95 % interval of
+      the median ``metric`` difference over the pairs both walked.
     """
-    p = paired(rows, a, b)
-    contested = p["n"] - p["both_fell"]
-    wins = len(p["only_b_fell"]) + p["a_lower_vx"]
-    diffs = _paired_diffs(rows, a, b)
-    return {
-        "n": p["n"], "contested": contested, "wins": wins,
-        "win_share": wins / contested if contested else None,
-        "win_ci": clopper_pearson(wins, contested),
-        "beats": bool(contested) and wins >= WIN_SHARE_REQUIRED * contested,
-        "only_a_fell": p["only_a_fell"], "never_falls_where_b_walks": not p["only_a_fell"],
-        "only_a_fell_ci": clopper_pearson(len(p["only_a_fell"]), p["n"]),
-        "median_diff_vx": quantile(diffs, 0.5), "median_diff_ci": bootstrap_median_ci(diffs),
-        "not_better": p["not_better"],
-    }
+    if len(replicas_a) != len(replicas_b):
+        raise ValueError(f"{a} has {len(replicas_a)} replicas, {b} {len(replicas_b)}: they pair by position")
+    pairs = [(a, b), *zip(replicas_a, replicas_b)]
+    by = {(r["sample"], r["arm"]): r for r in rows if r["status"] == COMPLETE}
+    samples = sorted({r["sample"] for r in rows if all((r["sample"], x) in by for pair in pairs for x in pair)})
+    n_pairs = len(pairs)
+    out: dict[str, Any] = {"n": len(samples), "replicas": n_pairs, "metric": metric, "contested": 0, "wins": 0,
+                           "only_a_fell": [], "a_fell_some": [], "not_won": []}
+    diffs: list[float] = []
+    for s in samples:
+        fa = [by[(s, x)]["fell"] for x, _ in pairs]
+        fb = [by[(s, y)]["fell"] for _, y in pairs]
+        if not any(fb) and any(fa):
+            out["a_fell_some"].append((s, sum(fa)))
+            if 2 * sum(fa) > n_pairs:
+                out["only_a_fell"].append(s)
+        contested = won = 0
+        for (x, y), fell_a, fell_b in zip(pairs, fa, fb):
+            if fell_a and fell_b:
+                continue
+            contested += 1
+            ea, eb = by[(s, x)].get(metric), by[(s, y)].get(metric)
+            if fell_b:
+                won += 1
+            elif not fell_a and ea is not None and eb is not None:
+                diffs.append(ea - eb)
+                won += ea < eb
+        if contested:
+            out["contested"] += 1
+            if 2 * won > contested:
+                out["wins"] += 1
+            else:
+                out["not_won"].append((s, won, contested, sum(fa), sum(fb)))
+    contested = out["contested"]
+    out.update({
+        "win_share": out["wins"] / contested if contested else None,
+        "win_ci": clopper_pearson(out["wins"], contested),
+        "beats": bool(contested) and out["wins"] >= WIN_SHARE_REQUIRED * contested,
+        "never_falls_where_b_walks": not out["only_a_fell"],
+        "only_a_fell_ci": clopper_pearson(len(out["only_a_fell"]), len(samples)),
+        "median_diff": quantile(diffs, 0.5), "median_diff_ci": bootstrap_median_ci(diffs),
+    })
+    return out
 
 
 def mcnemar_exact(k: int, m: int) -> float | None:
@@ -223,18 +271,6 @@ def fall_agreement(rows: Sequence[dict[str, Any]], b: str, arms: Sequence[str]) 
         k, m = len(p["only_a_fell"]), len(p["only_b_fell"])
         out.append({"arm": arm, "n": p["n"], "only_arm_fell": p["only_a_fell"], "only_b_fell": p["only_b_fell"],
                     "p_value": mcnemar_exact(k, m)})
-    return out
-
-
-def _paired_diffs(rows: Sequence[dict[str, Any]], a: str, b: str) -> list[float]:
-    """sse_vx of ``a`` minus ``b`` on the samples both completed and walked."""
-    by = {(r["sample"], r["arm"]): r for r in rows if r["status"] == COMPLETE}
-    out = []
-    for (s, arm), ra in sorted(by.items()):
-        rb = by.get((s, b))
-        if arm == a and rb is not None and ra["fell"] is False and rb["fell"] is False \
-                and ra["steady_state_error_vx"] is not None and rb["steady_state_error_vx"] is not None:
-            out.append(ra["steady_state_error_vx"] - rb["steady_state_error_vx"])
     return out
 
 

@@ -106,7 +106,7 @@ def cmd_campaign(args) -> int:
         _print_samples(samples, names)
         return 0
     out = Path(args.out) if args.out else Path("runs") / campaign.name
-    cdir = CampaignDir(out, campaign.name, texts, campaign.arm_names(), names)
+    cdir = CampaignDir(out, campaign.name, texts, campaign.arm_names(), names, campaign.analysis_settings())
     try:
         cdir.open(resume=args.resume, campaign_file=path)
     except CampaignDirError as exc:

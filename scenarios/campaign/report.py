@@ -32,7 +32,7 @@ def _rate(s: dict[str, Any]) -> str:
 
 def stats_table(data: analysis.CampaignData) -> tuple[list[str], list[list[str]]]:
     header = ["arm", "complete", "failed", "fell (95 % CI)", "sse_vx p50", "sse_vx p90", "sse_vx max",
-              "sse_vy p50", "sse_vy p90", "converged", "t_conv p50 (s)"]
+              "sse_vy p50", "sse_vy p90", "settled_vx p50", "settled_vx p90", "converged", "t_conv p50 (s)"]
     rows = []
     for arm in data.arms:
         s = analysis.arm_stats(data.rows, arm)
@@ -40,6 +40,8 @@ def stats_table(data: analysis.CampaignData) -> tuple[list[str], list[list[str]]
         for key, _ in SSE:
             q = s[key]
             cells += [_f(q["p50"]), _f(q["p90"])] + ([_f(q["max"])] if key.endswith("vx") else [])
+        q = s["settled_error_vx"]
+        cells += [_f(q["p50"]), _f(q["p90"])]
         cells += [f"{s['converged']}/{s['walked']}", _f(s["convergence_p50"], 1)]
         rows.append(cells)
     return header, rows
@@ -75,12 +77,6 @@ def _paired_lines(data: analysis.CampaignData) -> list[str]:
              f"{_f(p['max_diff_vy'], 4)} m/s).", ""]
     lines += _verdict_lines(data, a, b)
     lines += _agreement_lines(data, b)
-    if p["not_better"]:
-        lines += [f"Every sample where {a} is not better ({len(p['not_better'])}):", ""]
-        rows = [[f"[{s}](samples/{s}.toml)", why, _f(ra["steady_state_error_vx"]), _f(rb["steady_state_error_vx"]),
-                 _factor_cells(ra, data.factors)] for s, why, ra, rb in p["not_better"]]
-        lines += _md_table(["sample", "why", f"{a} sse_vx", f"{b} sse_vx", "factors"], rows)
-        lines.append("")
     return lines + ["![paired](paired.png)", ""]
 
 
@@ -88,21 +84,60 @@ def _pct(ci) -> str:
     return "-" if ci is None else f"[{100 * ci[0]:.1f}, {100 * ci[1]:.1f}] %"
 
 
+#: Short names of the errors the verdicts may compare.
+METRIC_LABEL = {"steady_state_error_vx": "sse_vx (the last 5 s)",
+                "settled_error_vx": "settled_vx (every row where the command has been constant for 2.5 s, after 5 s)"}
+
+
 def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
-    """The paired claims as explicit verdicts (:func:`scenarios.campaign.analysis.verdicts`)."""
-    v = analysis.verdicts(data.rows, a, b)
+    """The paired claims as explicit verdicts (:func:`scenarios.campaign.analysis.verdicts`),
+    and every sample the first arm does not win."""
+    metric = data.metric
+    ra, rb = data.replicas(a), data.replicas(b)
+    v = analysis.verdicts(data.rows, a, b, metric=metric, replicas_a=ra, replicas_b=rb)
+    n_rep = v["replicas"]
     fell = ", ".join(f"[{s}](samples/{s}.toml)" for s in v["only_a_fell"]) or "none"
+    some = ", ".join(f"{s} ({k}/{n_rep})" for s, k in v["a_fell_some"]) or "none"
     share = "-" if v["win_share"] is None else f"{100 * v['win_share']:.1f} %"
     ci = v["median_diff_ci"]
-    return [f"**Verdict: {a} never falls where {b} walks: {'PASS' if v['never_falls_where_b_walks'] else 'FAIL'}** "
-            f"({len(v['only_a_fell'])} of {v['n']} paired samples, exact 95 % interval {_pct(v['only_a_fell_ci'])}; "
-            f"samples: {fell}).", "",
-            f"**Verdict: {a} beats {b} on >= {100 * analysis.WIN_SHARE_REQUIRED:.0f} % of paired samples: "
-            f"{'PASS' if v['beats'] else 'FAIL'}** ({v['wins']} of {v['contested']} samples where at least one arm "
-            f"walked = {share}, exact 95 % interval {_pct(v['win_ci'])}; a win: only {b} fell, or both walked and "
-            f"{a}'s sse_vx is lower). Median sse_vx difference {a} - {b} over the samples both walked: "
-            f"{_f(v['median_diff_vx'], 4)} m/s (bootstrap 95 % interval "
-            f"{'-' if ci is None else f'[{ci[0]:.4f}, {ci[1]:.4f}]'} m/s).", ""]
+    label = METRIC_LABEL.get(metric, metric)
+    lines = []
+    if n_rep > 1:
+        lines += [f"Each sample runs {a} and {b} {n_rep} times each, paired by position: "
+                  f"{', '.join([a, *ra])} against {', '.join([b, *rb])}. Near the edge of falling any change of "
+                  "the walk tips a sample into a fall or out of one, so the verdicts judge each sample by its "
+                  f"outcomes over the {n_rep} pairs.", ""]
+        never = (f"**Verdict: {a} never falls where {b} walks: {'PASS' if v['never_falls_where_b_walks'] else 'FAIL'}**"
+                 f" (samples where {b} walked on all {n_rep} replicas and {a} fell on more than half: "
+                 f"{len(v['only_a_fell'])} of {v['n']}, exact 95 % interval {_pct(v['only_a_fell_ci'])}; {fell}. "
+                 f"Samples where {a} fell on some replica and {b} on none, with {a}'s falls: {some}).")
+        win = (f"a pair is won when only {b} fell, or both walked and {a}'s {label} is lower; a sample is won "
+               "with more than half of its pairs where at least one arm walked")
+    else:
+        never = (f"**Verdict: {a} never falls where {b} walks: {'PASS' if v['never_falls_where_b_walks'] else 'FAIL'}**"
+                 f" ({len(v['only_a_fell'])} of {v['n']} paired samples, exact 95 % interval "
+                 f"{_pct(v['only_a_fell_ci'])}; samples: {fell}).")
+        win = f"a win: only {b} fell, or both walked and {a}'s {label} is lower"
+    lines += [never, "",
+              f"**Verdict: {a} beats {b} on >= {100 * analysis.WIN_SHARE_REQUIRED:.0f} % of paired samples: "
+              f"{'PASS' if v['beats'] else 'FAIL'}** ({v['wins']} of {v['contested']} samples where at least one arm "
+              f"walked = {share}, exact 95 % interval {_pct(v['win_ci'])}; {win}). Median {metric} difference "
+              f"{a} - {b} over the pairs both walked: {_f(v['median_diff'], 4)} m/s (bootstrap 95 % interval "
+              f"{'-' if ci is None else f'[{ci[0]:.4f}, {ci[1]:.4f}]'} m/s).", ""]
+    if v["not_won"]:
+        by = {(r["sample"], r["arm"]): r for r in data.rows if r["status"] == "complete"}
+
+        def mean_error(s: str, arms: Sequence[str]) -> str:
+            vals = [by[(s, x)][metric] for x in arms if not by[(s, x)]["fell"] and by[(s, x)][metric] is not None]
+            return _f(sum(vals) / len(vals)) if vals else "-"
+
+        rows = [[f"[{s}](samples/{s}.toml)", f"{won}/{contested}", f"{fa}/{n_rep}", f"{fb}/{n_rep}",
+                 mean_error(s, [a, *ra]), mean_error(s, [b, *rb]), _factor_cells(by[(s, a)], data.factors)]
+                for s, won, contested, fa, fb in v["not_won"]]
+        lines += [f"Every sample {a} does not win ({len(v['not_won'])}):", ""]
+        lines += _md_table(["sample", "pairs won", f"{a} fell", f"{b} fell", f"{a} {metric} (mean of walked)",
+                            f"{b} {metric}", "factors"], rows) + [""]
+    return lines
 
 
 def _agreement_lines(data: analysis.CampaignData, b: str) -> list[str]:
@@ -157,8 +192,9 @@ def render(data: analysis.CampaignData, plots: Sequence[str]) -> str:
              f"Definition: [{COPY_NAME}]({COPY_NAME}); every sample's scenario: `samples/<id>.toml`; "
              "all rows: `campaign.csv`.", "",
              "Fall rate over the complete runs, with its 95 % Wilson interval; the velocity errors (`sse_*`: mean "
-             "|step-averaged velocity - command| over the last 5 s, m/s) and convergence over the runs that kept "
-             "walking.", ""]
+             "|step-averaged velocity - command| over the last 5 s, m/s; `settled_vx`: the same forward error over "
+             "every row where the command has been constant for 2.5 s, after the first 5 s) and convergence over "
+             "the runs that kept walking.", ""]
     lines += _md_table(*stats_table(data)) + [""]
     if len(data.rows) < expected:
         lines += [f"**Incomplete:** {expected - len(data.rows)} row(s) missing "

@@ -14,6 +14,12 @@ Layout (every key below is known; anything else is an error)::
                                     # from the duration
     retries = 2                     # optional (0-10, default 2): re-runs of a task whose
                                     # worker or run process died
+    metric = "settled_error_vx"     # optional: the error the paired verdicts compare,
+                                    # steady_state_error_vx (default) or settled_error_vx
+
+    [replicas]                      # optional: the verdicts' two arms (the first two of
+    adaptive = ["adaptive_k2"]      # compare), each with as many replica arms, paired by
+    pd_only = ["pd_only_k2"]        # position: the verdicts judge per-sample outcomes
 
     [factors.torso_mass_kg]         # see scenarios.campaign.factors for the names
     dist = "uniform"                # uniform | lhs: low, high (+ step); randint: low, high
@@ -32,7 +38,7 @@ import copy
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 from scenarios.errors import ScenarioError
 from scenarios.lang import spec as scenario_spec
@@ -45,7 +51,9 @@ from scenarios.lang.tomlfile import depth_problem, read_toml
 
 CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
 TOP_KEYS = ("name", "description", "base", "duration_s", "compare", "samples", "seed",
-            "task_timeout_s", "retries", "factors")
+            "task_timeout_s", "retries", "factors", "metric", "replicas")
+#: The errors the paired verdicts may compare (columns of campaign.csv), the default first.
+VERDICT_METRICS = ("steady_state_error_vx", "settled_error_vx")
 DISTS = ("uniform", "lhs", "randint", "choice", "grid")
 DIST_KEYS = {"uniform": ("dist", "low", "high", "step"), "lhs": ("dist", "low", "high", "step"),
              "randint": ("dist", "low", "high"), "choice": ("dist", "values", "weights"),
@@ -90,6 +98,12 @@ class Campaign:
     task_timeout_s: float | None = None
     source: str | None = None
     comm_step_s: float = field(default=DEFAULT_COMM_STEP_S)
+    metric: str = VERDICT_METRICS[0]  # the error the paired verdicts compare
+    replicas: tuple[tuple[str, tuple[str, ...]], ...] = ()  # (arm, its replica arms) for the verdicts
+
+    def analysis_settings(self) -> dict[str, Any]:
+        """What the campaign's report needs beyond the rows (written into campaign.json)."""
+        return {"metric": self.metric, "replicas": {arm: list(more) for arm, more in self.replicas}}
 
     @property
     def grid(self) -> tuple[Factor, ...]:
@@ -263,6 +277,57 @@ def _flatten_regulator(raw: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+def _verdict_metric(doc: Mapping[str, Any], probs: Problems) -> str:
+    metric = doc.get("metric", VERDICT_METRICS[0])
+    if metric not in VERDICT_METRICS:
+        probs.add("metric", metric, f"must be one of {', '.join(VERDICT_METRICS)}")
+        return VERDICT_METRICS[0]
+    return metric
+
+
+def _replicas(doc: Mapping[str, Any], arms: Sequence[str] | None,
+              probs: Problems) -> tuple[tuple[str, tuple[str, ...]], ...]:
+    """``[replicas]``: ``ARM = [replica arms]``. The verdicts of the first two arms of
+    ``compare`` take each with its replicas: replica i of the first pairs with replica i of
+    the second on every sample (both lists the same length); a replica is an arm of
+    ``compare`` that runs the same controller under a nuisance change (a gain, a seed)."""
+    raw = doc.get("replicas")
+    if raw is None:
+        return ()
+    if not isinstance(raw, dict) or not raw:
+        probs.add("replicas", raw, "must be a table ARM = [replica arms, ...]")
+        return ()
+    known = set(arms or ())
+    seen: dict[str, str] = {}
+    out = []
+    for arm, more in raw.items():
+        where = f"replicas.{arm}"
+        if arms is not None and arm not in known:
+            probs.add(where, arm, f"is not an arm of compare ({', '.join(arms)})")
+        if not isinstance(more, list) or not more or not all(isinstance(m, str) for m in more):
+            probs.add(where, more, "must be a non-empty list of arm names")
+            continue
+        for m in more:
+            if arms is not None and m not in known:
+                probs.add(where, m, f"is not an arm of compare ({', '.join(arms)})")
+            elif m in raw or m in seen or m == arm or more.count(m) > 1:
+                probs.add(where, m, f"is already {'an arm with replicas' if m in raw or m == arm else 'a replica'}")
+            seen[m] = arm
+        out.append((arm, tuple(more)))
+    groups = dict(out)
+    if arms is not None and len(arms) >= 2 and not probs.items:
+        a, b = arms[0], arms[1]
+        na, nb = len(groups.get(a, ())), len(groups.get(b, ()))
+        if na != nb:
+            probs.add("replicas", {a: na, b: nb},
+                      f"the verdicts pair {a}'s replicas with {b}'s: give both the same number")
+        if any(arm not in (a, b) for arm in groups):
+            probs.add("replicas", list(groups), f"only the verdicts' arms ({a}, {b}) take replicas")
+        if a in seen or b in seen:
+            probs.add("replicas", [a, b], "the verdicts' arms cannot be replicas of another arm")
+    return tuple(out)
+
+
 def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_dir: Path | None = None) -> Campaign:
     """Validate a parsed campaign document; raise ScenarioError listing every problem."""
     base_dir = base_dir or Path.cwd()
@@ -300,6 +365,8 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
                                       f"{MAX_SAMPLES} in all")
     if "terrain" in raw and any(n.startswith("terrain_") for n in raw):
         probs.note("factors.terrain", "give the terrain factor or terrain_* factors, not both")
+    metric = _verdict_metric(doc, probs)
+    replicas = _replicas(doc, list(base.get("compare") or ["adaptive"]) if base is not None else None, probs)
     if base is not None and not probs.items:
         _probe_factors(factors, base, base_dir, probs)
     if probs.items:
@@ -307,7 +374,7 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
     order = fx.apply_order([f.name for f in factors])
     factors.sort(key=lambda f: order.index(f.name))
     return Campaign(name, description, ref, base, base_dir, samples, seed, tuple(factors), retries, timeout,
-                    source, float(base["comm_step_s"]))
+                    source, float(base["comm_step_s"]), metric, replicas)
 
 
 def load_campaign(path: str | Path) -> Campaign:

@@ -95,9 +95,10 @@ class CampaignDir:
     """An output folder opened for one campaign (locked while open)."""
 
     def __init__(self, root: Path, name: str, texts: dict[str, str], arms: Sequence[str],
-                 factor_names: Sequence[str]):
+                 factor_names: Sequence[str], analysis: dict[str, Any] | None = None):
         self.root = Path(root)
         self.name = name
+        self.analysis = dict(analysis or {})  # the report's settings (verdict metric, replicas)
         self.texts = texts
         self.arms = list(arms)
         self.cols = columns(factor_names)
@@ -133,6 +134,10 @@ class CampaignDir:
             raise
         if not (self.root / MANIFEST_NAME).is_file():
             self._create(campaign_file)
+        elif self.analysis:  # resumed: the report follows the campaign file's settings now
+            manifest = json.loads((self.root / MANIFEST_NAME).read_text())
+            if any(manifest.get(k) != v for k, v in self.analysis.items()):
+                self._write_manifest({**manifest, **self.analysis})
         self._rewrite(only_complete=True)
         self._csv = open(self.csv_path, "a", newline="")
 
@@ -162,8 +167,10 @@ class CampaignDir:
             self.sample_file(sid).write_text(text)
         if campaign_file is not None:
             shutil.copyfile(campaign_file, self.root / COPY_NAME)
-        manifest = {"name": self.name, "fingerprint": self.fingerprint, "n_samples": len(self.texts),
-                    "arms": self.arms, "columns": self.cols}
+        self._write_manifest({"name": self.name, "fingerprint": self.fingerprint, "n_samples": len(self.texts),
+                              "arms": self.arms, "columns": self.cols, **self.analysis})
+
+    def _write_manifest(self, manifest: dict[str, Any]) -> None:
         tmp = self.root / (MANIFEST_NAME + ".tmp")
         tmp.write_text(json.dumps(manifest, indent=2) + "\n")
         os.replace(tmp, self.root / MANIFEST_NAME)  # written last: a half-created folder has none

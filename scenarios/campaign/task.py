@@ -40,7 +40,8 @@ from scenarios.campaign.forkrun import die_with_parent
 log = logging.getLogger(__name__)
 
 #: The metrics copied from each arm of ``summary.json`` into the campaign CSV.
-METRICS = ("fell", "t_fall_s", "steady_state_error_vx", "steady_state_error_vy", "convergence_time_s",
+METRICS = ("fell", "t_fall_s", "steady_state_error_vx", "steady_state_error_vy", "settled_error_vx",
+           "convergence_time_s",
            "mean_vx_last_s", "mean_vy_last_s", "max_abs_pitch_rad", "max_abs_roll_rad", "sim_s", "wall_s")
 COMPLETE, FAILED = "complete", "failed"
 _TAIL = 600  # characters of the run's stderr kept in a failure reason

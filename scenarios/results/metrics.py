@@ -40,6 +40,10 @@ STEADY_WINDOW_S = 5.0
 LEVEL_WINDOW_S = 4.0
 #: Start-up excluded from the whole-run error (s): from rest to the first steady steps.
 STARTUP_S = 5.0
+#: Time a command must have been constant before ``settled_error_vx`` counts a row (s): the
+#: gait ramps to a new command at 0.5 m/s^2, so a step across the campaigns' 0..1 m/s range
+#: takes it up to 2 s, and the step-averaged velocity lags by one walking step (~0.3 s).
+SETTLE_S = 2.5
 #: A convergence must hold at least this long before the end of the run to count (s).
 MIN_HOLD_S = 1.0
 
@@ -135,6 +139,32 @@ def steady_state_error(rows: np.ndarray, axis: str = "vx", *, window_s: float = 
     e = {"vx": ex, "vy": ey}[axis] if axis != "vy_stride" else lateral_stride_error(rows)
     sel = _last_window(rows, window_s)
     return float(np.mean(np.abs(e[sel])))
+
+
+def settled_error_vx(rows: np.ndarray, *, settle_s: float = SETTLE_S, startup_s: float = STARTUP_S,
+                     fell: bool = False) -> float | None:
+    """Mean |step-averaged forward velocity error| over the rows where the command
+    (``cmd_vx_des`` and ``cmd_vy_des``) has been constant for at least ``settle_s`` and the
+    run is past ``startup_s``: the error the regulator leaves once the gait has reached the
+    command, over every command level of the run (the last ``settle_s`` ... of each hold of
+    a stepped profile, the holds after the ramps of a ramped one). A run with changing
+    commands is judged where a steady state exists; :func:`steady_state_error` over the
+    last seconds would judge the last command step's transient instead.
+
+    ``None`` when the robot fell or no row qualifies.
+    """
+    if fell or len(rows) == 0:
+        return None
+    t = np.asarray(rows["t"], dtype=float)
+    cmd_x = np.asarray(rows["cmd_vx_des"], dtype=float)
+    cmd_y = np.asarray(rows["cmd_vy_des"], dtype=float)
+    changed = np.concatenate(([True], (np.diff(cmd_x) != 0.0) | (np.diff(cmd_y) != 0.0)))
+    since = t - np.maximum.accumulate(np.where(changed, t, -np.inf))
+    sel = (since >= settle_s - 1e-9) & (t >= startup_s - 1e-9)
+    if not sel.any():
+        return None
+    ex, _ = velocity_errors(rows)
+    return float(np.mean(np.abs(ex[sel])))
 
 
 def steady_state_error_yaw_rate(rows: np.ndarray, *, window_s: float = STEADY_WINDOW_S,
@@ -273,6 +303,7 @@ def summarize_arm(rows: np.ndarray, *, fell: bool, t_fall_s: float | None, pertu
         "steady_state_error_vy_stride": steady_state_error(rows, "vy_stride", fell=fell),
         "steady_state_error_yaw_rate": steady_state_error_yaw_rate(rows, fell=fell),
         "run_error_vx": run_error_vx(rows, fell=fell),
+        "settled_error_vx": settled_error_vx(rows, fell=fell),
         "level_errors_vx": level_errors_vx(rows, fell=fell),
         "convergence_time_s": convergence_time(rows, t_from=perturbation_t_s, fell=fell),
         "mean_vx_last_s": mean_last(rows, "tel_vx" if "tel_vx" in rows.dtype.names else "in_vx"),

@@ -411,7 +411,7 @@ def test_paired_verdicts_never_falls_where_pd_walks_and_beats_pd():
     rows += [r("pb2", "adaptive", False, 0.3), r("pb2", "pd_only", False, 0.1)]
     v = analysis.verdicts(rows, "adaptive", "pd_only")
     assert (v["wins"], v["contested"]) == (19, 22) and not v["beats"]  # 86.4 %
-    assert [x[0] for x in v["not_better"]] == ["af", "pb", "pb2"]
+    assert [x[0] for x in v["not_won"]] == ["af", "pb", "pb2"]
 
 
 def test_mcnemar_exact_matches_the_binomial_test():
