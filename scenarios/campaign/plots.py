@@ -137,11 +137,12 @@ def paired(data: analysis.CampaignData) -> str | None:
         return None
     plt = _plt()
     a, b = data.arms[:2]
+    key = data.metric  # the error the verdicts compare
+    label = "sse_vx" if key == "steady_state_error_vx" else key.replace("_error", "")
     by = {(r["sample"], r["arm"]): r for r in data.rows if r["status"] == COMPLETE}
     pairs = [(by[(s, a)], by[(s, b)]) for s, arm in by if arm == a and (s, b) in by]
-    both = [(ra["steady_state_error_vx"], rb["steady_state_error_vx"]) for ra, rb in pairs
-            if not ra["fell"] and not rb["fell"] and ra["steady_state_error_vx"] is not None
-            and rb["steady_state_error_vx"] is not None]
+    both = [(ra.get(key), rb.get(key)) for ra, rb in pairs
+            if not ra["fell"] and not rb["fell"] and ra.get(key) is not None and rb.get(key) is not None]
     fig, ax = plt.subplots(figsize=(4.6, 4.4))
     if both:
         xs, ys = zip(*((y, x) for x, y in both))
@@ -152,8 +153,8 @@ def paired(data: analysis.CampaignData) -> str | None:
         ax.set_ylim(0, lim)
     n_fa = sum(1 for ra, rb in pairs if ra["fell"] and not rb["fell"])
     n_fb = sum(1 for ra, rb in pairs if rb["fell"] and not ra["fell"])
-    ax.set_xlabel(f"{b} sse_vx (m/s)")
-    ax.set_ylabel(f"{a} sse_vx (m/s)")
+    ax.set_xlabel(f"{b} {label} (m/s)")
+    ax.set_ylabel(f"{a} {label} (m/s)")
     ax.set_title(f"below the line: {a} better\n(not shown: only {a} fell {n_fa}, only {b} fell {n_fb})", fontsize=9)
     ax.grid(alpha=0.3)
     return _save(fig, data.root, "paired.png")

@@ -414,6 +414,38 @@ def test_paired_verdicts_never_falls_where_pd_walks_and_beats_pd():
     assert [x[0] for x in v["not_won"]] == ["af", "pb", "pb2"]
 
 
+def test_replicated_verdicts_judge_each_sample_over_its_paired_replicas():
+    def r(sample, arm, fell, err):
+        return {"sample": sample, "arm": arm, "status": "complete", "fell": fell, "t_fall_s": 3.0 if fell else None,
+                "steady_state_error_vx": None if fell else 9.0,  # not the metric compared below
+                "settled_error_vx": None if fell else err, "steady_state_error_vy": None, "convergence_time_s": None}
+    a_arms, b_arms = ("ad", "ad_2", "ad_3"), ("pd", "pd_2", "pd_3")
+
+    def sample(name, a, b):  # a, b: per replica None (fell) or the settled error
+        return [r(name, x, e is None, e) for x, e in zip(a_arms, a)] + \
+               [r(name, y, e is None, e) for y, e in zip(b_arms, b)]
+    rows = (sample("won", (0.01, 0.02, 0.5), (0.1, 0.1, 0.1))  # 2 of 3 pairs won
+            + sample("lost", (0.01, 0.5, 0.5), (0.1, 0.1, 0.1))  # 1 of 3
+            + sample("pd_falls", (None, 0.2, 0.2), (None, None, 0.1))  # pairs: no contest, won, lost: 1 of 2
+            + sample("both_fall", (None, None, None), (None, None, None))  # no contest
+            + sample("ad_edge", (None, 0.01, 0.01), (0.1, 0.1, 0.1))  # fell on 1 of 3, PD on none: 2 of 3 won
+            + sample("ad_falls", (None, None, 0.01), (0.1, 0.1, 0.1)))  # fell on 2 of 3 where PD walked on all
+    v = analysis.verdicts(rows, "ad", "pd", metric="settled_error_vx", replicas_a=a_arms[1:], replicas_b=b_arms[1:])
+    assert v["replicas"] == 3 and v["n"] == 6 and v["contested"] == 5
+    assert v["wins"] == 2 and [x[0] for x in v["not_won"]] == ["ad_falls", "lost", "pd_falls"]
+    assert ("pd_falls", 1, 2, 1, 2) in v["not_won"]  # (sample, pairs won, contested, falls of a, falls of b)
+    assert v["only_a_fell"] == ["ad_falls"] and not v["never_falls_where_b_walks"]
+    assert v["a_fell_some"] == [("ad_edge", 1), ("ad_falls", 2)]
+    # pooled over the 10 pairs both walked: -0.09 five times, -0.08, 0.1, 0.4 three times
+    assert v["median_diff"] == pytest.approx(-0.085)
+    # one replica per arm is the unreplicated verdict; the metric is the one named
+    one = analysis.verdicts(rows, "ad", "pd", metric="settled_error_vx")
+    assert one["replicas"] == 1 and one["only_a_fell"] == ["ad_edge", "ad_falls"]
+    assert analysis.verdicts(rows, "ad", "pd")["median_diff"] == 0.0  # steady_state_error_vx: 9.0 both
+    with pytest.raises(ValueError, match="pair by position"):
+        analysis.verdicts(rows, "ad", "pd", replicas_a=a_arms[1:], replicas_b=b_arms[1:2])
+
+
 def test_mcnemar_exact_matches_the_binomial_test():
     # values of a two-sided exact binomial test with p = 1/2 (scipy.stats.binomtest)
     assert analysis.mcnemar_exact(4, 11) == pytest.approx(0.11846923828125)
@@ -454,3 +486,68 @@ def test_report_tables_every_arm_against_the_second_on_falls(tmp_path):
     two = report.render(analysis.CampaignData(tmp_path, {"name": "t", "n_samples": 3, "arms": arms[:2]},
                                               [x for x in rows if x["arm"] != "pd_gain"], []), [])
     assert "McNemar" not in two  # one pair only: the verdicts say it all
+
+
+def test_report_gives_the_replicated_verdicts_and_every_sample_not_won(tmp_path):
+    from scenarios.campaign import report
+
+    def r(sample, arm, fell, err):
+        return {"sample": sample, "arm": arm, "status": "complete", "fell": fell, "t_fall_s": 3.0 if fell else None,
+                "steady_state_error_vx": None if fell else 0.05, "steady_state_error_vy": None,
+                "settled_error_vx": None if fell else err, "convergence_time_s": None, "run_dir": None}
+    arms = ["adaptive", "pd_only", "adaptive_k2", "pd_k2"]
+    outcomes = {"s1": (0.01, 0.1, 0.01, 0.1), "s2": (None, 0.1, None, 0.1), "s3": (0.2, 0.1, 0.01, 0.1)}
+    rows = [r(s, arm, e is None, e) for s, es in outcomes.items() for arm, e in zip(arms, es)]
+    manifest = {"name": "t", "n_samples": 3, "arms": arms, "metric": "settled_error_vx",
+                "replicas": {"adaptive": ["adaptive_k2"], "pd_only": ["pd_k2"]}}
+    text = report.render(analysis.CampaignData(tmp_path, manifest, rows, []), [])
+    assert "runs adaptive and pd_only 2 times each" in text and "adaptive, adaptive_k2 against pd_only, pd_k2" in text
+    assert "never falls where pd_only walks: FAIL** (samples where pd_only walked on all 2 replicas" in text
+    assert "s2 (2/2)" in text
+    assert "beats pd_only on >= 90 % of paired samples: FAIL** (1 of 3 samples" in text
+    # s3: 1 of 2 pairs won is not more than half; the table gives both arms' mean settled error
+    assert "| [s3](samples/s3.toml) | 1/2 | 0/2 | 0/2 | 0.105 | 0.100 |" in text
+    assert "| [s2](samples/s2.toml) | 0/2 | 2/2 | 0/2 | - | 0.100 |" in text
+
+
+def _nominal_doc() -> dict:
+    return tomllib.loads((REPO_ROOT / "scenarios" / "suite" / "nominal.toml").read_text())
+
+
+def test_campaign_metric_and_replicas_are_checked_up_front():
+    doc = {"name": "c", "samples": 2, "seed": 1, "base": "nominal", "compare": ["adaptive", "pd_only", "a2", "p2"],
+           "factors": {"torso_mass_kg": {"dist": "uniform", "low": 12.0, "high": 14.0}},
+           "metric": "sse", "replicas": {"adaptive": ["a2", "nope"], "pd_only": "p2", "rl_hzd": ["p2"]}}
+    doc_arms = [{"name": "a2", "regulator": {"Kp_x": 0.09}},
+                {"name": "p2", "regulator": {"adaptation_enabled": False, "Kp_x": 0.09}}]
+    with pytest.raises(ScenarioError) as exc:
+        spec.parse_campaign({**doc, "base": {**_nominal_doc(), "arm": doc_arms}})
+    found = exc.value.problems
+    assert any("metric = 'sse'" in p and "steady_state_error_vx, settled_error_vx" in p for p in found)
+    assert any("replicas.adaptive = 'nope'" in p and "not an arm of compare" in p for p in found)
+    assert any("replicas.pd_only = 'p2'" in p and "non-empty list" in p for p in found)
+    assert any("replicas.rl_hzd" in p and "not an arm of compare" in p for p in found)
+    # unequal replica counts of the verdicts' arms
+    with pytest.raises(ScenarioError, match="give both the same number"):
+        spec.parse_campaign({**doc, "base": {**_nominal_doc(), "arm": doc_arms}, "metric": "settled_error_vx",
+                             "replicas": {"adaptive": ["a2"]}})
+    c = spec.parse_campaign({**doc, "base": {**_nominal_doc(), "arm": doc_arms}, "metric": "settled_error_vx",
+                             "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}})
+    assert c.analysis_settings() == {"metric": "settled_error_vx",
+                                     "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}}
+
+
+def test_the_folder_records_the_report_settings_and_a_resume_follows_the_campaign_file(tmp_path):
+    settings = {"metric": "settled_error_vx", "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}}
+    d = CampaignDir(tmp_path, "c", {"s0000": "a"}, ["adaptive", "pd_only"], ["torso_mass_kg"], settings)
+    d.open(resume=False, campaign_file=None)
+    d.finish()
+    d.close()
+    assert analysis.load(tmp_path).metric == "settled_error_vx"
+    assert analysis.load(tmp_path).replicas("pd_only") == ["p2"]
+    d = CampaignDir(tmp_path, "c", {"s0000": "a"}, ["adaptive", "pd_only"], ["torso_mass_kg"],
+                    {"metric": "steady_state_error_vx", "replicas": {}})
+    d.open(resume=True, campaign_file=None)
+    d.close()
+    data = analysis.load(tmp_path)
+    assert data.metric == "steady_state_error_vx" and data.replicas("pd_only") == []

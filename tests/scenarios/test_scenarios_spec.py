@@ -329,6 +329,26 @@ def test_run_error_vx_after_startup():
     assert metrics.run_error_vx(rows, startup_s=20.0) is None
 
 
+def test_settled_error_vx_counts_rows_where_the_command_has_been_constant_for_2_5_s():
+    t = np.arange(4000) * 0.005  # 20 s; commands: 0.5 from 0 s, 1.0 from 10 s, vy_des changes at 15 s
+    vx_des = np.where(t < 10.0, 0.5, 1.0)
+    vy_des = np.where(t < 15.0, 0.0, 0.1)
+    # error 0.3 in each command's first 2.5 s (the transient), 0.02 once settled; 1.0 in start-up
+    since = np.where(t < 10.0, t, np.where(t < 15.0, t - 10.0, t - 15.0))
+    err = np.where(t < 5.0, 1.0, np.where(since < 2.5, 0.3, 0.02))
+    rows = rows_from(t, vx_des + err, vx_des, vy_des=vy_des)
+    # counted: [5, 10) (the first command settled since 2.5 s), [12.5, 15), [17.5, 20)
+    assert metrics.settled_error_vx(rows) == pytest.approx(0.02)
+    # without the start-up cut, the settled part of [2.5, 5) (error 1.0) counts too: 500 of 2500 rows
+    assert metrics.settled_error_vx(rows, startup_s=0.0) == pytest.approx((500 * 1.0 + 2000 * 0.02) / 2500)
+    assert metrics.settled_error_vx(rows, settle_s=0.0) == pytest.approx(float(np.mean(err[t >= 5.0])))
+    assert metrics.settled_error_vx(rows, fell=True) is None
+    assert metrics.settled_error_vx(rows, settle_s=10.5) is None  # no command is held 10.5 s
+    # a ramp (the command changes every row) never settles
+    assert metrics.settled_error_vx(rows_from(t, 0.5, 0.5 + 0.01 * t)) is None
+    assert metrics.summarize_arm(rows, fell=False, t_fall_s=None)["settled_error_vx"] == pytest.approx(0.02)
+
+
 def test_step_alternation():
     t = np.arange(12) * 0.5
     steps = np.arange(12) // 2  # a step change every 2 rows, at t = 1, 2, ..., 5
