@@ -74,7 +74,12 @@ def read_rows(path: Path, cols: Sequence[str]) -> list[dict[str, str]]:
         if header is None:
             return []
         if header != list(cols):
-            raise CampaignDirError(f"{path}: the columns differ from this campaign's")
+            missing = [c for c in cols if c not in header]
+            extra = [c for c in header if c not in cols]
+            raise CampaignDirError(
+                f"{path}: the columns differ from this campaign's (missing: {', '.join(missing) or 'none'}; "
+                f"not expected: {', '.join(extra) or 'none'}; written by another version of the campaign "
+                "tool?); choose another --out")
         rows = [dict(zip(cols, r)) for r in reader if len(r) == len(cols)]
     return rows
 

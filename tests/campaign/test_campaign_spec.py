@@ -551,3 +551,14 @@ def test_the_folder_records_the_report_settings_and_a_resume_follows_the_campaig
     d.close()
     data = analysis.load(tmp_path)
     assert data.metric == "steady_state_error_vx" and data.replicas("pd_only") == []
+
+
+def test_a_folder_written_with_other_columns_is_refused_naming_them(tmp_path):
+    d = _dir(tmp_path)
+    d.open(resume=False, campaign_file=None)
+    d.close()
+    csv_path = tmp_path / "campaign.csv"
+    header, *rest = csv_path.read_text().splitlines()
+    csv_path.write_text("\n".join([header.replace(",settled_error_vx", ""), *rest]) + "\n")
+    with pytest.raises(CampaignDirError, match="missing: settled_error_vx; not expected: none"):
+        _dir(tmp_path).open(resume=True, campaign_file=None)
