@@ -9,6 +9,7 @@ Exit status: 0 every row complete; 1 some failed (they are in the CSV with the r
 """
 from __future__ import annotations
 
+import dataclasses
 import logging
 import sys
 from pathlib import Path
@@ -43,6 +44,9 @@ def add_parser(sub) -> None:
     sp.add_argument("--fork-runs", action="store_true",
                     help="fork each sample's run from a warm process per worker (imports and the base model's "
                          "check done once per worker, not once per sample); default: a new interpreter per run")
+    sp.add_argument("--seed", type=int, default=None,
+                    help="draw the samples from this seed instead of the file's: the same design on other robots "
+                         "(recorded in campaign.json and campaign.md)")
     sp.add_argument("--dry-run", action="store_true", help="validate and list the samples; run nothing")
     sp.set_defaults(func=cmd_campaign)
 
@@ -57,6 +61,8 @@ def _check_args(args) -> list[str]:
         problems.append(f"--task-timeout {args.task_timeout:g}: must be within (0, {MAX_TASK_TIMEOUT_S:g}] s")
     if args.retries is not None and not 0 <= args.retries <= 10:
         problems.append(f"--retries {args.retries}: must be within [0, 10]")
+    if args.seed is not None and not 0 <= args.seed <= 2**63 - 1:
+        problems.append(f"--seed {args.seed}: must be within [0, {2**63 - 1}]")
     if args.controller == "native":
         from scenarios.run.options import controller_problem
 
@@ -94,6 +100,8 @@ def cmd_campaign(args) -> int:
     try:
         path = spec.resolve_campaign(args.campaign)
         campaign = spec.load_campaign(path)
+        if args.seed is not None and not problems:
+            campaign = dataclasses.replace(campaign, seed=args.seed)
         samples = sampling.draw(campaign)
         texts = sampling.build_samples(campaign, samples)
     except ScenarioError as exc:

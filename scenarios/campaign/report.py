@@ -186,8 +186,9 @@ def render(data: analysis.CampaignData, plots: Sequence[str]) -> str:
     m = data.manifest
     failed = [r for r in data.rows if r["status"] != "complete"]
     expected = m["n_samples"] * len(data.arms)
+    drawn = f" (drawn from seed {m['seed']})" if "seed" in m else ""
     lines = [f"# Campaign {m['name']}", "",
-             f"{m['n_samples']} samples x {len(data.arms)} arms ({', '.join(data.arms)}); {len(data.rows)} of "
+             f"{m['n_samples']} samples{drawn} x {len(data.arms)} arms ({', '.join(data.arms)}); {len(data.rows)} of "
              f"{expected} rows present, {len(failed)} failed. Factors: {', '.join(data.factors)}. "
              f"Definition: [{COPY_NAME}]({COPY_NAME}); every sample's scenario: `samples/<id>.toml`; "
              "all rows: `campaign.csv`.", "",

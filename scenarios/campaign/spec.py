@@ -103,7 +103,8 @@ class Campaign:
 
     def analysis_settings(self) -> dict[str, Any]:
         """What the campaign's report needs beyond the rows (written into campaign.json)."""
-        return {"metric": self.metric, "replicas": {arm: list(more) for arm, more in self.replicas}}
+        return {"seed": self.seed, "metric": self.metric,
+                "replicas": {arm: list(more) for arm, more in self.replicas}}
 
     @property
     def grid(self) -> tuple[Factor, ...]:

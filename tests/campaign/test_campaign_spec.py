@@ -353,6 +353,14 @@ def test_cli_refuses_invalid_campaign_and_foreign_folder(tmp_path):
     assert r.returncode == 2 and "holds no campaign" in r.stderr
     r = subprocess.run(cmd + ["smoke", "--dry-run"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0 and len(r.stdout.splitlines()) == 5
+    # --seed: the same design on other samples; the same seed, the same samples
+    other = subprocess.run(cmd + ["smoke", "--dry-run", "--seed", "8"], capture_output=True, text=True, timeout=120)
+    again = subprocess.run(cmd + ["smoke", "--dry-run", "--seed", "8"], capture_output=True, text=True, timeout=120)
+    assert other.returncode == 0 and len(other.stdout.splitlines()) == 5
+    assert other.stdout.splitlines()[0] == r.stdout.splitlines()[0] and other.stdout != r.stdout
+    assert again.stdout == other.stdout
+    r = subprocess.run(cmd + ["smoke", "--dry-run", "--seed", "-1"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and "--seed -1: must be within [0, " in r.stderr
 
 
 # --------------------------------------------------------------------------- statistics
@@ -498,9 +506,10 @@ def test_report_gives_the_replicated_verdicts_and_every_sample_not_won(tmp_path)
     arms = ["adaptive", "pd_only", "adaptive_k2", "pd_k2"]
     outcomes = {"s1": (0.01, 0.1, 0.01, 0.1), "s2": (None, 0.1, None, 0.1), "s3": (0.2, 0.1, 0.01, 0.1)}
     rows = [r(s, arm, e is None, e) for s, es in outcomes.items() for arm, e in zip(arms, es)]
-    manifest = {"name": "t", "n_samples": 3, "arms": arms, "metric": "settled_error_vx",
+    manifest = {"name": "t", "n_samples": 3, "arms": arms, "seed": 2022, "metric": "settled_error_vx",
                 "replicas": {"adaptive": ["adaptive_k2"], "pd_only": ["pd_k2"]}}
     text = report.render(analysis.CampaignData(tmp_path, manifest, rows, []), [])
+    assert "3 samples (drawn from seed 2022) x 4 arms" in text
     assert "runs adaptive and pd_only 2 times each" in text and "adaptive, adaptive_k2 against pd_only, pd_k2" in text
     assert "never falls where pd_only walks: FAIL** (samples where pd_only walked on all 2 replicas" in text
     assert "s2 (2/2)" in text
@@ -533,7 +542,7 @@ def test_campaign_metric_and_replicas_are_checked_up_front():
                              "replicas": {"adaptive": ["a2"]}})
     c = spec.parse_campaign({**doc, "base": {**_nominal_doc(), "arm": doc_arms}, "metric": "settled_error_vx",
                              "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}})
-    assert c.analysis_settings() == {"metric": "settled_error_vx",
+    assert c.analysis_settings() == {"seed": 1, "metric": "settled_error_vx",
                                      "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}}
 
 
