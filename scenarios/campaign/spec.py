@@ -299,6 +299,7 @@ def _replicas(doc: Mapping[str, Any], arms: Sequence[str] | None,
         probs.add("replicas", raw, "must be a table ARM = [replica arms, ...]")
         return ()
     known = set(arms or ())
+    before = len(probs.items)
     seen: dict[str, str] = {}
     out = []
     for arm, more in raw.items():
@@ -311,12 +312,12 @@ def _replicas(doc: Mapping[str, Any], arms: Sequence[str] | None,
         for m in more:
             if arms is not None and m not in known:
                 probs.add(where, m, f"is not an arm of compare ({', '.join(arms)})")
-            elif m in raw or m in seen or m == arm or more.count(m) > 1:
+            elif m in raw or m in seen or m == arm:
                 probs.add(where, m, f"is already {'an arm with replicas' if m in raw or m == arm else 'a replica'}")
             seen[m] = arm
         out.append((arm, tuple(more)))
     groups = dict(out)
-    if arms is not None and len(arms) >= 2 and not probs.items:
+    if arms is not None and len(arms) >= 2 and len(probs.items) == before:  # the lists are sound
         a, b = arms[0], arms[1]
         na, nb = len(groups.get(a, ())), len(groups.get(b, ()))
         if na != nb:

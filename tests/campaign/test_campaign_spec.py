@@ -536,10 +536,18 @@ def test_campaign_metric_and_replicas_are_checked_up_front():
     assert any("replicas.adaptive = 'nope'" in p and "not an arm of compare" in p for p in found)
     assert any("replicas.pd_only = 'p2'" in p and "non-empty list" in p for p in found)
     assert any("replicas.rl_hzd" in p and "not an arm of compare" in p for p in found)
-    # unequal replica counts of the verdicts' arms
-    with pytest.raises(ScenarioError, match="give both the same number"):
+    # unequal replica counts of the verdicts' arms, reported with an unrelated problem too
+    with pytest.raises(ScenarioError) as exc:
         spec.parse_campaign({**doc, "base": {**_nominal_doc(), "arm": doc_arms}, "metric": "settled_error_vx",
-                             "replicas": {"adaptive": ["a2"]}})
+                             "replicas": {"adaptive": ["a2"]}, "retries": 99})
+    assert any("give both the same number" in p for p in exc.value.problems)
+    assert any("retries = 99" in p for p in exc.value.problems)
+    # an arm twice: one problem
+    with pytest.raises(ScenarioError) as exc:
+        spec.parse_campaign({**doc, "base": {**_nominal_doc(), "arm": doc_arms}, "metric": "settled_error_vx",
+                             "replicas": {"adaptive": ["a2", "a2"], "pd_only": ["p2", "pd_only"]}})
+    assert [p for p in exc.value.problems if "replicas." in p] == [
+        "replicas.adaptive = 'a2': is already a replica", "replicas.pd_only = 'pd_only': is already an arm with replicas"]
     c = spec.parse_campaign({**doc, "base": {**_nominal_doc(), "arm": doc_arms}, "metric": "settled_error_vx",
                              "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}})
     assert c.analysis_settings() == {"seed": 1, "metric": "settled_error_vx",
