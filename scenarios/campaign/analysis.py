@@ -204,7 +204,7 @@ def verdicts(rows: Sequence[dict[str, Any]], a: str, b: str, *, metric: str = "s
         raise ValueError(f"{a} has {len(replicas_a)} replicas, {b} {len(replicas_b)}: they pair by position")
     pairs = [(a, b), *zip(replicas_a, replicas_b)]
     by = {(r["sample"], r["arm"]): r for r in rows if r["status"] == COMPLETE}
-    samples = sorted({r["sample"] for r in rows if all((r["sample"], x) in by for pair in pairs for x in pair)})
+    samples = sorted({s for s, _ in by if all((s, x) in by for pair in pairs for x in pair)})
     n_pairs = len(pairs)
     out: dict[str, Any] = {"n": len(samples), "replicas": n_pairs, "metric": metric, "contested": 0, "wins": 0,
                            "only_a_fell": [], "a_fell_some": [], "not_won": []}

@@ -133,27 +133,27 @@ class CampaignDir:
             self._lock = None
             raise CampaignDirError(f"{self.root}: another campaign process is writing into this folder") from None
         try:
-            self._check_contents(resume)
+            manifest = self._check_contents(resume)
         except CampaignDirError:
             self.close()
             raise
-        if not (self.root / MANIFEST_NAME).is_file():
+        if manifest is None:
             self._create(campaign_file)
         elif self.analysis:  # resumed: the report follows the campaign file's settings now
-            manifest = json.loads((self.root / MANIFEST_NAME).read_text())
             if any(manifest.get(k) != v for k, v in self.analysis.items()):
                 self._write_manifest({**manifest, **self.analysis})
         self._rewrite(only_complete=True)
         self._csv = open(self.csv_path, "a", newline="")
 
-    def _check_contents(self, resume: bool) -> None:
+    def _check_contents(self, resume: bool) -> dict[str, Any] | None:
+        """The folder's manifest (None for an empty folder), if it may be opened."""
         manifest_path = self.root / MANIFEST_NAME
         if not manifest_path.is_file():
             others = [p.name for p in self.root.iterdir() if p.name != ".lock"]
             if others:
                 raise CampaignDirError(f"{self.root}: not empty and holds no campaign ({', '.join(sorted(others)[:5])}"
                                        f"{', ...' if len(others) > 5 else ''}); choose another --out")
-            return
+            return None
         try:
             manifest = json.loads(manifest_path.read_text())
         except (OSError, json.JSONDecodeError) as exc:
@@ -165,6 +165,7 @@ class CampaignDir:
         if not resume:
             raise CampaignDirError(f"{self.root} already holds this campaign ({self.name!r}): continue it with "
                                    "--resume, or choose another --out")
+        return manifest
 
     def _create(self, campaign_file: Path | None) -> None:
         self.samples_dir.mkdir(exist_ok=True)

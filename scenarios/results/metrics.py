@@ -146,8 +146,8 @@ def settled_error_vx(rows: np.ndarray, *, settle_s: float = SETTLE_S, startup_s:
     """Mean |step-averaged forward velocity error| over the rows where the command
     (``cmd_vx_des`` and ``cmd_vy_des``) has been constant for at least ``settle_s`` and the
     run is past ``startup_s``: the error the regulator leaves once the gait has reached the
-    command, over every command level of the run (the last ``settle_s`` ... of each hold of
-    a stepped profile, the holds after the ramps of a ramped one). A run with changing
+    command, over every command level of the run (each hold of a stepped profile after its
+    first ``settle_s``, the holds after the ramps of a ramped one). A run with changing
     commands is judged where a steady state exists; :func:`steady_state_error` over the
     last seconds would judge the last command step's transient instead.
 
