@@ -38,7 +38,7 @@ _PREFIX = struct.Struct("<8sH")
 _COUNTS = struct.Struct("<8sHHI")  # magic, version, n_rows, n_neurons
 #: The float64 fields after stride_calls: the stride sums and means, then the command reference.
 _TAIL_FLOATS = ("stride_sum_vy", "stride_sum_roll", "vy_mean_prev", "vy_mean_last",
-                  "roll_mean_prev", "roll_mean_last", "ref_vx", "ref_vy", "ref_sum_vx", "ref_vx_step")
+                "roll_mean_prev", "roll_mean_last", "ref_vx", "ref_vy", "ref_sum_vx", "ref_vx_step")
 _CRC = struct.Struct("<I")
 _FLOAT64_BYTES = 8
 _UNKNOWN_SCALES = (math.nan,) * 3

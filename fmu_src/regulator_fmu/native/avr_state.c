@@ -106,8 +106,8 @@ static AvrBlob *state_get(const AvrInstance *inst, AvrBlob *reuse) {
         put_u64(p + STRIDE_OFFSET, (uint64_t)c->stride_boundaries);
         put_u64(p + STRIDE_OFFSET + 8, (uint64_t)c->stride_calls);
         const double tail[N_TAIL_DOUBLES] = {c->stride_sum_vy, c->stride_sum_roll, c->vy_mean_prev,
-                                                 c->vy_mean_last, c->roll_mean_prev, c->roll_mean_last,
-                                                 c->ref_vx, c->ref_vy, c->ref_sum_vx, c->ref_vx_step};
+                                             c->vy_mean_last, c->roll_mean_prev, c->roll_mean_last,
+                                             c->ref_vx, c->ref_vy, c->ref_sum_vx, c->ref_vx_step};
         for (int i = 0; i < N_TAIL_DOUBLES; ++i) put_f64(p + STRIDE_OFFSET + 16 + 8 * i, tail[i]);
     }
     for (int vr = 0; vr < AVR_N_VARS; ++vr) put_f64(p + BLOB_HEADER + 8 * vr, inst->values[vr]);
@@ -232,8 +232,8 @@ static AvrStatus state_set(AvrInstance *inst, const char *call, const AvrBlob *b
         core.stride_boundaries = (int64_t)get_u64(p + STRIDE_OFFSET);
         core.stride_calls = (int64_t)get_u64(p + STRIDE_OFFSET + 8);
         double *tail[N_TAIL_DOUBLES] = {&core.stride_sum_vy, &core.stride_sum_roll, &core.vy_mean_prev,
-                                            &core.vy_mean_last, &core.roll_mean_prev, &core.roll_mean_last,
-                                            &core.ref_vx, &core.ref_vy, &core.ref_sum_vx, &core.ref_vx_step};
+                                        &core.vy_mean_last, &core.roll_mean_prev, &core.roll_mean_last,
+                                        &core.ref_vx, &core.ref_vy, &core.ref_sum_vx, &core.ref_vx_step};
         for (int i = 0; i < N_TAIL_DOUBLES; ++i) *tail[i] = get_f64(p + STRIDE_OFFSET + 16 + 8 * i);
         const unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
         for (size_t i = 0; i < (size_t)AVR_N_ROWS * n; ++i) core.weights[i] = get_f64(w + 8 * i);
