@@ -59,6 +59,7 @@ class RegulatorParams:
     leakage_per_s: float = _default("leakage_per_s")  # 1/s
     leakage_mode: int = _default("leakage_mode")
     command_accel_limit_mps2: float = _default("command_accel_limit_mps2")  # m/s^2
+    learn_settled_steps: int = _default("learn_settled_steps")
     error_deadzone_mps: float = _default("error_deadzone_mps")  # m/s
     weight_norm_max: float = _default("weight_norm_max")  # rad/Hz
 

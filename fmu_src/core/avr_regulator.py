@@ -23,7 +23,7 @@ from fmu_src.core.avr_network import (INV_TAU_RC, input_currents, lif_rates_time
                            readonly, scaled_inputs)
 from fmu_src.core.avr_params import network_key, validate_inputs
 from fmu_src.core.avr_specs import (ANGLE_LIMIT_RAD, OFFSET_NAMES, INT32_MAX, RATE_LIMIT_RADPS,
-                        VELOCITY_LIMIT_MPS)
+                        SETTLED_STEPS_MAX, VELOCITY_LIMIT_MPS)
 
 __all__ = ["WEIGHT_ROWS", "N_WEIGHT_ROWS", "STRIDE_READY", "RegulatorState",
            "initial_state", "step"]
@@ -74,6 +74,9 @@ class RegulatorState:
       ``ref_vx``/``ref_vy`` (m/s) after the last call, ``ref_sum_vx`` the sum of ``ref_vx``
       over the calls of the current step, ``ref_vx_step`` its mean over the step before
       (held, as ``vx`` is).
+    * ``settled_steps``: step_index changes seen since the command reference last moved
+      (:func:`_advance_settled`; stops at ``SETTLED_STEPS_MAX``): the velocity networks wait
+      for ``learn_settled_steps`` of them.
     """
 
     weights: np.ndarray
@@ -97,6 +100,7 @@ class RegulatorState:
     ref_vy: float = 0.0
     ref_sum_vx: float = 0.0
     ref_vx_step: float = 0.0
+    settled_steps: int = 0
 
     def __post_init__(self):
         weights = self.weights
@@ -168,12 +172,14 @@ def step(state: RegulatorState, inputs, dt: float, params, networks) -> tuple[Re
         values = (vx, vy, ref_x, ref_y, pitch, roll, pitch_rate, roll_rate, step_index)
     else:
         ref_x, ref_y = vx_des, vy_des
+    settled_steps = _advance_settled(state, reference, vx_des, vy_des, step_index)
     pd_x, pd_y, vx_at, vy_at = _held_pd_terms(state, params, vx, vy, ref_x, ref_y, step_index)
     stride = _advance_stride(state, step_index, vy, roll)
     pd_pitch, pd_roll = _torso_pd_terms(params, pitch, roll, pitch_rate, roll_rate)
     weights, psi = state.weights, None
     if params.adaptation_enabled:
-        weights, psi = _adapt(weights, values, stride, dt, params, networks)
+        velocity_learns = settled_steps >= params.learn_settled_steps
+        weights, psi = _adapt(weights, values, stride, dt, params, networks, velocity_learns)
     out = _compose_outputs((pd_x, pd_y, pd_pitch, pd_roll), psi, params)
     out["error_vx"] = vx - vx_des
     out["error_vy"] = vy - vy_des
@@ -186,7 +192,7 @@ def step(state: RegulatorState, inputs, dt: float, params, networks) -> tuple[Re
         weights=weights, last_step_index=step_index, vx_at_step=vx_at, vy_at_step=vy_at,
         pd_x=pd_x, pd_y=pd_y, n_calls=state.n_calls + 1 if state.n_calls < MAX_CALLS else MAX_CALLS,
         time_s=state.time_s + dt,
-        network_key=state.network_key, **stride, **reference)
+        network_key=state.network_key, settled_steps=settled_steps, **stride, **reference)
     return new_state, out
 
 
@@ -281,6 +287,28 @@ def _advance_reference(state: RegulatorState, params, vx: float, vy: float, vx_d
     return dict(ref_vx=ref_vx, ref_vy=ref_vy, ref_sum_vx=ref_sum_vx, ref_vx_step=ref_vx_step)
 
 
+#: How close (m/s) the command reference must be to the command to count as settled: the step
+#: mean of a constant reference (a sum of equal terms divided by their count) can differ from
+#: it in the last bits.
+SETTLED_TOLERANCE_MPS = 1e-9
+
+
+def _advance_settled(state: RegulatorState, reference: dict, vx_des: float, vy_des: float,
+                     step_index: int) -> int:
+    """``settled_steps`` after this call: 0 while the reference (``ref_vx``, ``ref_vy`` and the
+    step mean ``ref_vx_step``, after this call) differs from the command by more than
+    ``SETTLED_TOLERANCE_MPS``, else one more at each change of step_index (the first call
+    counts as one), up to ``SETTLED_STEPS_MAX``."""
+    tolerance = SETTLED_TOLERANCE_MPS
+    if (abs(reference["ref_vx"] - vx_des) > tolerance
+            or abs(reference["ref_vy"] - vy_des) > tolerance
+            or abs(reference["ref_vx_step"] - vx_des) > tolerance):
+        return 0
+    if step_index != state.last_step_index and state.settled_steps < SETTLED_STEPS_MAX:
+        return state.settled_steps + 1
+    return state.settled_steps
+
+
 def _torso_pd_terms(params, pitch, roll, pitch_rate, roll_rate) -> tuple[float, float]:
     """``(pd_pitch, pd_roll)`` (rad), every call."""
     pd_pitch = params.Kp_pitch * (pitch - params.pitch_des) + params.Kd_pitch * pitch_rate
@@ -313,9 +341,11 @@ def _advance_stride(state: RegulatorState, step_index: int, vy: float, roll: flo
         roll_mean_prev=roll_means[0], roll_mean_last=roll_means[1])
 
 
-def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, networks):
+def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, networks,
+           velocity_learns: bool = True):
     """The networks' saturated outputs ``psi`` (x, y, pitch, roll; rad) with the weights
-    from before this call, and the weights after this call's PES update."""
+    from before this call, and the weights after this call's PES update (with 0 as the x and
+    y errors unless ``velocity_learns``)."""
     vx, vy, vx_des, vy_des, pitch, roll, pitch_rate, roll_rate, step_index = values
     scaled = scaled_inputs(vx, vx_des, vy, vy_des, pitch, roll, pitch_rate, roll_rate, params)
     # tau_rc * rates, (3, n): the factor 1 / tau_rc goes into scalars below
@@ -330,6 +360,8 @@ def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, 
     psi = [limit if value > limit else (-limit if value < -limit else value) for value in raw]
     if params.learning_rate != 0.0 and step_index >= params.learn_from_step:
         errors = _learning_errors(stride, vx, vx_des, vy_des, pitch, params)
+        if not velocity_learns:
+            errors = (0.0, 0.0, errors[2], errors[3])
         weights = _pes_update(weights, row_rates, raw, sums, errors, dt, params)
     return weights, psi
 

@@ -17,7 +17,7 @@ import numpy as np
 
 __all__ = [
     "OUTPUT_JOINTS", "VarSpec", "PARAM_SPECS", "INPUT_SPECS", "OUTPUT_SPECS",
-    "VELOCITY_LIMIT_MPS", "ANGLE_LIMIT_RAD", "RATE_LIMIT_RADPS", "INT32_MAX",
+    "VELOCITY_LIMIT_MPS", "ANGLE_LIMIT_RAD", "RATE_LIMIT_RADPS", "INT32_MAX", "SETTLED_STEPS_MAX",
     "FIXED_PARAMS", "PARAM_BY_NAME", "OUTPUT_NAMES", "OFFSET_NAMES", "PYTHON_TYPES",
     "format_range", "check_param",
 ]
@@ -30,6 +30,8 @@ OUTPUT_JOINTS = (
 
 #: Largest FMI Integer (int32): the upper bound of the integer variables.
 INT32_MAX = 2**31 - 1
+#: Largest learn_settled_steps; the state's count of settled step changes stops at it.
+SETTLED_STEPS_MAX = 1000
 
 #: The Python type an FMI variable's value is converted to, by FMI type name.
 PYTHON_TYPES = {"Real": float, "Integer": int, "Boolean": bool}
@@ -166,6 +168,15 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
            "controller's gait ramp, so a command step is not answered twice (once by the gait, "
            "once by an offset against an error the gait is already removing); 0 switches it "
            "off (vx_des and vy_des are used as they come, the paper's rule)"),
+    _param("learn_settled_steps", 0, 0, SETTLED_STEPS_MAX, "1",
+           "The velocity networks (x, y) learn only once the command reference has been "
+           "settled over this many step_index changes, in [0, 1000]: settled means the "
+           "reference equals the command (vx_des, vy_des) and so does its mean over the last "
+           "completed step (each within 1e-9 m/s); a moving reference resets the count. While "
+           "they wait their learning errors are 0 (leakage and projection still act) and the "
+           "torso networks learn as usual. Errors during a command change are mostly the "
+           "gait's own transient, which a learned offset carries over to the next command; "
+           "0 switches it off (the paper's rule: learn at every call)", type="Integer"),
     _param("error_deadzone_mps", 0.0, 0.0, 1.0, "m/s",
            "Dead-zone on the two velocity learning errors (x: vx_des - vx; y: vy_des - the "
            "stride-averaged vy), m/s, in [0, 1]: an error e learns as e - d if e > d, e + d "

@@ -110,8 +110,8 @@ def test_specs_match_dataclasses_and_api_order():
         "psi_gain_stance_hip_roll", "psi_gain_stance_hip_pitch", "psi_gain_stance_knee",
         "adaptation_enabled", "velocity_scale_mps", "angle_scale_rad",
         "rate_scale_radps", "n_neurons", "seed", "delta_limit_rad",
-        "leakage_per_s", "leakage_mode", "command_accel_limit_mps2", "error_deadzone_mps",
-        "weight_norm_max"]
+        "leakage_per_s", "leakage_mode", "command_accel_limit_mps2", "learn_settled_steps",
+        "error_deadzone_mps", "weight_norm_max"]
     assert [f.name for f in dataclasses.fields(RegulatorParams)] == [s.name for s in PARAM_SPECS]
     p = RegulatorParams()
     for s in PARAM_SPECS:
@@ -923,6 +923,47 @@ def test_command_reference_is_learned_against_and_saved_in_the_state():
     assert again.state == limited.state and again.state.ref_vx == limited.state.ref_vx != 0.0
     more = [RegulatorInputs(vx=0.6, vx_des=1.5, step_index=8 + k // 10) for k in range(40)]
     assert run(again, more) == run(limited, more)
+
+
+def test_velocity_learning_waits_for_a_settled_reference():
+    """With learn_settled_steps = N the x and y rows do not learn (plain rule: they stay put)
+    while the command reference moves and until N step changes after it settled; the torso rows
+    learn as without it; the count survives a state round trip; a forged count is refused."""
+    def seq(k0, k1, vx_des):  # 10 calls per step; the robot lags the command by 0.2 m/s
+        return [RegulatorInputs(vx=vx_des - 0.2, vx_des=vx_des, vy=0.05, pitch=0.1, step_index=k // 10)
+                for k in range(k0, k1)]
+    limit = dict(learning_rate=1e-4, command_accel_limit_mps2=0.5)
+    waits, plain = Regulator(small(learn_settled_steps=3, **limit)), Regulator(small(**limit))
+    # from rest (the reference starts at the measured vx, 0.2 below the command: it needs
+    # 0.2 / (0.5 * 0.005) = 80 calls to get there, and its step mean one step more)
+    run(waits, seq(0, 80, 0.4)), run(plain, seq(0, 80, 0.4))
+    assert waits.state.settled_steps == 0
+    assert np.all(waits.state.weights[[0, 1]] == 0.0) and np.any(plain.state.weights[0] != 0.0)
+    assert np.array_equal(waits.state.weights[2], plain.state.weights[2])
+    # settled: the step mean reaches the command at the change of step 9 -> counts 1; learns from 3
+    counts = []
+    for u in seq(80, 140, 0.4):
+        waits.step(u, DT)
+        counts.append(waits.state.settled_steps)
+    assert counts[::10] == [0, 1, 2, 3, 4, 5] and np.any(waits.state.weights[0] != 0.0)
+    blob = state_to_bytes(waits.state)
+    again = Regulator(small(learn_settled_steps=3, **limit))
+    again.load_state(blob)
+    assert again.state == waits.state and again.state.settled_steps == 5
+    x_row = waits.state.weights[0].copy()
+    run(waits, seq(140, 141, 0.9))  # a new command: the reference moves, the count restarts
+    assert waits.state.settled_steps == 0 and np.array_equal(waits.state.weights[0], x_row)
+    h = avr_statebytes._HEADER
+    fields_ = list(h.unpack_from(blob))
+    for forged in (-1, fields_[9] + 1):  # below 0, beyond n_calls
+        fields_[-1] = forged
+        with pytest.raises(StateError, match=rf"settled_steps = {forged}: must be in \[0, min\(n_calls"):
+            state_from_bytes(_recrc(h.pack(*fields_) + blob[h.size:-4]), waits.params)
+
+
+def test_learn_settled_steps_range_is_named():
+    with pytest.raises(ParameterError, match=r"learn_settled_steps = -1: must be an integer in \[0, 1000\]"):
+        small(learn_settled_steps=-1)
 
 
 def test_command_accel_limit_range_is_named():

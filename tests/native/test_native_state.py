@@ -28,7 +28,7 @@ def _corruptions(blob: bytes, other_blob: bytes):
         struct.pack_into(fmt, body, offset, value)
         return with_crc(body)
 
-    values = 208  # header (format version 2: with the stride accumulators at 144..207)
+    values = 248  # header (format version 4: stride accumulators and reference at 144..239, settled_steps at 240)
     weights = values + 8 * n_vars
     yield "truncated", blob[:-1]
     yield "extended", blob + b"\0"
@@ -51,6 +51,8 @@ def _corruptions(blob: bytes, other_blob: bytes):
     # counters no run reaches: the next doStep would overflow them (UBSan: tests/support/native/sanitize_run.py)
     yield "n_calls = INT64_MAX, valid checksum", patched(96, "<q", 2**63 - 1)
     yield "stride_calls = INT64_MAX, valid checksum", patched(152, "<q", 2**63 - 1)
+    yield "settled_steps beyond n_calls, valid checksum", patched(240, "<q", 2**40)
+    yield "negative settled_steps, valid checksum", patched(240, "<q", -1)
 
 
 @FMI

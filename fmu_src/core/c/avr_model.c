@@ -304,6 +304,7 @@ static void learn(AvrCore *core, const double *values, double dt, const double d
     double e_roll = ready ? V(roll_des) - 0.5 * (core->roll_mean_prev + core->roll_mean_last) : 0.0;
     double e_x = V(vx_des) - V(vx), zone = V(error_deadzone_mps);
     if (zone != 0.0) e_x = dead_zone(e_x, zone), e_y = dead_zone(e_y, zone);
+    if ((double)core->settled_steps < V(learn_settled_steps)) e_x = 0.0, e_y = 0.0;
     double err[AVR_N_ROWS] = {e_x, e_y, V(pitch_des) - V(pitch), e_roll};
     double keep = leak_factor(V(leakage_per_s), dt);
     /* leakage_mode 1 (avr_regulator._keep_current_output): coef + amount (w . h) / |h|^2 for a row
@@ -409,10 +410,23 @@ static void advance_reference(AvrCore *c, const double *values, int64_t si, doub
     }
 }
 
+/* settled_steps after this call (avr_regulator._advance_settled): 0 while the reference (after
+ * advance_reference) differs from the command by more than AVR_SETTLED_TOLERANCE_MPS, else one
+ * more at each change of step_index, up to AVR_SETTLED_STEPS_MAX. */
+static void advance_settled(AvrCore *c, const double *values, int64_t si) {
+    double tol = AVR_SETTLED_TOLERANCE_MPS;
+    if (fabs(c->ref_vx - V(vx_des)) > tol || fabs(c->ref_vy - V(vy_des)) > tol
+        || fabs(c->ref_vx_step - V(vx_des)) > tol)
+        c->settled_steps = 0;
+    else if (si != c->last_step_index && c->settled_steps < AVR_SETTLED_STEPS_MAX)
+        c->settled_steps += 1;
+}
+
 void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) {
     double vx = V(vx), vy = V(vy);
     int64_t si = (int64_t)V(step_index);
     advance_reference(core, values, si, dt);
+    advance_settled(core, values, si);
     /* With the limit on, PD, network inputs and learning read the reference in place of the
      * command (restored below for the error outputs). */
     double vx_des = V(vx_des), vy_des = V(vy_des);

@@ -55,6 +55,9 @@ typedef struct {
     /* The command reference (avr_regulator._advance_reference): after the last call, the sum
      * of ref_vx over the current step's calls, its mean over the step before. */
     double ref_vx, ref_vy, ref_sum_vx, ref_vx_step;
+    /* step_index changes since the reference last moved (avr_regulator._advance_settled), up to
+     * AVR_SETTLED_STEPS_MAX: the velocity networks wait for learn_settled_steps of them. */
+    int64_t settled_steps;
 } AvrCore;
 
 #define AVR_STRIDE_READY 4 /* stride_boundaries once two steps are complete */

@@ -1,8 +1,9 @@
 /*
  * The FMU state of an instance as one self-checking blob (see avr_instance.h).
  *
- * FMU state blob, little-endian, format version 3 (offsets in bytes; versions 1, without
- * the stride accumulators, and 2, without the command reference, are refused naming both):
+ * FMU state blob, little-endian, format version 4 (offsets in bytes; versions 1, without
+ * the stride accumulators, 2, without the command reference, and 3, without settled_steps,
+ * are refused naming them):
  *     0  "AVRNATIV"            magic
  *     8  u32 version           12  u32 total size in bytes
  *    16  GUID, NUL-padded to 48 bytes (a state of another FMU build is refused)
@@ -13,7 +14,8 @@
  *   144  i64 stride_boundaries (0..4)   152  i64 stride_calls
  *   160  f64 stride_sum_vy, stride_sum_roll, vy_mean_prev, vy_mean_last, roll_mean_prev,
  *        roll_mean_last, ref_vx, ref_vy, ref_sum_vx, ref_vx_step
- *   240  f64 value of every variable, in value-reference order
+ *   240  i64 settled_steps (0..AVR_SETTLED_STEPS_MAX)
+ *   248  f64 value of every variable, in value-reference order
  *        f64 weights (4 rows of n_neurons)
  *   end-4: u32 CRC-32 (zlib's) of every byte before it
  * A blob is refused unless its size, checksum, GUID and variable count match and every
@@ -32,9 +34,10 @@
 #include "fmi_blob.h"
 
 #define BLOB_MAGIC "AVRNATIV"
-#define BLOB_VERSION 3u
+#define BLOB_VERSION 4u
 #define BLOB_GUID_BYTES 48
-#define BLOB_HEADER 240
+#define BLOB_HEADER 248
+#define SETTLED_OFFSET 240
 #define N_CORE_DOUBLES 5
 #define STRIDE_OFFSET 144
 #define N_TAIL_DOUBLES 10 /* after stride_calls: the stride sums and means, then the command reference */
@@ -109,6 +112,7 @@ static AvrBlob *state_get(const AvrInstance *inst, AvrBlob *reuse) {
                                              c->vy_mean_last, c->roll_mean_prev, c->roll_mean_last,
                                              c->ref_vx, c->ref_vy, c->ref_sum_vx, c->ref_vx_step};
         for (int i = 0; i < N_TAIL_DOUBLES; ++i) put_f64(p + STRIDE_OFFSET + 16 + 8 * i, tail[i]);
+        put_u64(p + SETTLED_OFFSET, (uint64_t)c->settled_steps);
     }
     for (int vr = 0; vr < AVR_N_VARS; ++vr) put_f64(p + BLOB_HEADER + 8 * vr, inst->values[vr]);
     unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
@@ -128,7 +132,7 @@ static int finite_doubles(const unsigned char *p, size_t count) {
 static AvrStatus check_frame(const AvrInstance *inst, const char *call, const unsigned char *p, size_t size) {
     static const FmiBlobFormat format = {
         .magic = BLOB_MAGIC, .magic_bytes = 8, .version_at = 8, .version = BLOB_VERSION,
-        .version_note = "(older states predate the stride-averaged lateral/roll learning (version 1) or the command reference (version 2) and cannot be continued)",
+        .version_note = "(older states predate the stride-averaged lateral/roll learning (version 1), the command reference (version 2) or the settled-step count (version 3) and cannot be continued)",
         .size_at = 12, .size_field_bytes = 4, .size_add = 0, .crc_bytes = 4,
         .guid_at = 16, .guid_bytes = BLOB_GUID_BYTES, .guid = AVR_GUID,
         .min_bytes = BLOB_HEADER + 8u * AVR_N_VARS + 4u}; /* blob_size(0) */
@@ -168,7 +172,8 @@ static AvrStatus check_contents(const AvrInstance *inst, const char *call, const
 /* The counters a run can reach (as avr_statebytes.counter_problems): it starts with
  * last_step_index -1, n_calls 0, time_s 0 and no stride; each call sets last_step_index to its
  * step_index, adds one to n_calls (stopping at AVR_MAX_CALLS) and its dt > 0 to time_s;
- * stride_calls counts the calls of the current step, so at most n_calls.  Beyond these the
+ * stride_calls counts the calls of the current step, so at most n_calls; settled_steps counts
+ * step_index changes, at most one per call, up to AVR_SETTLED_STEPS_MAX.  Beyond these the
  * next step's arithmetic would overflow (signed overflow is undefined behaviour). */
 static AvrStatus check_counters(const AvrInstance *inst, const char *call, const unsigned char *p) {
     const int64_t last = (int64_t)get_u64(p + 88), n_calls = (int64_t)get_u64(p + 96);
@@ -188,6 +193,10 @@ static AvrStatus check_counters(const AvrInstance *inst, const char *call, const
         return avr_refuse(inst, call, "state has stride_boundaries = %lld, stride_calls = %lld: must be in [0, %d] "
                           "and [0, n_calls = %lld], both 0 or neither", (long long)boundaries, (long long)stride_calls,
                           AVR_STRIDE_READY, (long long)n_calls);
+    const int64_t settled = (int64_t)get_u64(p + SETTLED_OFFSET);
+    if (settled < 0 || settled > n_calls || settled > AVR_SETTLED_STEPS_MAX)
+        return avr_refuse(inst, call, "state has settled_steps = %lld: must be in [0, min(n_calls = %lld, %lld)]",
+                          (long long)settled, (long long)n_calls, (long long)AVR_SETTLED_STEPS_MAX);
     return AVR_OK;
 }
 
@@ -235,6 +244,7 @@ static AvrStatus state_set(AvrInstance *inst, const char *call, const AvrBlob *b
                                         &core.vy_mean_last, &core.roll_mean_prev, &core.roll_mean_last,
                                         &core.ref_vx, &core.ref_vy, &core.ref_sum_vx, &core.ref_vx_step};
         for (int i = 0; i < N_TAIL_DOUBLES; ++i) *tail[i] = get_f64(p + STRIDE_OFFSET + 16 + 8 * i);
+        core.settled_steps = (int64_t)get_u64(p + SETTLED_OFFSET);
         const unsigned char *w = p + BLOB_HEADER + 8 * AVR_N_VARS;
         for (size_t i = 0; i < (size_t)AVR_N_ROWS * n; ++i) core.weights[i] = get_f64(w + 8 * i);
         avr_adopt(inst, net, &core);

@@ -14,8 +14,8 @@ same as in the pythonfmu FMU, so a host can swap one FMU for the other.
 from __future__ import annotations
 
 from fmu_src.core.avr_network import INTERCEPT_RANGE, LN2, MAX_RATE_RANGE_HZ, SQRT2, TAU_RC, TAU_REF
-from fmu_src.core.avr_regulator import MAX_CALLS
-from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+from fmu_src.core.avr_regulator import MAX_CALLS, SETTLED_TOLERANCE_MPS
+from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, SETTLED_STEPS_MAX
 
 _TYPES = {"Real": "AVR_REAL", "Integer": "AVR_INTEGER", "Boolean": "AVR_BOOLEAN"}
 _CAUSALITY = {"parameter": "AVR_PARAMETER", "input": "AVR_INPUT", "output": "AVR_OUTPUT"}
@@ -74,6 +74,7 @@ def vars_header() -> str:
         "AVR_INTERCEPT_LO": INTERCEPT_RANGE[0],
         "AVR_INTERCEPT_HI": INTERCEPT_RANGE[1],
         "AVR_LN2": LN2, "AVR_SQRT2": SQRT2,
+        "AVR_SETTLED_TOLERANCE_MPS": SETTLED_TOLERANCE_MPS,
     }
     categories = [name for name, _ in LOG_CATEGORIES]
     lines = [
@@ -82,6 +83,8 @@ def vars_header() -> str:
         *[f"#define {name} ({c_double(value)})" for name, value in constants.items()], "",
         "/* n_calls and stride_calls stop at it; a state beyond it is refused (avr_regulator.MAX_CALLS) */",
         f"#define AVR_MAX_CALLS {MAX_CALLS}LL", "",
+        "/* settled_steps stops at it (avr_specs.SETTLED_STEPS_MAX, learn_settled_steps' maximum) */",
+        f"#define AVR_SETTLED_STEPS_MAX {SETTLED_STEPS_MAX}LL", "",
         "/* The log categories of the model description: fmi*SetDebugLogging accepts these only */",
         f"#define AVR_N_LOG_CATEGORIES {len(categories)}",
         "static const char *const AVR_LOG_CATEGORIES[AVR_N_LOG_CATEGORIES] = {"
