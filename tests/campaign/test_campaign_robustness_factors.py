@@ -153,3 +153,20 @@ def test_robustness_random_campaign_is_what_the_issue_asks():
         kp = int(g) / 1000
         assert arms[f"adaptive_kpx_{g}"] == {**base, "Kp_x": pytest.approx(kp)}
         assert arms[f"pd_kpx_{g}"] == {**base, "adaptation_enabled": False, "Kp_x": pytest.approx(kp)}
+
+
+def test_robustness_random_settled_is_robustness_random_with_learning_on_settled_commands():
+    """The two campaigns differ only by their name, description and learn_settled_steps on
+    every regulator arm: same samples, so their PD-only and RL-HZD rows are the same runs."""
+    def doc(name):
+        return tomllib.loads(spec.resolve_campaign(name).read_text())
+    plain, settled = doc("robustness_random"), doc("robustness_random_settled")
+    assert settled.pop("name") == "robustness_random_settled" and plain.pop("name") == "robustness_random"
+    assert "learn_settled_steps = 3" in settled.pop("description")
+    plain.pop("description")
+    assert settled["base"]["regulator"].pop("learn_settled_steps") == 3
+    assert settled == plain
+    c = spec.load_campaign(spec.resolve_campaign("robustness_random_settled"))
+    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
+                                     check_plant=False)
+    assert {dict(a.overrides).get("learn_settled_steps") for a in s.arms if a.name != "rl_hzd"} == {3}
