@@ -130,7 +130,8 @@ def test_recorded_closed_loop_matches_the_core(native_fmus, closed_loop_inputs, 
     assert np.array_equal(out.view(np.uint64), reference.view(np.uint64))  # every bit, -0.0 too
 
 
-#: Each remedy against drift (and all three), set so that it acts on the recorded run: the
+#: Each remedy against drift (and all of them, with the command reference and learning on
+#: settled commands), set so that it acts on the recorded run: the
 #: leak halves a weight in ~14 s, the dead-zone is about the within-step swing of vx, and the
 #: bound is below the x row's norm after 20 s of plain learning (7.6e-6 rad/Hz).
 REMEDIES = {
@@ -139,8 +140,10 @@ REMEDIES = {
     "deadzone": {"error_deadzone_mps": 0.05},
     "projection": {"weight_norm_max": 3e-6},
     "command_reference": {"command_accel_limit_mps2": 0.5},  # the run's speed change at 30 s
+    # the velocity rows wait 3 steps after the reference settles, at the start and after 30 s
+    "settled_learning": {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3},
     "all": {"leakage_per_s": 0.05, "leakage_mode": 1, "error_deadzone_mps": 0.05,
-            "weight_norm_max": 3e-6, "command_accel_limit_mps2": 0.5},
+            "weight_norm_max": 3e-6, "command_accel_limit_mps2": 0.5, "learn_settled_steps": 3},
 }
 _remedy_reference = {}
 
@@ -156,6 +159,9 @@ def test_remedies_against_drift_match_the_core(native_fmus, closed_loop_inputs, 
         _remedy_reference[remedy] = core_outputs(closed_loop_inputs, **params)
     reference = _remedy_reference[remedy]
     assert not np.array_equal(reference, closed_loop_reference)  # the remedy acts on this run
+    if remedy == "settled_learning":  # the wait acts beyond the reference it needs
+        assert not np.array_equal(reference, core_outputs(closed_loop_inputs, **LOOP_PARAMS,
+                                                           **REMEDIES["command_reference"]))
     slave = AnySlave(native_fmus[fmi]).init(**params)
     out = np.array([slave.step(k, u) for k, u in enumerate(closed_loop_inputs)])
     slave.close()
