@@ -170,3 +170,23 @@ def test_robustness_random_settled_is_robustness_random_with_learning_on_settled
     s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
                                      check_plant=False)
     assert {dict(a.overrides).get("learn_settled_steps") for a in s.arms if a.name != "rl_hzd"} == {3}
+
+
+def test_robustness_random_settled_lr2_is_robustness_random_settled_at_twice_the_learning_rate():
+    """The two campaigns differ only by their name, description and learning_rate = 2e-6 on
+    every regulator arm (the FMU's default is 1e-6): same samples, same PD-only and RL-HZD
+    runs, and the adaptive arms keep learn_settled_steps = 3."""
+    def doc(name):
+        return tomllib.loads(spec.resolve_campaign(name).read_text())
+    settled, fast = doc("robustness_random_settled"), doc("robustness_random_settled_lr2")
+    assert fast.pop("name") == "robustness_random_settled_lr2" and settled.pop("name") == "robustness_random_settled"
+    assert "learning_rate = 2e-6" in fast.pop("description")
+    settled.pop("description")
+    assert fast["base"]["regulator"].pop("learning_rate") == 2e-6
+    assert fast == settled
+    c = spec.load_campaign(spec.resolve_campaign("robustness_random_settled_lr2"))
+    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
+                                     check_plant=False)
+    regulated = [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+    assert {o.get("learning_rate") for o in regulated} == {2e-6}
+    assert {o.get("learn_settled_steps") for o in regulated} == {3}
