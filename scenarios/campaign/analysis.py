@@ -189,10 +189,10 @@ def verdicts(rows: Sequence[dict[str, Any]], a: str, b: str, *, metric: str = "s
     into a fall or out of one, so the claims are judged on each sample's outcomes over its
     R pairs (with R = 1, on the one run):
 
-    * ``never_falls_where_b_walks``: no sample where ``b`` walked on every replica and ``a``
-      fell on more than half of its replicas (the samples where it did are listed, with
-      the exact 95 % interval of that rate; ``a_fell_some`` lists the samples where ``a``
-      fell on some replica and ``b`` on none).
+    * ``never_falls_where_b_walks``: no sample where ``a`` fell on more than half of its
+      replicas and ``b`` on fewer than half (the same majority reading for both arms; the
+      samples where it did are listed, with the exact 95 % interval of that rate;
+      ``a_fell_some`` lists the samples where ``a`` fell on some replica and ``b`` on none).
     * ``beats``: a pair is contested unless both fell; ``a`` wins it when only ``b`` fell,
       or both walked and ``a``'s ``metric`` is lower. ``a`` wins a sample when it wins more
       than half of the sample's contested pairs; a sample with none is no contest. The
@@ -214,8 +214,8 @@ def verdicts(rows: Sequence[dict[str, Any]], a: str, b: str, *, metric: str = "s
         fb = [by[(s, y)]["fell"] for _, y in pairs]
         if not any(fb) and any(fa):
             out["a_fell_some"].append((s, sum(fa)))
-            if 2 * sum(fa) > n_pairs:
-                out["only_a_fell"].append(s)
+        if 2 * sum(fa) > n_pairs and 2 * sum(fb) < n_pairs:
+            out["only_a_fell"].append(s)
         contested = won = 0
         for (x, y), fell_a, fell_b in zip(pairs, fa, fb):
             if fell_a and fell_b:

@@ -108,7 +108,7 @@ def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
                   "the walk tips a sample into a fall or out of one, so the verdicts judge each sample by its "
                   f"outcomes over the {n_rep} pairs.", ""]
         never = (f"**Verdict: {a} never falls where {b} walks: {'PASS' if v['never_falls_where_b_walks'] else 'FAIL'}**"
-                 f" (samples where {b} walked on all {n_rep} replicas and {a} fell on more than half: "
+                 f" (samples where {a} fell on more than half of the {n_rep} replicas and {b} on fewer than half: "
                  f"{len(v['only_a_fell'])} of {v['n']}, exact 95 % interval {_pct(v['only_a_fell_ci'])}; {fell}. "
                  f"Samples where {a} fell on some replica and {b} on none, with {a}'s falls: {some}).")
         win = (f"a pair is won when only {b} fell, or both walked and {a}'s {label} is lower; a sample is won "
