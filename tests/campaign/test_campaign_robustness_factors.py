@@ -155,38 +155,33 @@ def test_robustness_random_campaign_is_what_the_issue_asks():
         assert arms[f"pd_kpx_{g}"] == {**base, "adaptation_enabled": False, "Kp_x": pytest.approx(kp)}
 
 
-def test_robustness_random_settled_is_robustness_random_with_learning_on_settled_commands():
-    """The two campaigns differ only by their name, description and learn_settled_steps on
-    every regulator arm: same samples, so their PD-only and RL-HZD rows are the same runs."""
-    def doc(name):
-        return tomllib.loads(spec.resolve_campaign(name).read_text())
-    plain, settled = doc("robustness_random"), doc("robustness_random_settled")
-    assert settled.pop("name") == "robustness_random_settled" and plain.pop("name") == "robustness_random"
-    assert "learn_settled_steps = 3" in settled.pop("description")
-    plain.pop("description")
-    assert settled["base"]["regulator"].pop("learn_settled_steps") == 3
-    assert settled == plain
-    c = spec.load_campaign(spec.resolve_campaign("robustness_random_settled"))
-    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
-                                     check_plant=False)
-    assert {dict(a.overrides).get("learn_settled_steps") for a in s.arms if a.name != "rl_hzd"} == {3}
+# Each variant campaign: (its file, the file it varies, the regulator setting it adds, the
+# settings its regulator arms then carry).
+VARIANTS = [
+    ("robustness_random_settled", "robustness_random", ("learn_settled_steps", 3),
+     {"learn_settled_steps": 3, "learning_rate": None}),
+    ("robustness_random_settled_lr2", "robustness_random_settled", ("learning_rate", 2e-6),
+     {"learn_settled_steps": 3, "learning_rate": 2e-6}),
+]
 
 
-def test_robustness_random_settled_lr2_is_robustness_random_settled_at_twice_the_learning_rate():
-    """The two campaigns differ only by their name, description and learning_rate = 2e-6 on
-    every regulator arm (the FMU's default is 1e-6): same samples, same PD-only and RL-HZD
-    runs, and the adaptive arms keep learn_settled_steps = 3."""
+@pytest.mark.parametrize("variant, parent, added, carried", VARIANTS, ids=[v[0] for v in VARIANTS])
+def test_variant_campaigns_differ_from_their_parent_by_one_regulator_setting(variant, parent, added, carried):
+    """A variant differs from the file it varies only by its name, description and one
+    setting on every regulator arm: the same samples, so their PD-only and RL-HZD rows are
+    the same runs (learning settings do not act with adaptation off)."""
     def doc(name):
         return tomllib.loads(spec.resolve_campaign(name).read_text())
-    settled, fast = doc("robustness_random_settled"), doc("robustness_random_settled_lr2")
-    assert fast.pop("name") == "robustness_random_settled_lr2" and settled.pop("name") == "robustness_random_settled"
-    assert "learning_rate = 2e-6" in fast.pop("description")
-    settled.pop("description")
-    assert fast["base"]["regulator"].pop("learning_rate") == 2e-6
-    assert fast == settled
-    c = spec.load_campaign(spec.resolve_campaign("robustness_random_settled_lr2"))
+    key, value = added
+    base, var = doc(parent), doc(variant)
+    assert var.pop("name") == variant and base.pop("name") == parent
+    assert key in var.pop("description")
+    base.pop("description")
+    assert var["base"]["regulator"].pop(key) == value
+    assert var == base
+    c = spec.load_campaign(spec.resolve_campaign(variant))
     s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
                                      check_plant=False)
     regulated = [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
-    assert {o.get("learning_rate") for o in regulated} == {2e-6}
-    assert {o.get("learn_settled_steps") for o in regulated} == {3}
+    for name, expected in carried.items():
+        assert {o.get(name) for o in regulated} == {expected}, name
