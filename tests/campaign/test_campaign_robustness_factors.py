@@ -155,12 +155,12 @@ def test_robustness_random_campaign_is_what_the_issue_asks():
         assert arms[f"pd_kpx_{g}"] == {**base, "adaptation_enabled": False, "Kp_x": pytest.approx(kp)}
 
 
-# Each variant campaign: (its file, the file it varies, the regulator setting it adds, the
-# settings its regulator arms then carry).
+# Each variant campaign: (its file, the file it varies, the regulator setting it adds, as
+# its description spells it, the settings its regulator arms then carry).
 VARIANTS = [
-    ("robustness_random_settled", "robustness_random", ("learn_settled_steps", 3),
+    ("robustness_random_settled", "robustness_random", ("learn_settled_steps", 3, "learn_settled_steps = 3"),
      {"learn_settled_steps": 3, "learning_rate": None}),
-    ("robustness_random_settled_lr2", "robustness_random_settled", ("learning_rate", 2e-6),
+    ("robustness_random_settled_lr2", "robustness_random_settled", ("learning_rate", 2e-6, "learning_rate = 2e-6"),
      {"learn_settled_steps": 3, "learning_rate": 2e-6}),
 ]
 
@@ -172,10 +172,10 @@ def test_variant_campaigns_differ_from_their_parent_by_one_regulator_setting(var
     the same runs (learning settings do not act with adaptation off)."""
     def doc(name):
         return tomllib.loads(spec.resolve_campaign(name).read_text())
-    key, value = added
+    key, value, spelled = added
     base, var = doc(parent), doc(variant)
     assert var.pop("name") == variant and base.pop("name") == parent
-    assert key in var.pop("description")
+    assert spelled in var.pop("description")
     base.pop("description")
     assert var["base"]["regulator"].pop(key) == value
     assert var == base
