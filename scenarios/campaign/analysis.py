@@ -41,9 +41,25 @@ class CampaignData:
         """The error the paired verdicts compare (the campaign file's ``metric``)."""
         return self.manifest.get("metric", "steady_state_error_vx")
 
+    @property
+    def replicate_over(self) -> dict[str, Any] | None:
+        """The campaign file's ``replicate_over`` (factor, draws, grid cells, its index), if any."""
+        return self.manifest.get("replicate_over") or None
+
     def replicas(self, arm: str) -> list[str]:
-        """The replica arms of ``arm`` (the campaign file's ``[replicas]``), none by default."""
+        """The replica arms of ``arm``: the campaign file's ``[replicas]``, or with
+        ``replicate_over`` the arm on the factor's other values (``ARM@k``, see
+        :meth:`verdict_rows`); none by default."""
+        over = self.replicate_over
+        if over:
+            return [f"{arm}@{k}" for k in range(1, over["cells"][over["index"]])]
         return list((self.manifest.get("replicas") or {}).get(arm, ()))
+
+    def verdict_rows(self) -> list[dict[str, Any]]:
+        """The rows the verdicts judge: as they are, or with ``replicate_over`` regrouped by
+        random draw (:func:`regroup`)."""
+        over = self.replicate_over
+        return regroup(self.rows, over["draws"], over["cells"], over["index"]) if over else self.rows
 
 
 def is_campaign_dir(path: Path) -> bool:
@@ -57,6 +73,25 @@ def _typed(row: dict[str, str], factors: Sequence[str]) -> dict[str, Any]:
     out["fell"] = {"true": True, "false": False}.get(row.get("fell", ""))
     for f in factors:
         out[f] = _factor_value(row[f])
+    return out
+
+
+def regroup(rows: Sequence[dict[str, Any]], draws: int, cells: Sequence[int], index: int) -> list[dict[str, Any]]:
+    """Rows of a campaign with a grid, relabelled so that the verdicts take the cells of
+    grid factor ``index`` as replicas. Sample ``i`` is random draw ``i % draws`` in grid cell
+    ``i // draws`` (:func:`scenarios.campaign.sampling.draw_samples`; the last grid factor
+    varies fastest). Its row keeps every value and becomes sample ``SAMPLE`` (the id of the
+    draw's sample on the factor's first value, the other grid factors as they are) and arm
+    ``ARM@k`` on the factor's value ``k`` > 0 (``ARM`` on the first)."""
+    width = len(rows[0]["sample"]) - 1 if rows else 4
+    strides = [math.prod(cells[j + 1:]) for j in range(len(cells))]
+    out = []
+    for r in rows:
+        i = int(r["sample"][1:])
+        cell, draw = divmod(i, draws)
+        k = (cell // strides[index]) % cells[index]
+        first = (cell - k * strides[index]) * draws + draw
+        out.append({**r, "sample": f"s{first:0{width}d}", "arm": r["arm"] if k == 0 else f"{r['arm']}@{k}"})
     return out
 
 

@@ -94,7 +94,8 @@ def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
     and every sample the first arm does not win."""
     metric = data.metric
     ra, rb = data.replicas(a), data.replicas(b)
-    v = analysis.verdicts(data.rows, a, b, metric=metric, replicas_a=ra, replicas_b=rb)
+    vrows = data.verdict_rows()
+    v = analysis.verdicts(vrows, a, b, metric=metric, replicas_a=ra, replicas_b=rb)
     n_rep = v["replicas"]
     fell = ", ".join(f"[{s}](samples/{s}.toml)" for s in v["only_a_fell"]) or "none"
     some = ", ".join(f"{s} ({k}/{n_rep})" for s, k in v["a_fell_some"]) or "none"
@@ -102,11 +103,19 @@ def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
     ci = v["median_diff_ci"]
     label = METRIC_LABEL.get(metric, metric)
     lines = []
-    if n_rep > 1:
+    over = data.replicate_over
+    if n_rep > 1 and over:
+        lines += [f"Each random draw runs on the {n_rep} values of the grid factor `{over['factor']}`, {a} and "
+                  f"{b} paired on each value; below a sample names the draw by its sample on the first value "
+                  f"({a}@k, {b}@k: the arm on value k). Near the edge of falling any change of the walk tips a "
+                  f"run into a fall or out of one, so the verdicts judge each draw by its outcomes over the "
+                  f"{n_rep} values.", ""]
+    elif n_rep > 1:
         lines += [f"Each sample runs {a} and {b} {n_rep} times each, paired by position: "
                   f"{', '.join([a, *ra])} against {', '.join([b, *rb])}. Near the edge of falling any change of "
                   "the walk tips a sample into a fall or out of one, so the verdicts judge each sample by its "
                   f"outcomes over the {n_rep} pairs.", ""]
+    if n_rep > 1:
         never = (f"**Verdict: {a} never falls where {b} walks: {'PASS' if v['never_falls_where_b_walks'] else 'FAIL'}**"
                  f" (samples where {a} fell on more than half of the {n_rep} replicas and {b} on fewer than half: "
                  f"{len(v['only_a_fell'])} of {v['n']}, exact 95 % interval {_pct(v['only_a_fell_ci'])}; {fell}. "
@@ -125,7 +134,7 @@ def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
               f"{a} - {b} over the pairs both walked: {_f(v['median_diff'], 4)} m/s (bootstrap 95 % interval "
               f"{'-' if ci is None else f'[{ci[0]:.4f}, {ci[1]:.4f}]'} m/s).", ""]
     if v["not_won"]:
-        by = {(r["sample"], r["arm"]): r for r in data.rows if r["status"] == "complete"}
+        by = {(r["sample"], r["arm"]): r for r in vrows if r["status"] == "complete"}
 
         def mean_error(s: str, arms: Sequence[str]) -> str:
             vals = [by[(s, x)][metric] for x in arms if not by[(s, x)]["fell"] and by[(s, x)][metric] is not None]

@@ -20,6 +20,9 @@ Layout (every key below is known; anything else is an error)::
     [replicas]                      # optional: the verdicts' two arms (the first two of
     adaptive = ["adaptive_k2"]      # compare), each with as many replica arms, paired by
     pd_only = ["pd_only_k2"]        # position: the verdicts judge per-sample outcomes
+    replicate_over = "floor_terrain_seed"   # optional, instead of [replicas]: a grid factor;
+                                    # the verdicts judge each random draw over its cells
+                                    # (e.g. the same robot on five grounds), paired by cell
 
     [factors.torso_mass_kg]         # see scenarios.campaign.factors for the names
     dist = "uniform"                # uniform | lhs: low, high (+ step); randint: low, high
@@ -51,7 +54,7 @@ from scenarios.lang.tomlfile import depth_problem, read_toml
 
 CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
 TOP_KEYS = ("name", "description", "base", "duration_s", "compare", "samples", "seed",
-            "task_timeout_s", "retries", "factors", "metric", "replicas")
+            "task_timeout_s", "retries", "factors", "metric", "replicas", "replicate_over")
 #: The errors the paired verdicts may compare (columns of campaign.csv), the default first.
 VERDICT_METRICS = ("steady_state_error_vx", "settled_error_vx")
 DISTS = ("uniform", "lhs", "randint", "choice", "grid")
@@ -100,11 +103,17 @@ class Campaign:
     comm_step_s: float = field(default=DEFAULT_COMM_STEP_S)
     metric: str = VERDICT_METRICS[0]  # the error the paired verdicts compare
     replicas: tuple[tuple[str, tuple[str, ...]], ...] = ()  # (arm, its replica arms) for the verdicts
+    replicate_over: str | None = None  # a grid factor whose cells are the verdicts' replicas
 
     def analysis_settings(self) -> dict[str, Any]:
         """What the campaign's report needs beyond the rows (written into campaign.json)."""
+        over = None
+        if self.replicate_over is not None:
+            names = [f.name for f in self.grid]
+            over = {"factor": self.replicate_over, "draws": self.samples,
+                    "cells": [len(f.values) for f in self.grid], "index": names.index(self.replicate_over)}
         return {"seed": self.seed, "metric": self.metric,
-                "replicas": {arm: list(more) for arm, more in self.replicas}}
+                "replicas": {arm: list(more) for arm, more in self.replicas}, "replicate_over": over}
 
     @property
     def grid(self) -> tuple[Factor, ...]:
@@ -286,6 +295,24 @@ def _verdict_metric(doc: Mapping[str, Any], probs: Problems) -> str:
     return metric
 
 
+def _replicate_over(doc: Mapping[str, Any], factors: Sequence[Factor], probs: Problems) -> str | None:
+    """``replicate_over``: a grid factor of the campaign (at least two values). Every random
+    draw runs once per value of it; the verdicts take those runs as the draw's replicas,
+    paired by value (the first value's sample names the draw). Not with ``[replicas]``."""
+    raw = doc.get("replicate_over")
+    if raw is None:
+        return None
+    grid = [f.name for f in factors if f.dist == "grid" and len(f.values) >= 2]
+    allowed = f"a grid factor of at least two values ({', '.join(grid) or 'none here'})"
+    if not isinstance(raw, str) or raw not in grid:
+        probs.add("replicate_over", raw, f"must name {allowed}")
+        return None
+    if doc.get("replicas") is not None:
+        probs.add("replicate_over", raw, "give [replicas] or replicate_over, not both")
+        return None
+    return raw
+
+
 def _replicas(doc: Mapping[str, Any], arms: Sequence[str] | None,
               probs: Problems) -> tuple[tuple[str, tuple[str, ...]], ...]:
     """``[replicas]``: ``ARM = [replica arms]``. The verdicts of the first two arms of
@@ -369,6 +396,7 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
         probs.note("factors.terrain", "give the terrain factor or terrain_* factors, not both")
     metric = _verdict_metric(doc, probs)
     replicas = _replicas(doc, list(base.get("compare") or ["adaptive"]) if base is not None else None, probs)
+    replicate_over = _replicate_over(doc, factors, probs)
     if base is not None and not probs.items:
         _probe_factors(factors, base, base_dir, probs)
     if probs.items:
@@ -376,7 +404,7 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
     order = fx.apply_order([f.name for f in factors])
     factors.sort(key=lambda f: order.index(f.name))
     return Campaign(name, description, ref, base, base_dir, samples, seed, tuple(factors), retries, timeout,
-                    source, float(base["comm_step_s"]), metric, replicas)
+                    source, float(base["comm_step_s"]), metric, replicas, replicate_over)
 
 
 def load_campaign(path: str | Path) -> Campaign:

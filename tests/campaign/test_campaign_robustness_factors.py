@@ -8,7 +8,7 @@ import tomllib
 import pytest
 
 from fmu_src.core.avr_specs import PARAM_SPECS
-from scenarios.campaign import sampling, spec
+from scenarios.campaign import analysis, sampling, spec
 from scenarios.errors import ScenarioError
 from scenarios.lang import spec as scenario_spec
 from support.paths import REPO_ROOT
@@ -185,3 +185,30 @@ def test_variant_campaigns_differ_from_their_parent_by_one_regulator_setting(var
     regulated = [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
     for name, expected in carried.items():
         assert {o.get(name) for o in regulated} == {expected}, name
+
+
+def test_robustness_random_grounds_walks_each_robot_of_the_lr2_campaign_on_five_grounds():
+    """The same factors and regulator settings as robustness_random_settled_lr2 (another
+    seed), the terrain seed a grid of five the verdicts replicate over; three arms."""
+    def doc(name):
+        return tomllib.loads(spec.resolve_campaign(name).read_text())
+    grounds, lr2 = doc("robustness_random_grounds"), doc("robustness_random_settled_lr2")
+    assert grounds["factors"].pop("floor_terrain_seed") == {"dist": "grid", "values": [1, 2, 3, 4, 5]}
+    lr2["factors"].pop("floor_terrain_seed")
+    assert grounds["factors"] == lr2["factors"]
+    assert grounds["base"]["regulator"] == lr2["base"]["regulator"]
+    assert grounds["seed"] not in (2021, 2022, 2023, 2024)  # a set no setting was chosen on
+    c = spec.load_campaign(spec.resolve_campaign("robustness_random_grounds"))
+    assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd"] and c.replicas == ()
+    assert c.replicate_over == "floor_terrain_seed" and c.samples == 100 and c.n_samples == 500
+    over = c.analysis_settings()["replicate_over"]
+    samples = sampling.draw(c)
+    rows = [{"sample": s.id, "arm": "adaptive", "values": s.values} for s in samples]
+    draws: dict[str, list[dict]] = {}
+    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
+        draws.setdefault(r["sample"], []).append(r["values"])
+    assert len(draws) == 100
+    for members in draws.values():
+        assert sorted(v["floor_terrain_seed"] for v in members) == [1, 2, 3, 4, 5]
+        rest = [{k: x for k, x in v.items() if k != "floor_terrain_seed"} for v in members]
+        assert all(x == rest[0] for x in rest)

@@ -522,6 +522,31 @@ def test_report_gives_the_replicated_verdicts_and_every_sample_not_won(tmp_path)
     assert "| [s2](samples/s2.toml) | 0/2 | 2/2 | 0/2 | - | 0.100 |" in text
 
 
+def test_report_judges_a_draw_over_its_grounds(tmp_path):
+    """replicate_over: samples s0..s5 are 2 draws on 3 grounds; the verdicts take each draw
+    over its grounds (draw s0: s0, s2, s4; draw s1: s1, s3, s5)."""
+    from scenarios.campaign import report
+
+    def r(sample, arm, fell, err):
+        return {"sample": sample, "arm": arm, "status": "complete", "fell": fell, "t_fall_s": 3.0 if fell else None,
+                "steady_state_error_vx": None, "steady_state_error_vy": None,
+                "settled_error_vx": None if fell else err, "convergence_time_s": None, "run_dir": None}
+    # draw 0: adaptive falls on the first ground only; draw 1: adaptive falls on two grounds, PD on none
+    outcomes = {"s0000": (None, 0.1), "s0002": (0.01, 0.1), "s0004": (0.01, 0.1),
+                "s0001": (None, 0.1), "s0003": (None, 0.1), "s0005": (0.01, 0.1)}
+    rows = [r(s, arm, e is None, e) for s, es in outcomes.items() for arm, e in zip(("adaptive", "pd_only"), es)]
+    manifest = {"name": "t", "n_samples": 6, "arms": ["adaptive", "pd_only"], "seed": 1, "metric": "settled_error_vx",
+                "replicas": {}, "replicate_over": {"factor": "floor_terrain_seed", "draws": 2, "cells": [3], "index": 0}}
+    data = analysis.CampaignData(tmp_path, manifest, rows, [])
+    assert data.replicas("adaptive") == ["adaptive@1", "adaptive@2"]
+    text = report.render(data, [])
+    assert "Each random draw runs on the 3 values of the grid factor `floor_terrain_seed`" in text
+    assert ("never falls where pd_only walks: FAIL** (samples where adaptive fell on more than half of the 3 "
+            "replicas and pd_only on fewer than half: 1 of 2") in text
+    assert "[s0001](samples/s0001.toml)" in text and "s0000 (1/3)" in text
+    assert "beats pd_only on >= 90 % of paired samples: FAIL** (1 of 2 samples" in text
+
+
 def _nominal_doc() -> dict:
     return tomllib.loads((REPO_ROOT / "scenarios" / "suite" / "nominal.toml").read_text())
 
@@ -554,7 +579,62 @@ def test_campaign_metric_and_replicas_are_checked_up_front():
     c = spec.parse_campaign({**doc, "base": {**_nominal_doc(), "arm": doc_arms}, "metric": "settled_error_vx",
                              "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}})
     assert c.analysis_settings() == {"seed": 1, "metric": "settled_error_vx",
-                                     "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}}
+                                     "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}, "replicate_over": None}
+
+
+GROUND_FACTORS = """
+[factors.torso_mass_kg]
+dist = "uniform"
+low = 11.0
+high = 20.0
+[factors.model]
+dist = "grid"
+values = ["menagerie", "osu"]
+[factors.floor_terrain_seed]
+dist = "grid"
+values = [7, 8, 9]
+"""
+
+
+def grounds(top: str = 'replicate_over = "floor_terrain_seed"\n', factors: str = GROUND_FACTORS) -> str:
+    """3 draws x 2 models x 3 grounds; ``top``: top-level keys (before the tables)."""
+    return BASE.replace("samples = 8", "samples = 3") + top + factors
+
+
+def test_replicate_over_names_a_grid_factor_and_excludes_replicas():
+    found = problems_of(grounds('replicate_over = "torso_mass_kg"\n'))
+    assert found == ["replicate_over = 'torso_mass_kg': must name a grid factor of at least two values "
+                     "(model, floor_terrain_seed)"]
+    assert any("replicate_over = 'nope'" in p for p in problems_of(grounds('replicate_over = "nope"\n')))
+    one_value = grounds(factors=GROUND_FACTORS.replace("values = [7, 8, 9]", "values = [7]"))
+    assert any("replicate_over = 'floor_terrain_seed': must name a grid factor of at least two values (model)" in p
+               for p in problems_of(one_value))
+    both = grounds() + '[replicas]\nadaptive = ["pd_only"]\n'
+    assert any("give [replicas] or replicate_over, not both" in p for p in problems_of(both))
+    c = campaign(grounds())
+    over = c.analysis_settings()["replicate_over"]
+    assert over == {"factor": "floor_terrain_seed", "draws": 3, "cells": [2, 3],
+                    "index": [f.name for f in c.grid].index("floor_terrain_seed")}
+
+
+def test_replicate_over_regroups_each_draw_over_the_factor_values():
+    c = campaign(grounds())
+    samples = sampling.draw(c)
+    assert len(samples) == 18  # 3 draws x 2 models x 3 grounds
+    over = c.analysis_settings()["replicate_over"]
+    rows = [{"sample": s.id, "arm": arm, "status": "complete", "values": s.values}
+            for s in samples for arm in ("adaptive", "pd_only")]
+    groups: dict[tuple[str, str], list[dict]] = {}
+    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
+        groups.setdefault((r["sample"], r["arm"].split("@")[0]), []).append(r)
+    assert len(groups) == 3 * 2 * 2  # draws x models x arms
+    by_id = {s.id: s.values for s in samples}
+    for (name, arm), members in groups.items():
+        assert sorted(m["arm"] for m in members) == [arm, f"{arm}@1", f"{arm}@2"]
+        # one draw on one model: everything but the ground is the same
+        assert len({(m["values"]["model"], m["values"]["torso_mass_kg"]) for m in members}) == 1
+        assert {m["arm"]: m["values"]["floor_terrain_seed"] for m in members} == {arm: 7, f"{arm}@1": 8, f"{arm}@2": 9}
+        assert by_id[name]["floor_terrain_seed"] == 7 and by_id[name]["model"] == members[0]["values"]["model"]
 
 
 def test_the_folder_records_the_report_settings_and_a_resume_follows_the_campaign_file(tmp_path):
