@@ -116,7 +116,7 @@ def cmd_campaign(args) -> int:
     out = Path(args.out) if args.out else Path("runs") / campaign.name
     cdir = CampaignDir(out, campaign.name, texts, campaign.arm_names(), names, campaign.analysis_settings())
     try:
-        cdir.open(resume=args.resume, campaign_file=path)
+        cdir.open(resume=args.resume, campaign_file=path, campaign_text=campaign.resolved_text)
     except CampaignDirError as exc:
         print(str(exc), file=sys.stderr)
         return 2

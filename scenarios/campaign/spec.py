@@ -4,6 +4,11 @@ Layout (every key below is known; anything else is an error)::
 
     name = "robustness"             # [a-z0-9][a-z0-9_-]*
     description = "..."
+    extends = "robustness_random"   # optional: a built-in campaign or a campaign file
+                                    # (relative to this file) this one is laid over: its
+                                    # tables merge key by key (a factor's table, one with
+                                    # dist, replaces the parent's whole), any other value
+                                    # and every array replace; name is then required
     base = "nominal"                # a suite scenario name, a scenario file (relative to
                                     # this file), or an inline [base] table (a scenario)
     duration_s = 30.0               # optional: replaces the base's duration_s
@@ -46,6 +51,7 @@ from typing import Any, Mapping, Sequence
 from scenarios.errors import ScenarioError
 from scenarios.lang import spec as scenario_spec
 from scenarios.campaign import factors as fx
+from scenarios.campaign import tomlw
 from scenarios.lang.fields import Problems, as_finite, did_you_mean, integer, name as name_field, number, string, unknown_keys
 from scenarios.lang.formatting import show
 from scenarios.lang.scenario import BUILTIN_MODELS, DEFAULT_COMM_STEP_S
@@ -53,7 +59,7 @@ from scenarios.lang.sections import resolve_model
 from scenarios.lang.tomlfile import depth_problem, read_toml
 
 CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
-TOP_KEYS = ("name", "description", "base", "duration_s", "compare", "samples", "seed",
+TOP_KEYS = ("name", "description", "extends", "base", "duration_s", "compare", "samples", "seed",
             "task_timeout_s", "retries", "factors", "metric", "replicas", "replicate_over")
 #: The errors the paired verdicts may compare (columns of campaign.csv), the default first.
 VERDICT_METRICS = ("steady_state_error_vx", "settled_error_vx")
@@ -69,6 +75,8 @@ MAX_SAMPLES = 100_000
 MAX_TASK_TIMEOUT_S = 7 * 24 * 3600.0
 MAX_RETRIES = 10
 DEFAULT_RETRIES = 2
+#: Longest chain of ``extends`` (a campaign over a campaign over ...).
+MAX_EXTENDS = 8
 
 
 @dataclass(frozen=True)
@@ -104,6 +112,7 @@ class Campaign:
     metric: str = VERDICT_METRICS[0]  # the error the paired verdicts compare
     replicas: tuple[tuple[str, tuple[str, ...]], ...] = ()  # (arm, its replica arms) for the verdicts
     replicate_over: str | None = None  # a grid factor whose cells are the verdicts' replicas
+    resolved_text: str | None = None  # with extends: the whole campaign as one file (the run folder's copy)
 
     def analysis_settings(self) -> dict[str, Any]:
         """What the campaign's report needs beyond the rows (written into campaign.json)."""
@@ -364,6 +373,14 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
     if too_deep:
         raise ScenarioError([too_deep], source=source)
     probs = Problems()
+    resolved_text = None
+    if "extends" in doc:
+        parent = doc["extends"]
+        doc, base_dir = extended(doc, base_dir, probs)
+        if probs.items:
+            raise ScenarioError(probs.items, source=source)
+        resolved_text = (f"# {source or 'a campaign'} (extends = {parent!r}), its extends resolved into one file\n"
+                         + tomlw.dumps(doc))
     unknown_keys(doc, TOP_KEYS, "", probs)
     name = name_field(doc, "name", "name", probs, " (it names samples)")
     description = string(doc, "description", "description", probs)
@@ -404,7 +421,58 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
     order = fx.apply_order([f.name for f in factors])
     factors.sort(key=lambda f: order.index(f.name))
     return Campaign(name, description, ref, base, base_dir, samples, seed, tuple(factors), retries, timeout,
-                    source, float(base["comm_step_s"]), metric, replicas, replicate_over)
+                    source, float(base["comm_step_s"]), metric, replicas, replicate_over, resolved_text)
+
+
+def _lay_over(parent: Mapping[str, Any], child: Mapping[str, Any], under_factors: bool = False) -> dict[str, Any]:
+    """``child`` laid over ``parent``: tables merge key by key, a factor's table (under
+    ``factors``, one with ``dist``) and every other value replace."""
+    out = copy.deepcopy(dict(parent))
+    for k, v in child.items():
+        whole = under_factors and isinstance(v, dict) and "dist" in v
+        if isinstance(v, dict) and isinstance(out.get(k), dict) and not whole:
+            out[k] = _lay_over(out[k], v, under_factors or k == "factors")
+        else:
+            out[k] = copy.deepcopy(v)
+    return out
+
+
+def extended(doc: Mapping[str, Any], base_dir: Path, probs: Problems,
+             chain: tuple[Path, ...] = ()) -> tuple[dict[str, Any], Path]:
+    """A campaign document with its ``extends`` resolved: the parent (itself resolved) with
+    ``doc`` laid over it, and the folder the result's ``base`` resolves against (the file
+    that gave ``base``). Problems go to ``probs``."""
+    raw = doc.get("extends")
+    if raw is None:
+        return dict(doc), base_dir
+    own = {k: v for k, v in doc.items() if k != "extends"}
+    if not isinstance(raw, str) or not raw:
+        probs.add("extends", raw, "must be a built-in campaign name or a campaign file")
+        return own, base_dir
+    if "name" not in doc:
+        probs.note("extends", "a campaign that extends another gives its own name")
+    path = base_dir / raw if not Path(raw).is_absolute() else Path(raw)
+    if not (raw.endswith(".toml") or path.exists()):
+        if raw not in builtin_campaigns():
+            hint = did_you_mean(raw, builtin_campaigns(), f"; built-in: {', '.join(builtin_campaigns())}",
+                                cutoff=scenario_spec.TARGET_HINT_CUTOFF)
+            probs.add("extends", raw, "no such campaign file or built-in campaign" + hint)
+            return own, base_dir
+        path = CAMPAIGN_DIR / f"{raw}.toml"
+    key = path.resolve()
+    if key in chain or len(chain) >= MAX_EXTENDS:
+        shown = " -> ".join(p.name for p in (*chain, key))
+        probs.add("extends", raw, f"{'extends itself' if key in chain else 'too long a chain'}: {shown} "
+                                  f"(at most {MAX_EXTENDS} files)")
+        return own, base_dir
+    try:
+        parent = _read_toml(path, "campaign file")
+    except ScenarioError as exc:
+        for p in exc.problems:
+            probs.add("extends", raw, p)
+        return own, base_dir
+    parent, parent_dir = extended(parent, path.parent, probs, (*chain, key))
+    return _lay_over(parent, own), (base_dir if "base" in own else parent_dir)
 
 
 def load_campaign(path: str | Path) -> Campaign:

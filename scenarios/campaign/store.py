@@ -1,7 +1,7 @@
 """The campaign folder: what is in it, who may write to it, and the streamed CSV.
 
     DIR/campaign.json     manifest: name, fingerprint of the samples, arms, columns
-    DIR/campaign.toml     the campaign file as given
+    DIR/campaign.toml     the campaign file as given (with extends, resolved into one file)
     DIR/samples/<id>.toml one scenario file per sample (python -m scenarios run it alone)
     DIR/runs/<id>/try<k>/<id>/  the run output of each execution (summary.json, csv, plots)
     DIR/campaign.csv      one row per sample x arm, appended (flush + fsync) per finished task
@@ -122,8 +122,10 @@ class CampaignDir:
         return self.samples_dir / f"{sid}.toml"
 
     # ---- opening
-    def open(self, *, resume: bool, campaign_file: Path | None) -> None:
-        """Claim the folder: refuse another campaign, or this one without ``resume``."""
+    def open(self, *, resume: bool, campaign_file: Path | None, campaign_text: str | None = None) -> None:
+        """Claim the folder: refuse another campaign, or this one without ``resume``. The
+        folder keeps ``campaign_text`` (a campaign resolved into one file), else a copy of
+        ``campaign_file``."""
         self.root.mkdir(parents=True, exist_ok=True)
         self._lock = open(self.root / ".lock", "w")
         try:
@@ -138,7 +140,7 @@ class CampaignDir:
             self.close()
             raise
         if manifest is None:
-            self._create(campaign_file)
+            self._create(campaign_file, campaign_text)
         elif self.analysis:  # resumed: the report follows the campaign file's settings now
             if any(manifest.get(k) != v for k, v in self.analysis.items()):
                 self._write_manifest({**manifest, **self.analysis})
@@ -167,11 +169,13 @@ class CampaignDir:
                                    "--resume, or choose another --out")
         return manifest
 
-    def _create(self, campaign_file: Path | None) -> None:
+    def _create(self, campaign_file: Path | None, campaign_text: str | None) -> None:
         self.samples_dir.mkdir(exist_ok=True)
         for sid, text in self.texts.items():
             self.sample_file(sid).write_text(text)
-        if campaign_file is not None:
+        if campaign_text is not None:
+            (self.root / COPY_NAME).write_text(campaign_text)
+        elif campaign_file is not None:
             shutil.copyfile(campaign_file, self.root / COPY_NAME)
         self._write_manifest({"name": self.name, "fingerprint": self.fingerprint, "n_samples": len(self.texts),
                               "arms": self.arms, "columns": self.cols, **self.analysis})

@@ -10,6 +10,7 @@ import pytest
 from fmu_src.core.avr_specs import PARAM_SPECS
 from scenarios.campaign import analysis, sampling, spec
 from scenarios.errors import ScenarioError
+from scenarios.lang.fields import Problems
 from scenarios.lang import spec as scenario_spec
 from support.paths import REPO_ROOT
 
@@ -155,6 +156,14 @@ def test_robustness_random_campaign_is_what_the_issue_asks():
         assert arms[f"pd_kpx_{g}"] == {**base, "adaptation_enabled": False, "Kp_x": pytest.approx(kp)}
 
 
+def resolved(name: str) -> dict:
+    """A built-in campaign's document with its extends resolved."""
+    probs = Problems()
+    doc, _ = spec.extended(tomllib.loads(spec.resolve_campaign(name).read_text()), spec.CAMPAIGN_DIR, probs)
+    assert not probs.items, probs.items
+    return doc
+
+
 # Each variant campaign: (its file, the file it varies, the regulator setting it adds, as
 # its description spells it, the settings its regulator arms then carry).
 VARIANTS = [
@@ -170,10 +179,10 @@ def test_variant_campaigns_differ_from_their_parent_by_one_regulator_setting(var
     """A variant differs from the file it varies only by its name, description and one
     setting on every regulator arm: the same samples, so their PD-only and RL-HZD rows are
     the same runs (learning settings do not act with adaptation off)."""
-    def doc(name):
-        return tomllib.loads(spec.resolve_campaign(name).read_text())
     key, value, spelled = added
-    base, var = doc(parent), doc(variant)
+    raw = tomllib.loads(spec.resolve_campaign(variant).read_text())
+    assert raw["extends"] == parent and set(raw) == {"extends", "name", "description", "base"}
+    base, var = resolved(parent), resolved(variant)
     assert var.pop("name") == variant and base.pop("name") == parent
     assert spelled in var.pop("description")
     base.pop("description")
@@ -190,9 +199,7 @@ def test_variant_campaigns_differ_from_their_parent_by_one_regulator_setting(var
 def test_robustness_random_grounds_walks_each_robot_of_the_lr2_campaign_on_five_grounds():
     """The same factors and regulator settings as robustness_random_settled_lr2 (another
     seed), the terrain seed a grid of five the verdicts replicate over; three arms."""
-    def doc(name):
-        return tomllib.loads(spec.resolve_campaign(name).read_text())
-    grounds, lr2 = doc("robustness_random_grounds"), doc("robustness_random_settled_lr2")
+    grounds, lr2 = resolved("robustness_random_grounds"), resolved("robustness_random_settled_lr2")
     assert grounds["factors"].pop("floor_terrain_seed") == {"dist": "grid", "values": [1, 2, 3, 4, 5]}
     lr2["factors"].pop("floor_terrain_seed")
     assert grounds["factors"] == lr2["factors"]

@@ -363,6 +363,81 @@ def test_cli_refuses_invalid_campaign_and_foreign_folder(tmp_path):
     assert r.returncode == 2 and "--seed -1: must be within [0, " in r.stderr
 
 
+PARENT = BASE + """
+[factors.torso_mass_kg]
+dist = "uniform"
+low = 11.0
+high = 20.0
+[factors.joint_damping_scale]
+dist = "uniform"
+low = 1.0
+high = 3.0
+[factors.link_mass_scale.left-shin]
+dist = "uniform"
+low = 0.8
+high = 1.2
+"""
+
+
+def test_extends_lays_a_campaign_over_another(tmp_path):
+    (tmp_path / "parent.toml").write_text(PARENT)
+    (tmp_path / "child.toml").write_text("""extends = "parent.toml"
+name = "child"
+seed = 12
+compare = ["adaptive"]
+[factors.torso_mass_kg]  # a factor's table replaces the parent's whole
+dist = "choice"
+values = [12.0, 14.0]
+[factors.link_mass_scale.right-shin]  # a table of factors merges: left-shin stays
+dist = "uniform"
+low = 0.9
+high = 1.1
+""")
+    c = spec.load_campaign(tmp_path / "child.toml")
+    p = spec.load_campaign(tmp_path / "parent.toml")
+    assert (c.name, c.seed, c.samples, c.arm_names()) == ("child", 12, 8, ["adaptive"])
+    f = {x.name: x for x in c.factors}
+    assert (f["torso_mass_kg"].dist, f["torso_mass_kg"].values, f["torso_mass_kg"].low) == ("choice", (12.0, 14.0), None)
+    assert f["joint_damping_scale"] == {x.name: x for x in p.factors}["joint_damping_scale"]
+    assert {"link_mass_scale.left-shin", "link_mass_scale.right-shin"} <= set(f)
+    # the run folder keeps the campaign as one file, which loads to the same campaign
+    assert c.resolved_text.startswith(f"# {tmp_path / 'child.toml'} (extends = 'parent.toml')")
+    assert p.resolved_text is None
+    (tmp_path / "one.toml").write_text(c.resolved_text)
+    one = spec.load_campaign(tmp_path / "one.toml")
+    assert one.factors == c.factors and one.base_doc == c.base_doc and one.seed == 12
+    d = CampaignDir(tmp_path / "run", "child", {"s0000": "a"}, ["adaptive"], ["torso_mass_kg"])
+    d.open(resume=False, campaign_file=tmp_path / "child.toml", campaign_text=c.resolved_text)
+    d.close()
+    assert (tmp_path / "run" / "campaign.toml").read_text() == c.resolved_text
+    # a chain: a grandchild over the child; base's relative file resolves where it was written
+    (tmp_path / "sub").mkdir()
+    (tmp_path / "base.toml").write_text((REPO_ROOT / "scenarios" / "suite" / "nominal.toml").read_text())
+    (tmp_path / "child.toml").write_text('extends = "parent.toml"\nname = "child"\nbase = "base.toml"\n')
+    (tmp_path / "sub" / "grand.toml").write_text('extends = "../child.toml"\nname = "grand"\nsamples = 2\n')
+    g = spec.load_campaign(tmp_path / "sub" / "grand.toml")
+    assert (g.name, g.samples) == ("grand", 2) and Path(g.base_ref).resolve() == (tmp_path / "base.toml").resolve()
+
+
+def test_extends_problems_are_named(tmp_path):
+    def found(text, where=tmp_path):
+        with pytest.raises(ScenarioError) as info:
+            spec.parse_campaign(tomllib.loads(text), source="t.toml", base_dir=where)
+        return info.value.problems
+    assert any("extends = 'robustness_randon'" in p and "no such campaign" in p and "robustness_random" in p
+               for p in found('extends = "robustness_randon"\nname = "x"\n'))
+    assert any("extends = 'nope.toml'" in p for p in found('extends = "nope.toml"\nname = "x"\n'))
+    assert any("extends: a campaign that extends another gives its own name" in p
+               for p in found('extends = "smoke"\n'))
+    assert any("extends = 3" in p for p in found('extends = 3\nname = "x"\n'))
+    (tmp_path / "a.toml").write_text('extends = "b.toml"\nname = "a"\n')
+    (tmp_path / "b.toml").write_text('extends = "a.toml"\nname = "b"\n')
+    assert any("extends itself: a.toml -> b.toml -> a.toml" in p for p in found('extends = "a.toml"\nname = "x"\n'))
+    # a problem of the laid-over whole names its field
+    assert any("samples = 0" in p for p in found('extends = "smoke"\nname = "x"\nsamples = 0\n',
+                                                   where=spec.CAMPAIGN_DIR))
+
+
 # --------------------------------------------------------------------------- statistics
 def test_wilson_interval_and_quantile():
     lo, hi = analysis.wilson(0, 10)
