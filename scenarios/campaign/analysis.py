@@ -79,7 +79,7 @@ def _typed(row: dict[str, str], factors: Sequence[str]) -> dict[str, Any]:
 def regroup(rows: Sequence[dict[str, Any]], draws: int, cells: Sequence[int], index: int) -> list[dict[str, Any]]:
     """Rows of a campaign with a grid, relabelled so that the verdicts take the cells of
     grid factor ``index`` as replicas. Sample ``i`` is random draw ``i % draws`` in grid cell
-    ``i // draws`` (:func:`scenarios.campaign.sampling.draw_samples`; the last grid factor
+    ``i // draws`` (:func:`scenarios.campaign.sampling.draw`; the last grid factor
     varies fastest). Its row keeps every value and becomes sample ``SAMPLE`` (the id of the
     draw's sample on the factor's first value, the other grid factors as they are) and arm
     ``ARM@k`` on the factor's value ``k`` > 0 (``ARM`` on the first)."""

@@ -451,14 +451,10 @@ def extended(doc: Mapping[str, Any], base_dir: Path, probs: Problems,
         return own, base_dir
     if "name" not in doc:
         probs.note("extends", "a campaign that extends another gives its own name")
-    path = base_dir / raw if not Path(raw).is_absolute() else Path(raw)
-    if not (raw.endswith(".toml") or path.exists()):
-        if raw not in builtin_campaigns():
-            hint = did_you_mean(raw, builtin_campaigns(), f"; built-in: {', '.join(builtin_campaigns())}",
-                                cutoff=scenario_spec.TARGET_HINT_CUTOFF)
-            probs.add("extends", raw, "no such campaign file or built-in campaign" + hint)
-            return own, base_dir
-        path = CAMPAIGN_DIR / f"{raw}.toml"
+    path, why = _campaign_path(raw, base_dir)
+    if path is None:
+        probs.add("extends", raw, why)
+        return own, base_dir
     key = path.resolve()
     if key in chain or len(chain) >= MAX_EXTENDS:
         shown = " -> ".join(p.name for p in (*chain, key))
@@ -485,13 +481,22 @@ def builtin_campaigns() -> list[str]:
     return sorted(p.stem for p in CAMPAIGN_DIR.glob("*.toml"))
 
 
+def _campaign_path(target: str, base_dir: Path | None = None) -> tuple[Path | None, str]:
+    """(the file, "") for a campaign file path (relative to ``base_dir`` if given) or a
+    built-in campaign name; (None, why) for neither."""
+    path = base_dir / target if base_dir is not None and not Path(target).is_absolute() else Path(target)
+    if target.endswith(".toml") or path.exists():
+        return path, ""
+    names = builtin_campaigns()
+    if target in names:
+        return CAMPAIGN_DIR / f"{target}.toml", ""
+    hint = did_you_mean(target, names, f"; built-in: {', '.join(names)}", cutoff=scenario_spec.TARGET_HINT_CUTOFF)
+    return None, "no such campaign file or built-in campaign" + hint
+
+
 def resolve_campaign(target: str) -> Path:
     """A built-in campaign name (``robustness``, ``smoke``) or a campaign file path."""
-    path = Path(target)
-    if target.endswith(".toml") or path.exists():
-        return path
-    if target in builtin_campaigns():
-        return CAMPAIGN_DIR / f"{target}.toml"
-    hint = did_you_mean(target, builtin_campaigns(), f"; built-in: {', '.join(builtin_campaigns())}",
-                        cutoff=scenario_spec.TARGET_HINT_CUTOFF)
-    raise ScenarioError([f"{target!r}: no such campaign file or built-in campaign{hint}"])
+    path, why = _campaign_path(target)
+    if path is None:
+        raise ScenarioError([f"{target!r}: {why}"])
+    return path
