@@ -9,6 +9,8 @@ Layout (every key below is known; anything else is an error)::
                                     # tables merge key by key (a factor's table, one with
                                     # dist, replaces the parent's whole), any other value
                                     # and every array replace; name is then required
+    drop = ["replicas", "base.arm"] # optional, with extends: the parent's keys (dotted
+                                    # paths) removed before this file is laid over
     base = "nominal"                # a suite scenario name, a scenario file (relative to
                                     # this file), or an inline [base] table (a scenario)
     duration_s = 30.0               # optional: replaces the base's duration_s
@@ -59,7 +61,7 @@ from scenarios.lang.sections import resolve_model
 from scenarios.lang.tomlfile import depth_problem, read_toml
 
 CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
-TOP_KEYS = ("name", "description", "extends", "base", "duration_s", "compare", "samples", "seed",
+TOP_KEYS = ("name", "description", "extends", "drop", "base", "duration_s", "compare", "samples", "seed",
             "task_timeout_s", "retries", "factors", "metric", "replicas", "replicate_over")
 #: The errors the paired verdicts may compare (columns of campaign.csv), the default first.
 VERDICT_METRICS = ("steady_state_error_vx", "settled_error_vx")
@@ -374,8 +376,8 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
         raise ScenarioError([too_deep], source=source)
     probs = Problems()
     resolved_text = None
-    if "extends" in doc:
-        parent = doc["extends"]
+    if "extends" in doc or "drop" in doc:
+        parent = doc.get("extends")
         doc, base_dir = extended(doc, base_dir, probs)
         if probs.items:
             raise ScenarioError(probs.items, source=source)
@@ -443,9 +445,11 @@ def extended(doc: Mapping[str, Any], base_dir: Path, probs: Problems,
     ``doc`` laid over it, and the folder the result's ``base`` resolves against (the file
     that gave ``base``). Problems go to ``probs``."""
     raw = doc.get("extends")
+    own = {k: v for k, v in doc.items() if k not in ("extends", "drop")}
     if raw is None:
-        return dict(doc), base_dir
-    own = {k: v for k, v in doc.items() if k != "extends"}
+        if "drop" in doc:
+            probs.add("drop", doc["drop"], "removes keys of the campaign this one extends: give extends too")
+        return own, base_dir
     if not isinstance(raw, str) or not raw:
         probs.add("extends", raw, "must be a built-in campaign name or a campaign file")
         return own, base_dir
@@ -468,7 +472,25 @@ def extended(doc: Mapping[str, Any], base_dir: Path, probs: Problems,
             probs.add("extends", raw, p)
         return own, base_dir
     parent, parent_dir = extended(parent, path.parent, probs, (*chain, key))
+    _drop(parent, doc.get("drop", []), raw, probs)
     return _lay_over(parent, own), (base_dir if "base" in own else parent_dir)
+
+
+def _drop(parent: dict[str, Any], paths: Any, parent_name: str, probs: Problems) -> None:
+    """Remove each dotted key of ``paths`` from ``parent`` (in place); a path that is not a
+    key of it is a problem."""
+    if not isinstance(paths, list) or not all(isinstance(p, str) and p for p in paths):
+        probs.add("drop", paths, "must be a list of the extended campaign's keys (dotted, e.g. \"base.arm\")")
+        return
+    for dotted in paths:
+        *outer, last = dotted.split(".")
+        table = parent
+        for k in outer:
+            table = table.get(k) if isinstance(table, dict) else None
+        if not isinstance(table, dict) or last not in table:
+            probs.add("drop", dotted, f"is not a key of {parent_name}")
+            continue
+        del table[last]
 
 
 def load_campaign(path: str | Path) -> Campaign:

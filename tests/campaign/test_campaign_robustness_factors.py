@@ -199,7 +199,10 @@ def test_variant_campaigns_differ_from_their_parent_by_one_regulator_setting(var
 def test_robustness_random_grounds_walks_each_robot_of_the_lr2_campaign_on_five_grounds():
     """The same factors and regulator settings as robustness_random_settled_lr2 (another
     seed), the terrain seed a grid of five the verdicts replicate over; three arms."""
+    raw = tomllib.loads(spec.resolve_campaign("robustness_random_grounds").read_text())
+    assert raw["extends"] == "robustness_random_settled_lr2" and raw["drop"] == ["replicas", "base.arm"]
     grounds, lr2 = resolved("robustness_random_grounds"), resolved("robustness_random_settled_lr2")
+    assert "replicas" not in grounds and "arm" not in grounds["base"] and "arm" in lr2["base"]
     assert grounds["factors"].pop("floor_terrain_seed") == {"dist": "grid", "values": [1, 2, 3, 4, 5]}
     lr2["factors"].pop("floor_terrain_seed")
     assert grounds["factors"] == lr2["factors"]

@@ -417,6 +417,11 @@ high = 1.1
     (tmp_path / "sub" / "grand.toml").write_text('extends = "../child.toml"\nname = "grand"\nsamples = 2\n')
     g = spec.load_campaign(tmp_path / "sub" / "grand.toml")
     assert (g.name, g.samples) == ("grand", 2) and Path(g.base_ref).resolve() == (tmp_path / "base.toml").resolve()
+    # drop: the parent's keys removed before the laying over
+    (tmp_path / "dropper.toml").write_text('extends = "parent.toml"\nname = "dropper"\n'
+                                          'drop = ["factors.joint_damping_scale", "factors.link_mass_scale.left-shin"]\n')
+    d = spec.load_campaign(tmp_path / "dropper.toml")
+    assert [f.name for f in d.factors] == ["torso_mass_kg"]
 
 
 def test_extends_problems_are_named(tmp_path):
@@ -433,6 +438,11 @@ def test_extends_problems_are_named(tmp_path):
     (tmp_path / "a.toml").write_text('extends = "b.toml"\nname = "a"\n')
     (tmp_path / "b.toml").write_text('extends = "a.toml"\nname = "b"\n')
     assert any("extends itself: a.toml -> b.toml -> a.toml" in p for p in found('extends = "a.toml"\nname = "x"\n'))
+    assert any("drop = 'factors.nope': is not a key of smoke" in p
+               for p in found('extends = "smoke"\nname = "x"\ndrop = ["factors.nope", "seed"]\n', where=spec.CAMPAIGN_DIR))
+    assert any("drop = ['seed']" in p and "give extends too" in p for p in found('name = "x"\ndrop = ["seed"]\n'))
+    assert any("drop = 'seed'" in p and "must be a list" in p
+               for p in found('extends = "smoke"\nname = "x"\ndrop = "seed"\n', where=spec.CAMPAIGN_DIR))
     # a problem of the laid-over whole names its field
     assert any("samples = 0" in p for p in found('extends = "smoke"\nname = "x"\nsamples = 0\n',
                                                    where=spec.CAMPAIGN_DIR))
