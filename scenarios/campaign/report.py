@@ -105,7 +105,9 @@ def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
     lines = []
     over = data.replicate_over
     if n_rep > 1 and over:
-        lines += [f"Each random draw runs on the {n_rep} values of the grid factor `{over['factor']}`, {a} and "
+        redrawn = ", ".join(f"`{n}`" for n in over.get("redraw") or ())
+        anew = f" with its own draw of {redrawn} on each value" if redrawn else ""
+        lines += [f"Each random draw runs on the {n_rep} values of the grid factor `{over['factor']}`{anew}, {a} and "
                   f"{b} paired on each value; below a sample names the draw by its sample on the first value "
                   f"({a}@k, {b}@k: the arm on value k). Near the edge of falling any change of the walk tips a "
                   f"run into a fall or out of one, so the verdicts judge each draw by its outcomes over the "

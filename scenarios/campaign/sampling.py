@@ -4,7 +4,9 @@ Every factor draws from its own generator, seeded by (campaign seed, factor name
 or reordering factors leaves the other factors' draws unchanged; the ``lhs`` factors
 share one generator (seed, ``"lhs"``) and one Latin hypercube. Sample ``i`` is grid cell
 ``i // samples`` (grid factors in file order, the last varying fastest) with random draw
-``i % samples``: every grid cell sees the same random draws (paired comparisons).
+``i % samples``: every grid cell sees the same random draws (paired comparisons), except
+the campaign's ``redraw`` factors, drawn anew on each value ``k`` > 0 of its
+``replicate_over`` factor from the generator (campaign seed, ``"NAME@k"``).
 """
 from __future__ import annotations
 
@@ -57,8 +59,8 @@ def _step(f: Factor, campaign: Campaign) -> float | None:
     return f.step if f.step is not None else campaign.comm_step_s if f.name in fx.TIME_FACTORS else None
 
 
-def _draw_factor(f: Factor, campaign: Campaign, n: int) -> list[Any]:
-    rng = rng_for(campaign.seed, f.name)
+def _draw_factor(f: Factor, campaign: Campaign, n: int, stream: str | None = None) -> list[Any]:
+    rng = rng_for(campaign.seed, stream or f.name)
     if f.dist == "uniform":
         return _snap(rng.uniform(f.low, f.high, n), f, _step(f, campaign))
     if f.dist == "randint":
@@ -80,13 +82,20 @@ def draw(campaign: Campaign) -> list[Sample]:
         for j, f in enumerate(lhs):
             columns[f.name] = _snap(f.low + u[:, j] * (f.high - f.low), f, _step(f, campaign))
     grid = campaign.grid
+    over = [f.name for f in grid].index(campaign.replicate_over) if campaign.replicate_over else None
+    redrawn: dict[int, dict[str, list[Any]]] = {}  # value index k > 0 of replicate_over -> its columns
+    if over is not None and campaign.redraw:
+        by_name = {f.name: f for f in campaign.factors}
+        redrawn = {k: {name: _draw_factor(by_name[name], campaign, n, f"{name}@{k}") for name in campaign.redraw}
+                   for k in range(1, len(grid[over].values))}
     width = max(4, len(str(campaign.n_samples - 1)))
     samples = []
-    for c, cell in enumerate(itertools.product(*(f.values for f in grid))):
-        fixed = {f.name: copy.deepcopy(v) for f, v in zip(grid, cell)}
+    for c, cell in enumerate(itertools.product(*(range(len(f.values)) for f in grid))):
+        fixed = {f.name: copy.deepcopy(f.values[j]) for f, j in zip(grid, cell)}
+        cols = {**columns, **redrawn.get(cell[over], {})} if over is not None else columns
         for r in range(n):
             i = c * n + r
-            drawn = {**{k: col[r] for k, col in columns.items()}, **fixed}
+            drawn = {**{k: col[r] for k, col in cols.items()}, **fixed}
             values = {f.name: drawn[f.name] for f in campaign.factors}
             samples.append(Sample(f"s{i:0{width}d}", i, values))
     return samples

@@ -30,6 +30,10 @@ Layout (every key below is known; anything else is an error)::
     replicate_over = "floor_terrain_seed"   # optional, instead of [replicas]: a grid factor;
                                     # the verdicts judge each random draw over its cells
                                     # (e.g. the same robot on five grounds), paired by cell
+    redraw = ["random_pushes_seed"] # optional, with replicate_over: random factors drawn
+                                    # anew on each of its values (a nuisance of every
+                                    # replica, e.g. the pushes); its first value keeps the
+                                    # draws it has without redraw
 
     [factors.torso_mass_kg]         # see scenarios.campaign.factors for the names
     dist = "uniform"                # uniform | lhs: low, high (+ step); randint: low, high
@@ -62,7 +66,7 @@ from scenarios.lang.tomlfile import depth_problem, read_toml
 
 CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
 TOP_KEYS = ("name", "description", "extends", "drop", "base", "duration_s", "compare", "samples", "seed",
-            "task_timeout_s", "retries", "factors", "metric", "replicas", "replicate_over")
+            "task_timeout_s", "retries", "factors", "metric", "replicas", "replicate_over", "redraw")
 #: The errors the paired verdicts may compare (columns of campaign.csv), the default first.
 VERDICT_METRICS = ("steady_state_error_vx", "settled_error_vx")
 DISTS = ("uniform", "lhs", "randint", "choice", "grid")
@@ -114,6 +118,7 @@ class Campaign:
     metric: str = VERDICT_METRICS[0]  # the error the paired verdicts compare
     replicas: tuple[tuple[str, tuple[str, ...]], ...] = ()  # (arm, its replica arms) for the verdicts
     replicate_over: str | None = None  # a grid factor whose cells are the verdicts' replicas
+    redraw: tuple[str, ...] = ()  # random factors drawn anew on each value of replicate_over
     resolved_text: str | None = None  # with extends: the whole campaign as one file (the run folder's copy)
 
     def analysis_settings(self) -> dict[str, Any]:
@@ -122,7 +127,8 @@ class Campaign:
         if self.replicate_over is not None:
             names = [f.name for f in self.grid]
             over = {"factor": self.replicate_over, "draws": self.samples,
-                    "cells": [len(f.values) for f in self.grid], "index": names.index(self.replicate_over)}
+                    "cells": [len(f.values) for f in self.grid], "index": names.index(self.replicate_over),
+                    "redraw": list(self.redraw)}
         return {"seed": self.seed, "metric": self.metric,
                 "replicas": {arm: list(more) for arm, more in self.replicas}, "replicate_over": over}
 
@@ -324,6 +330,34 @@ def _replicate_over(doc: Mapping[str, Any], factors: Sequence[Factor], probs: Pr
     return raw
 
 
+def _redraw(doc: Mapping[str, Any], factors: Sequence[Factor], over: str | None, probs: Problems) -> tuple[str, ...]:
+    """``redraw``: random factors of the campaign (uniform, randint or choice; an ``lhs``
+    factor shares one hypercube with the others and cannot be drawn alone) drawn anew on
+    every value of ``replicate_over`` but the first, so that each replica of a draw also
+    sees its own nuisance (e.g. its own pushes on a flat floor, where the ground alone
+    would repeat one walk). Only with ``replicate_over``."""
+    raw = doc.get("redraw")
+    if raw is None:
+        return ()
+    random = [f.name for f in factors if f.dist in ("uniform", "randint", "choice")]
+    allowed = f"the campaign's uniform, randint or choice factors ({', '.join(random) or 'none here'})"
+    if not isinstance(raw, list) or not raw or not all(isinstance(n, str) for n in raw):
+        probs.add("redraw", raw, f"must be a list of {allowed}")
+        return ()
+    if "replicate_over" not in doc:
+        probs.add("redraw", raw, "redraws factors per value of replicate_over: give replicate_over too")
+        return ()
+    out = []
+    for n in raw:
+        if n not in random:
+            probs.add("redraw", n, f"must be one of {allowed}")
+        elif n in out:
+            probs.add("redraw", n, "is listed twice")
+        else:
+            out.append(n)
+    return tuple(out) if over is not None else ()
+
+
 def _replicas(doc: Mapping[str, Any], arms: Sequence[str] | None,
               probs: Problems) -> tuple[tuple[str, tuple[str, ...]], ...]:
     """``[replicas]``: ``ARM = [replica arms]``. The verdicts of the first two arms of
@@ -416,6 +450,7 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
     metric = _verdict_metric(doc, probs)
     replicas = _replicas(doc, list(base.get("compare") or ["adaptive"]) if base is not None else None, probs)
     replicate_over = _replicate_over(doc, factors, probs)
+    redraw = _redraw(doc, factors, replicate_over, probs)
     if base is not None and not probs.items:
         _probe_factors(factors, base, base_dir, probs)
     if probs.items:
@@ -423,7 +458,7 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
     order = fx.apply_order([f.name for f in factors])
     factors.sort(key=lambda f: order.index(f.name))
     return Campaign(name, description, ref, base, base_dir, samples, seed, tuple(factors), retries, timeout,
-                    source, float(base["comm_step_s"]), metric, replicas, replicate_over, resolved_text)
+                    source, float(base["comm_step_s"]), metric, replicas, replicate_over, redraw, resolved_text)
 
 
 def _lay_over(parent: Mapping[str, Any], child: Mapping[str, Any], under_factors: bool = False) -> dict[str, Any]:

@@ -222,3 +222,39 @@ def test_robustness_random_grounds_walks_each_robot_of_the_lr2_campaign_on_five_
         assert sorted(v["floor_terrain_seed"] for v in members) == [1, 2, 3, 4, 5]
         rest = [{k: x for k, x in v.items() if k != "floor_terrain_seed"} for v in members]
         assert all(x == rest[0] for x in rest)
+
+
+def test_robustness_random_nuisance_gives_each_of_a_robots_five_runs_its_own_ground_and_pushes():
+    """robustness_random_grounds with random_pushes_seed redrawn per ground (another seed):
+    every run of a draw is the same robot on another ground under other pushes, so a flat
+    or sloped floor no longer repeats one walk five times."""
+    raw = tomllib.loads(spec.resolve_campaign("robustness_random_nuisance").read_text())
+    assert raw["extends"] == "robustness_random_grounds" and raw["redraw"] == ["random_pushes_seed"]
+    nuisance, grounds = resolved("robustness_random_nuisance"), resolved("robustness_random_grounds")
+    assert nuisance["factors"] == grounds["factors"] and nuisance["base"] == grounds["base"]
+    assert nuisance["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026)  # a set no setting was chosen on
+    c = spec.load_campaign(spec.resolve_campaign("robustness_random_nuisance"))
+    assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd"] and c.replicate_over == "floor_terrain_seed"
+    assert c.redraw == ("random_pushes_seed",) and c.n_samples == 500
+    over = c.analysis_settings()["replicate_over"]
+    samples = sampling.draw(c)
+    rows = [{"sample": s.id, "arm": "adaptive", "values": s} for s in samples]
+    draws: dict[str, list] = {}
+    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
+        draws.setdefault(r["sample"], []).append(r["values"])
+    assert len(draws) == 100
+    flat = 0
+    for members in draws.values():
+        values = [m.values for m in members]
+        assert sorted(v["floor_terrain_seed"] for v in values) == [1, 2, 3, 4, 5]
+        assert len({v["random_pushes_seed"] for v in values}) == 5
+        nuisance_keys = ("floor_terrain_seed", "random_pushes_seed")
+        rest = [{k: x for k, x in v.items() if k not in nuisance_keys} for v in values]
+        assert all(x == rest[0] for x in rest)
+        if "terrain" not in values[0]["floor"]:
+            flat += 1
+            # the five scenarios differ in their pushes (the walks differ, though the floor is one)
+            pushes = [tuple(scenario_spec.parse_scenario(sampling.sample_document(c, m), source=m.id,
+                                                         base_dir=c.base_dir).pushes) for m in members]
+            assert len(set(pushes)) == 5
+    assert 40 <= flat <= 75  # flat or sloped floors: weights 6 of 10 in lr2's floor factor

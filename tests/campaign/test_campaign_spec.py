@@ -699,7 +699,7 @@ def test_replicate_over_names_a_grid_factor_and_excludes_replicas():
     c = campaign(grounds())
     over = c.analysis_settings()["replicate_over"]
     assert over == {"factor": "floor_terrain_seed", "draws": 3, "cells": [2, 3],
-                    "index": [f.name for f in c.grid].index("floor_terrain_seed")}
+                    "index": [f.name for f in c.grid].index("floor_terrain_seed"), "redraw": []}
 
 
 def test_replicate_over_regroups_each_draw_over_the_factor_values():
@@ -720,6 +720,59 @@ def test_replicate_over_regroups_each_draw_over_the_factor_values():
         assert len({(m["values"]["model"], m["values"]["torso_mass_kg"]) for m in members}) == 1
         assert {m["arm"]: m["values"]["floor_terrain_seed"] for m in members} == {arm: 7, f"{arm}@1": 8, f"{arm}@2": 9}
         assert by_id[name]["floor_terrain_seed"] == 7 and by_id[name]["model"] == members[0]["values"]["model"]
+
+
+NUISANCE_FACTOR = """
+[factors.joint_damping_scale]
+dist = "uniform"
+low = 1.0
+high = 3.0
+"""
+
+
+def test_redraw_names_random_factors_and_needs_replicate_over():
+    over = 'replicate_over = "floor_terrain_seed"\n'
+    found = problems_of(grounds('redraw = ["torso_mass_kg"]\n'))
+    assert found == ["redraw = ['torso_mass_kg']: redraws factors per value of replicate_over: give replicate_over too"]
+    found = problems_of(grounds(over + 'redraw = ["model", "nope", "torso_mass_kg", "torso_mass_kg"]\n'))
+    allowed = "must be one of the campaign's uniform, randint or choice factors (torso_mass_kg)"
+    assert found == [f"redraw = 'model': {allowed}", f"redraw = 'nope': {allowed}",
+                     "redraw = 'torso_mass_kg': is listed twice"]
+    assert problems_of(grounds(over + 'redraw = "torso_mass_kg"\n')) == [
+        "redraw = 'torso_mass_kg': must be a list of the campaign's uniform, randint or choice factors (torso_mass_kg)"]
+    # reported beside an unrelated problem of the same file
+    found = problems_of(grounds(over + 'redraw = ["nope"]\nretries = 99\n'))
+    assert any(p.startswith("redraw = 'nope'") for p in found) and any("retries = 99" in p for p in found)
+
+
+def test_redraw_gives_each_replica_its_own_draw_of_the_nuisance():
+    """Each draw on 3 grounds: torso_mass_kg drawn anew on grounds 8 and 9, joint_damping_scale
+    not; the first ground keeps the draws the campaign has without redraw."""
+    plain = sampling.draw(campaign(grounds(factors=GROUND_FACTORS + NUISANCE_FACTOR)))
+    c = campaign(grounds('replicate_over = "floor_terrain_seed"\nredraw = ["torso_mass_kg"]\n',
+                         GROUND_FACTORS + NUISANCE_FACTOR))
+    assert c.redraw == ("torso_mass_kg",) and c.analysis_settings()["replicate_over"]["redraw"] == ["torso_mass_kg"]
+    samples = sampling.draw(c)
+    assert [s.values for s in samples] == [s.values for s in sampling.draw(c)]  # same seed, same draws
+    over = c.analysis_settings()["replicate_over"]
+    rows = [{"sample": s.id, "arm": "adaptive", "values": s.values} for s in samples]
+    groups: dict[str, list[dict]] = {}
+    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
+        groups.setdefault(r["sample"], []).append(r["values"])
+    plain_by_id = {s.id: s.values for s in plain}
+    masses_by_ground: dict[int, list[float]] = {}
+    for name, members in groups.items():
+        assert len(members) == 3
+        assert members[0] == plain_by_id[name]  # the first ground: as without redraw
+        assert len({m["joint_damping_scale"] for m in members}) == 1  # not redrawn: one robot
+        assert len({m["model"] for m in members}) == 1
+        masses = [m["torso_mass_kg"] for m in members]
+        assert len(set(masses)) == 3 and all(11.0 <= x <= 20.0 for x in masses)
+        for m in members:
+            masses_by_ground.setdefault(m["floor_terrain_seed"], []).append(m["torso_mass_kg"])
+    # the redrawn column is one per ground, shared by the other grid cells (both models)
+    for ground, masses in masses_by_ground.items():
+        assert len(set(masses)) == 3, ground
 
 
 def test_the_folder_records_the_report_settings_and_a_resume_follows_the_campaign_file(tmp_path):
