@@ -244,9 +244,11 @@ def verdicts(rows: Sequence[dict[str, Any]], a: str, b: str, *, metric: str = "s
     out: dict[str, Any] = {"n": len(samples), "replicas": n_pairs, "metric": metric, "contested": 0, "wins": 0,
                            "only_a_fell": [], "a_fell_some": [], "not_won": []}
     diffs: list[float] = []
+    falls: list[tuple[list[bool], list[bool]]] = []
     for s in samples:
         fa = [by[(s, x)]["fell"] for x, _ in pairs]
         fb = [by[(s, y)]["fell"] for _, y in pairs]
+        falls.append((fa, fb))
         if not any(fb) and any(fa):
             out["a_fell_some"].append((s, sum(fa)))
         if 2 * sum(fa) > n_pairs and 2 * sum(fb) < n_pairs:
@@ -275,9 +277,40 @@ def verdicts(rows: Sequence[dict[str, Any]], a: str, b: str, *, metric: str = "s
         "beats": bool(contested) and out["wins"] >= WIN_SHARE_REQUIRED * contested,
         "never_falls_where_b_walks": not out["only_a_fell"],
         "only_a_fell_ci": clopper_pearson(len(out["only_a_fell"]), len(samples)),
+        "only_a_fell_null": swapped_only_a_fell(falls, len(out["only_a_fell"])),
         "median_diff": quantile(diffs, 0.5), "median_diff_ci": bootstrap_median_ci(diffs),
     })
     return out
+
+
+#: Random relabellings of the arms for the chance level of "never falls where b walks".
+SWAPS_N = 2000
+
+
+def swapped_only_a_fell(falls: Sequence[tuple[Sequence[bool], Sequence[bool]]], observed: int,
+                        level: float = 0.95) -> dict[str, float] | None:
+    """How many samples the "never falls where b walks" reading lists by chance alone.
+
+    ``falls``: per sample, the fell flags of ``a``'s and ``b``'s runs, paired by position.
+    Were the two arms equally likely to be the one that falls on each pair, swapping the
+    two runs of a pair would not change the odds; this swaps each pair with probability
+    1/2 (:data:`SWAPS_N` times, seed :data:`BOOTSTRAP_SEED`) and counts the samples where
+    ``a`` fell on more than half of its runs and ``b`` on fewer than half. Returns the
+    mean count, its central ``level`` interval and the share of swaps with at least
+    ``observed`` such samples; None without samples."""
+    if not falls:
+        return None
+    import numpy as np
+
+    fa = np.array([a for a, _ in falls], dtype=bool)  # samples x pairs
+    fb = np.array([b for _, b in falls], dtype=bool)
+    n_pairs = fa.shape[1]
+    swap = np.random.default_rng(BOOTSTRAP_SEED).random((SWAPS_N, *fa.shape)) < 0.5
+    ka = np.where(swap, fb, fa).sum(axis=2)
+    kb = np.where(swap, fa, fb).sum(axis=2)
+    counts = ((2 * ka > n_pairs) & (2 * kb < n_pairs)).sum(axis=1)
+    return {"mean": float(counts.mean()), "low": float(np.quantile(counts, (1 - level) / 2)),
+            "high": float(np.quantile(counts, (1 + level) / 2)), "at_least_observed": float((counts >= observed).mean())}
 
 
 def mcnemar_exact(k: int, m: int) -> float | None:

@@ -129,6 +129,12 @@ def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
                  f" ({len(v['only_a_fell'])} of {v['n']} paired samples, exact 95 % interval "
                  f"{_pct(v['only_a_fell_ci'])}; samples: {fell}).")
         win = f"a win: only {b} fell, or both walked and {a}'s {label} is lower"
+    null = v.get("only_a_fell_null")
+    if null is not None:
+        never += (f" Chance level: with the two runs of each pair swapped at random ({analysis.SWAPS_N} times), "
+                  f"as if either arm were as likely to be the one that falls, the same reading lists "
+                  f"{null['mean']:.1f} samples on average (95 %: {null['low']:.0f}-{null['high']:.0f}), and "
+                  f"{len(v['only_a_fell'])} or more in {100 * null['at_least_observed']:.0f} % of the swaps.")
     lines += [never, "",
               f"**Verdict: {a} beats {b} on >= {100 * analysis.WIN_SHARE_REQUIRED:.0f} % of paired samples: "
               f"{'PASS' if v['beats'] else 'FAIL'}** ({v['wins']} of {v['contested']} samples where at least one arm "

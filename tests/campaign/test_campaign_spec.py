@@ -549,6 +549,30 @@ def test_mcnemar_exact_matches_the_binomial_test():
     assert analysis.mcnemar_exact(3, 3) == 1.0 and analysis.mcnemar_exact(0, 0) is None
 
 
+def test_chance_level_of_never_falls_swaps_the_runs_of_each_pair():
+    """The chance level of the "never falls where b walks" reading: each pair's two runs
+    swapped with probability 1/2. Tolerances: 2000 swaps give a standard error of
+    sqrt(0.25 / 2000) = 0.011 on a rate of 1/2; 0.04 is over 3.5 of them."""
+    swapped = analysis.swapped_only_a_fell
+    # concordant pairs only (both fell or both walked): no swap changes anything
+    assert swapped([([True, False, True], [True, False, True])] * 4, 0) == {
+        "mean": 0.0, "low": 0.0, "high": 0.0, "at_least_observed": 1.0}
+    # a fell on 5 of 5, b on none: a swap gives a Binomial(5, 1/2) falls, b the rest; listed iff a >= 3
+    one = swapped([([True] * 5, [False] * 5)], 1)
+    assert one["mean"] == pytest.approx(0.5, abs=0.04) and one["at_least_observed"] == pytest.approx(0.5, abs=0.04)
+    # ten such samples: the count is Binomial(10, 1/2), 5 on average
+    ten = swapped([([True] * 5, [False] * 5)] * 10, 10)
+    assert ten["mean"] == pytest.approx(5.0, abs=0.15) and 1.0 <= ten["low"] <= 3.0 and 7.0 <= ten["high"] <= 9.0
+    assert ten["at_least_observed"] < 0.01  # 10 of 10: 1/1024 by chance
+    assert swapped([([True] * 5, [False] * 5)] * 10, 10) == ten  # fixed seed
+    assert swapped([], 0) is None
+    # in the verdicts, beside the count it qualifies
+    rows = [{"sample": f"s{i}", "arm": arm, "status": "complete", "fell": fell, "steady_state_error_vx": 0.1}
+            for i in range(3) for arm, fell in (("ad", i == 0), ("pd", False))]
+    v = analysis.verdicts(rows, "ad", "pd")
+    assert v["only_a_fell"] == ["s0"] and v["only_a_fell_null"]["mean"] == pytest.approx(0.5, abs=0.04)
+
+
 def test_fall_agreement_counts_falls_against_the_reference_arm():
     def r(sample, arm, fell):
         return {"sample": sample, "arm": arm, "status": "complete", "fell": fell, "t_fall_s": 3.0 if fell else None,
@@ -629,6 +653,8 @@ def test_report_judges_a_draw_over_its_grounds(tmp_path):
     assert ("never falls where pd_only walks: FAIL** (samples where adaptive fell on more than half of the 3 "
             "replicas and pd_only on fewer than half: 1 of 2") in text
     assert "[s0001](samples/s0001.toml)" in text and "s0000 (1/3)" in text
+    # chance lists draw s1 (two of its three pairs: only adaptive fell) when neither is swapped: 1 in 4
+    assert "Chance level: with the two runs of each pair swapped at random (2000 times)" in text
     assert "beats pd_only on >= 90 % of paired samples: FAIL** (1 of 2 samples" in text
 
 
