@@ -225,13 +225,17 @@ def test_robustness_random_grounds_walks_each_robot_of_the_lr2_campaign_on_five_
 
 
 def test_robustness_random_nuisance_gives_each_of_a_robots_five_runs_its_own_ground_and_pushes():
-    """robustness_random_grounds with random_pushes_seed redrawn per ground (another seed):
-    every run of a draw is the same robot on another ground under other pushes, so a flat
-    or sloped floor no longer repeats one walk five times."""
+    """robustness_random_grounds with random_pushes_seed redrawn per ground, learning 8
+    settled steps after a command change (another seed): every run of a draw is the same
+    robot on another ground under other pushes, so a flat or sloped floor no longer
+    repeats one walk five times."""
     raw = tomllib.loads(spec.resolve_campaign("robustness_random_nuisance").read_text())
     assert raw["extends"] == "robustness_random_grounds" and raw["redraw"] == ["random_pushes_seed"]
     nuisance, grounds = resolved("robustness_random_nuisance"), resolved("robustness_random_grounds")
-    assert nuisance["factors"] == grounds["factors"] and nuisance["base"] == grounds["base"]
+    assert nuisance["factors"] == grounds["factors"]
+    assert nuisance["base"]["regulator"].pop("learn_settled_steps") == 8  # 3 in grounds
+    grounds["base"]["regulator"].pop("learn_settled_steps")
+    assert nuisance["base"] == grounds["base"]
     assert nuisance["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026)  # a set no setting was chosen on
     c = spec.load_campaign(spec.resolve_campaign("robustness_random_nuisance"))
     assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd"] and c.replicate_over == "floor_terrain_seed"
