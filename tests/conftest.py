@@ -64,6 +64,22 @@ def fmu_dir(tmp_path_factory, built_fmu):
     return _unzip(built_fmu, tmp_path_factory.mktemp("fmu_unzipped"))
 
 
+@dataclass(frozen=True)
+class BuiltAll:
+    """One full ``build.py`` run (``build_all``) into a fresh folder: ``dist`` and the paths it returned."""
+
+    dist: Path
+    built: tuple[Path, ...]
+
+
+@pytest.fixture(scope="session")
+def built_all(tmp_path_factory, build_module) -> BuiltAll:
+    """``build_all`` once per session, shared by the tests that read a whole build (its XML
+    documents, fmus.json, the cross-check tree); they only read it."""
+    out = tmp_path_factory.mktemp("dist")
+    return BuiltAll(out, tuple(Path(p) for p in build_module.build_all(out)))
+
+
 @pytest.fixture(scope="session")
 def native_fmus(tmp_path_factory, build_module):
     """{2: path, 3: path}: both native FMUs exactly as build.py builds them."""

@@ -33,10 +33,8 @@ LS_DESCRIPTION = "Layered Standard providing information on related files includ
 
 
 @pytest.fixture(scope="module")
-def dist(tmp_path_factory, build_module) -> Path:
-    out = tmp_path_factory.mktemp("dist")
-    build_module.build_all(out)
-    return out
+def dist(built_all) -> Path:
+    return built_all.dist
 
 
 def fmus_of(dist):
@@ -114,7 +112,8 @@ def test_the_three_regulators_share_one_reference(dist):
     assert len(refs) == 3 and len(set(refs.values())) == 1, sorted(refs)
 
 
-def test_an_fmu_built_alone_is_build_alls(dist, built_fmu, native_fmus, tmp_path_factory, build_module):
+def test_an_fmu_built_alone_is_build_alls(dist, built_fmu, native_fmus, native_plant_fmus, tmp_path_factory,
+                                         build_module):
     """The FMUs each build function writes (the session's, as a run builds ``dist/`` on demand)
     carry the same reference and are the same files as build_all's."""
     if os.environ.get("AVR_TEST_FMU"):
@@ -124,8 +123,7 @@ def test_an_fmu_built_alone_is_build_alls(dist, built_fmu, native_fmus, tmp_path
              "CassiePlant.fmu": built_plant_fmu(tmp_path_factory, build_module),
              **{f"CommandSource_fmi{v}.fmu": build_module.build_command_source(v, tmp_path_factory.mktemp("command"))
                 for v in (2, 3)},
-             **{f"CassiePlantNative_fmi{v}.fmu": build_module.build_native_plant_fmu(
-                 v, tmp_path_factory.mktemp("native_plant")) for v in (2, 3)}}
+             **{f"CassiePlantNative_fmi{v}.fmu": native_plant_fmus[v] for v in (2, 3)}}
     assert sorted(alone) == sorted(fmu.name for fmu in fmus_of(dist))
     for name, fmu in alone.items():
         assert experiment_of(Path(fmu))[2] == experiment_of(dist / name)[2], name

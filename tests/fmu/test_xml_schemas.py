@@ -88,11 +88,9 @@ BREAKS = {
 
 
 @pytest.fixture(scope="module")
-def documents(tmp_path_factory, build_module) -> dict[str, bytes]:
+def documents(built_all) -> dict[str, bytes]:
     """Every XML document of a full ``build.py`` run (``build_all``) into a fresh folder."""
-    out = tmp_path_factory.mktemp("dist")
-    build_module.build_all(out)
-    return xml_documents(out)
+    return xml_documents(built_all.dist)
 
 
 def test_the_build_writes_exactly_these_xml_documents(documents):

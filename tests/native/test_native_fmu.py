@@ -35,12 +35,13 @@ def test_no_python_in_any_binary(native_fmus, fmi, tmp_path):
             assert dlls <= {"kernel32.dll", "msvcrt.dll"}, dlls
 
 
-def test_build_all_writes_fmus_json_listing_every_fmu_built(build_module, tmp_path):
+def test_build_all_writes_fmus_json_listing_every_fmu_built(built_all):
     require(MINGW_CC), require(AARCH64_CC)  # without them build.py skips their platforms (test_build_platforms.py)
-    built = build_module.build_all(tmp_path)
+    built = built_all.built
     paths = [p for p in built if p.suffix == ".fmu"]
     assert {p.name for p in built} - {p.name for p in paths} == {"CassieAVR.ssp", "CassieAVR_osp", "CassieAVRNative.ssp"}
-    listing = json.loads((tmp_path / "fmus.json").read_text())["fmus"]
+    assert all(p.parent == built_all.dist for p in built)
+    listing = json.loads((built_all.dist / "fmus.json").read_text())["fmus"]
     assert [e["file"] for e in listing] == [p.name for p in paths] and all(p.is_file() for p in paths)
     assert [(e["fmiVersion"], e["modelIdentifier"], e["implementation"], e["platforms"]) for e in listing] == [
         ("2.0", "AdaptiveVelocityRegulator", "python", ["linux64", "win64"]),
