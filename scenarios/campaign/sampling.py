@@ -82,7 +82,7 @@ def draw(campaign: Campaign) -> list[Sample]:
         for j, f in enumerate(lhs):
             columns[f.name] = _snap(f.low + u[:, j] * (f.high - f.low), f, _step(f, campaign))
     grid = campaign.grid
-    over = [f.name for f in grid].index(campaign.replicate_over) if campaign.replicate_over else None
+    over = campaign.replicate_index
     redrawn: dict[int, dict[str, list[Any]]] = {}  # value index k > 0 of replicate_over -> its columns
     if over is not None and campaign.redraw:
         by_name = {f.name: f for f in campaign.factors}

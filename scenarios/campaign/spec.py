@@ -124,10 +124,9 @@ class Campaign:
     def analysis_settings(self) -> dict[str, Any]:
         """What the campaign's report needs beyond the rows (written into campaign.json)."""
         over = None
-        if self.replicate_over is not None:
-            names = [f.name for f in self.grid]
+        if self.replicate_index is not None:
             over = {"factor": self.replicate_over, "draws": self.samples,
-                    "cells": [len(f.values) for f in self.grid], "index": names.index(self.replicate_over),
+                    "cells": [len(f.values) for f in self.grid], "index": self.replicate_index,
                     "redraw": list(self.redraw)}
         return {"seed": self.seed, "metric": self.metric,
                 "replicas": {arm: list(more) for arm, more in self.replicas}, "replicate_over": over}
@@ -135,6 +134,13 @@ class Campaign:
     @property
     def grid(self) -> tuple[Factor, ...]:
         return tuple(f for f in self.factors if f.dist == "grid")
+
+    @property
+    def replicate_index(self) -> int | None:
+        """The position of ``replicate_over`` among the grid factors (None without it)."""
+        if self.replicate_over is None:
+            return None
+        return [f.name for f in self.grid].index(self.replicate_over)
 
     @property
     def n_samples(self) -> int:
