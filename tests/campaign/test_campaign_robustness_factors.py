@@ -262,3 +262,43 @@ def test_robustness_random_nuisance_gives_each_of_a_robots_five_runs_its_own_gro
                                                          base_dir=c.base_dir).pushes) for m in members]
             assert len(set(pushes)) == 5
     assert 40 <= flat <= 75  # flat or sloped floors: weights 6 of 10 in lr2's floor factor
+
+
+def test_robustness_random_start_gives_each_run_its_own_start_nuisance():
+    """robustness_random_nuisance with a push of at most 3 N per axis at 1 s on the pelvis,
+    drawn anew on every run with the pushes (another seed): each of a robot's five runs is
+    its own walk from the start, and adaptive and PD-only of a run get the same one."""
+    raw = tomllib.loads(spec.resolve_campaign("robustness_random_start").read_text())
+    assert raw["extends"] == "robustness_random_nuisance"
+    assert raw["redraw"] == ["random_pushes_seed", "push_force_x_n", "push_force_y_n"]
+    start, nuisance = resolved("robustness_random_start"), resolved("robustness_random_nuisance")
+    added = {k: start["factors"].pop(k) for k in ("push_force_x_n", "push_force_y_n")}
+    assert added == {k: {"dist": "uniform", "low": -3.0, "high": 3.0} for k in added}
+    assert start["factors"] == nuisance["factors"]
+    assert start["base"].pop("push") == [{"t_s": 1.0, "force_n": [0.0, 0.0, 0.0], "duration_s": 0.1}]
+    assert start["base"] == nuisance["base"]  # the regulator settings too
+    assert start["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026, 2027)  # no setting or design chosen on it
+    c = spec.load_campaign(spec.resolve_campaign("robustness_random_start"))
+    assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd"] and c.n_samples == 500
+    over = c.analysis_settings()["replicate_over"]
+    samples = sampling.draw(c)
+    rows = [{"sample": s.id, "arm": "adaptive", "values": s} for s in samples]
+    draws: dict[str, list] = {}
+    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
+        draws.setdefault(r["sample"], []).append(r["values"])
+    assert len(draws) == 100
+    redrawn = ("floor_terrain_seed", "random_pushes_seed", "push_force_x_n", "push_force_y_n")
+    checked = 0
+    for members in draws.values():
+        values = [m.values for m in members]
+        forces = [(v["push_force_x_n"], v["push_force_y_n"]) for v in values]
+        assert len(set(forces)) == 5 and all(-3.0 <= f <= 3.0 for xy in forces for f in xy)
+        rest = [{k: x for k, x in v.items() if k not in redrawn} for v in values]
+        assert all(x == rest[0] for x in rest)
+        if checked < 3:  # the parsed scenarios carry it: one pelvis push at 1 s, before the random ones
+            checked += 1
+            for m, (fx_n, fy_n) in zip(members, forces):
+                sc = scenario_spec.parse_scenario(sampling.sample_document(c, m), source=m.id, base_dir=c.base_dir)
+                first = [p for p in sc.pushes if p.t_s == 1.0]
+                assert [(p.force_n, p.duration_s, p.body) for p in first] == [((fx_n, fy_n, 0.0), 0.1, "cassie-pelvis")]
+                assert all(p.t_s >= 3.0 for p in sc.pushes if p is not first[0])
