@@ -67,7 +67,7 @@ WINDOW_S = 300.0
 
 #: The regulator settings of the randomization campaigns whose verdicts the README reports
 #: (robustness_random_settled_lr2 and robustness_random_grounds; robustness_random_nuisance
-#: waits 8 settled steps): the long walks hold for them too.
+#: and robustness_random_start wait 8 settled steps): the long walks hold for them too.
 CAMPAIGN_SETTINGS = {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3, "learning_rate": 2e-6}
 NUISANCE_SETTINGS = {**CAMPAIGN_SETTINGS, "learn_settled_steps": 8}
 
