@@ -224,6 +224,17 @@ def test_robustness_random_grounds_walks_each_robot_of_the_lr2_campaign_on_five_
         assert all(x == rest[0] for x in rest)
 
 
+def samples_by_draw(c: spec.Campaign) -> dict[str, list]:
+    """A replicated campaign's samples grouped by random draw (the report's grouping,
+    :func:`analysis.regroup`): ``{draw's sample id: [its sample on each replica value]}``."""
+    over = c.analysis_settings()["replicate_over"]
+    rows = [{"sample": s.id, "arm": "adaptive", "values": s} for s in sampling.draw(c)]
+    draws: dict[str, list] = {}
+    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
+        draws.setdefault(r["sample"], []).append(r["values"])
+    return draws
+
+
 def test_robustness_random_nuisance_gives_each_of_a_robots_five_runs_its_own_ground_and_pushes():
     """robustness_random_grounds with random_pushes_seed redrawn per ground, learning 8
     settled steps after a command change (another seed): every run of a draw is the same
@@ -240,12 +251,7 @@ def test_robustness_random_nuisance_gives_each_of_a_robots_five_runs_its_own_gro
     c = spec.load_campaign(spec.resolve_campaign("robustness_random_nuisance"))
     assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd"] and c.replicate_over == "floor_terrain_seed"
     assert c.redraw == ("random_pushes_seed",) and c.n_samples == 500
-    over = c.analysis_settings()["replicate_over"]
-    samples = sampling.draw(c)
-    rows = [{"sample": s.id, "arm": "adaptive", "values": s} for s in samples]
-    draws: dict[str, list] = {}
-    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
-        draws.setdefault(r["sample"], []).append(r["values"])
+    draws = samples_by_draw(c)
     assert len(draws) == 100
     flat = 0
     for members in draws.values():
@@ -280,12 +286,7 @@ def test_robustness_random_start_gives_each_run_its_own_start_nuisance():
     assert start["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026, 2027)  # no setting or design chosen on it
     c = spec.load_campaign(spec.resolve_campaign("robustness_random_start"))
     assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd"] and c.n_samples == 500
-    over = c.analysis_settings()["replicate_over"]
-    samples = sampling.draw(c)
-    rows = [{"sample": s.id, "arm": "adaptive", "values": s} for s in samples]
-    draws: dict[str, list] = {}
-    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
-        draws.setdefault(r["sample"], []).append(r["values"])
+    draws = samples_by_draw(c)
     assert len(draws) == 100
     redrawn = ("floor_terrain_seed", "random_pushes_seed", "push_force_x_n", "push_force_y_n")
     checked = 0
