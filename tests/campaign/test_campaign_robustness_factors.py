@@ -196,6 +196,17 @@ def test_variant_campaigns_differ_from_their_parent_by_one_regulator_setting(var
         assert {o.get(name) for o in regulated} == {expected}, name
 
 
+def samples_by_draw(c: spec.Campaign) -> dict[str, list]:
+    """A replicated campaign's samples grouped by random draw (the report's grouping,
+    :func:`analysis.regroup`): ``{draw's sample id: [its sample on each replica value]}``."""
+    over = c.analysis_settings()["replicate_over"]
+    rows = [{"sample": s.id, "arm": "adaptive", "values": s} for s in sampling.draw(c)]
+    draws: dict[str, list] = {}
+    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
+        draws.setdefault(r["sample"], []).append(r["values"])
+    return draws
+
+
 def test_robustness_random_grounds_walks_each_robot_of_the_lr2_campaign_on_five_grounds():
     """The same factors and regulator settings as robustness_random_settled_lr2 (another
     seed), the terrain seed a grid of five the verdicts replicate over; three arms."""
@@ -211,28 +222,13 @@ def test_robustness_random_grounds_walks_each_robot_of_the_lr2_campaign_on_five_
     c = spec.load_campaign(spec.resolve_campaign("robustness_random_grounds"))
     assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd"] and c.replicas == ()
     assert c.replicate_over == "floor_terrain_seed" and c.samples == 100 and c.n_samples == 500
-    over = c.analysis_settings()["replicate_over"]
-    samples = sampling.draw(c)
-    rows = [{"sample": s.id, "arm": "adaptive", "values": s.values} for s in samples]
-    draws: dict[str, list[dict]] = {}
-    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
-        draws.setdefault(r["sample"], []).append(r["values"])
+    draws = samples_by_draw(c)
     assert len(draws) == 100
-    for members in draws.values():
+    for samples in draws.values():
+        members = [m.values for m in samples]
         assert sorted(v["floor_terrain_seed"] for v in members) == [1, 2, 3, 4, 5]
         rest = [{k: x for k, x in v.items() if k != "floor_terrain_seed"} for v in members]
         assert all(x == rest[0] for x in rest)
-
-
-def samples_by_draw(c: spec.Campaign) -> dict[str, list]:
-    """A replicated campaign's samples grouped by random draw (the report's grouping,
-    :func:`analysis.regroup`): ``{draw's sample id: [its sample on each replica value]}``."""
-    over = c.analysis_settings()["replicate_over"]
-    rows = [{"sample": s.id, "arm": "adaptive", "values": s} for s in sampling.draw(c)]
-    draws: dict[str, list] = {}
-    for r in analysis.regroup(rows, over["draws"], over["cells"], over["index"]):
-        draws.setdefault(r["sample"], []).append(r["values"])
-    return draws
 
 
 def test_robustness_random_nuisance_gives_each_of_a_robots_five_runs_its_own_ground_and_pushes():
@@ -289,15 +285,13 @@ def test_robustness_random_start_gives_each_run_its_own_start_nuisance():
     draws = samples_by_draw(c)
     assert len(draws) == 100
     redrawn = ("floor_terrain_seed", "random_pushes_seed", "push_force_x_n", "push_force_y_n")
-    checked = 0
-    for members in draws.values():
+    for i, members in enumerate(draws.values()):
         values = [m.values for m in members]
         forces = [(v["push_force_x_n"], v["push_force_y_n"]) for v in values]
         assert len(set(forces)) == 5 and all(-3.0 <= f <= 3.0 for xy in forces for f in xy)
         rest = [{k: x for k, x in v.items() if k not in redrawn} for v in values]
         assert all(x == rest[0] for x in rest)
-        if checked < 3:  # the parsed scenarios carry it: one pelvis push at 1 s, before the random ones
-            checked += 1
+        if i < 3:  # the parsed scenarios carry it: one pelvis push at 1 s, before the random ones
             for m, (fx_n, fy_n) in zip(members, forces):
                 sc = scenario_spec.parse_scenario(sampling.sample_document(c, m), source=m.id, base_dir=c.base_dir)
                 first = [p for p in sc.pushes if p.t_s == 1.0]
