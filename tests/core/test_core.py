@@ -111,7 +111,7 @@ def test_specs_match_dataclasses_and_api_order():
         "adaptation_enabled", "velocity_scale_mps", "angle_scale_rad",
         "rate_scale_radps", "n_neurons", "seed", "delta_limit_rad",
         "leakage_per_s", "leakage_mode", "command_accel_limit_mps2", "learn_settled_steps",
-        "error_deadzone_mps", "weight_norm_max"]
+        "error_deadzone_mps", "weight_norm_max", "unsettled_unlearn"]
     assert [f.name for f in dataclasses.fields(RegulatorParams)] == [s.name for s in PARAM_SPECS]
     p = RegulatorParams()
     for s in PARAM_SPECS:

@@ -304,7 +304,11 @@ static void learn(AvrCore *core, const double *values, double dt, const double d
     double e_roll = ready ? V(roll_des) - 0.5 * (core->roll_mean_prev + core->roll_mean_last) : 0.0;
     double e_x = V(vx_des) - V(vx), zone = V(error_deadzone_mps);
     if (zone != 0.0) e_x = dead_zone(e_x, zone), e_y = dead_zone(e_y, zone);
-    if ((double)core->settled_steps < V(learn_settled_steps)) e_x = 0.0, e_y = 0.0;
+    if ((double)core->settled_steps < V(learn_settled_steps)) { /* avr_regulator._unsettled_errors */
+        int unlearn = V(unsettled_unlearn) != 0.0;
+        if (!unlearn || raw[0] * e_x <= 0.0) e_x = 0.0;
+        if (!unlearn || raw[1] * e_y <= 0.0) e_y = 0.0;
+    }
     double err[AVR_N_ROWS] = {e_x, e_y, V(pitch_des) - V(pitch), e_roll};
     double keep = leak_factor(V(leakage_per_s), dt);
     /* leakage_mode 1 (avr_regulator._keep_current_output): coef + amount (w . h) / |h|^2 for a row
