@@ -51,10 +51,13 @@ def rss():
 
 for i in range(args["warm_up"]):
     cycle(i)
-before = rss()
+marks = [rss()]
 for i in range(args["cycles"]):
     cycle(i)
-print(json.dumps({"growth_kb": (rss() - before) / 1024, "sys_path": len(sys.path)}))
+    if (i + 1) % args["window"] == 0:
+        marks.append(rss())
+print(json.dumps({"growth_kb": (marks[-1] - marks[0]) / 1024, "sys_path": len(sys.path),
+                  "window_kb": [(b - a) / 1024 for a, b in zip(marks, marks[1:])]}))
 """
 
 
@@ -63,9 +66,9 @@ def fmus(tmp_path_factory, build_module, built_fmu):
     return {"regulator": built_fmu, "plant": built_plant_fmu(tmp_path_factory, build_module)}
 
 
-def _growth(fmus, name, cycles, initialize, tmp_path) -> dict:
+def _growth(fmus, name, cycles, initialize, tmp_path, window=None) -> dict:
     args = {"fmu": str(fmus[name]), "dir": str(tmp_path / "extracted"), "cycles": cycles, "warm_up": WARM_UP,
-            "initialize": initialize}
+            "initialize": initialize, "window": window or cycles}
     return run_host(HOST, args, tmp_path)[0]
 
 
@@ -76,8 +79,15 @@ def _check(result, cycles):
 
 @pytest.mark.parametrize("name, initialize", [("regulator", True), ("plant", False)])
 def test_instantiate_free_cycles_grow_less_than_the_bound(fmus, tmp_path, name, initialize):
-    """200 cycles (the plant's without initialization: see the long test)."""
-    _check(_growth(fmus, name, 200, initialize, tmp_path), 200)
+    """Three windows of 100 cycles (the plant's without initialization: see the long test), judged
+    by their median: RSS grows in steps, as the allocator maps memory in arenas, so one window
+    can hold a one-time step that is no per-cycle growth. The regulator grew +644 kB over 200
+    cycles at one commit and +1140 kB after one parameter was added, while from cycle 400 to
+    1000 both grew 1.5 kB per cycle: the same rate, a step of about 0.5 MB that falls inside
+    or outside the window. A leak grows in every window; one step moves only one of three."""
+    result = _growth(fmus, name, 300, initialize, tmp_path, window=100)
+    per_cycle = sorted(result["window_kb"])[1] / 100
+    assert per_cycle < BOUND_PER_CYCLE_KB, f"RSS grew {result['window_kb']} kB in three windows of 100 cycles"
 
 
 @pytest.mark.long
