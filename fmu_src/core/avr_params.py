@@ -62,7 +62,7 @@ class RegulatorParams:
     learn_settled_steps: int = _default("learn_settled_steps")
     error_deadzone_mps: float = _default("error_deadzone_mps")  # m/s
     weight_norm_max: float = _default("weight_norm_max")  # rad/Hz
-    unsettled_unlearn: int = _default("unsettled_unlearn")
+    overspeed_unlearn: int = _default("overspeed_unlearn")
 
     def __post_init__(self):
         values, problems = _checked(self)

@@ -361,7 +361,7 @@ def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, 
     if params.learning_rate != 0.0 and step_index >= params.learn_from_step:
         errors = _learning_errors(stride, vx, vx_des, vy_des, pitch, params)
         if not velocity_learns:
-            errors = _unsettled_errors(errors, raw, params.unsettled_unlearn)
+            errors = _unsettled_errors(errors, raw, params.overspeed_unlearn, vx_des, vy_des)
         weights = _pes_update(weights, row_rates, raw, sums, errors, dt, params)
     return weights, psi
 
@@ -370,14 +370,15 @@ def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, 
 _ROW_NETWORK = [0, 1, 2, 2]
 
 
-def _unsettled_errors(errors: tuple, raw: list, unlearn: int) -> tuple:
+def _unsettled_errors(errors: tuple, raw: list, unlearn: int, ref_x: float, ref_y: float) -> tuple:
     """The learning errors while the velocity networks wait for a settled command: x and y
-    are 0, or with ``unlearn`` kept where they move that row's output toward 0 (an update
-    moves raw[j] toward -E_j: toward 0 when raw[j] E_j > 0)."""
+    are 0; with ``unlearn`` each is kept where the robot is beyond the reference in the
+    reference's direction (E_j ref_j < 0: overspeed) and the error moves its row's output
+    toward 0 (an update moves raw[j] toward -E_j: toward 0 where raw[j] E_j > 0)."""
     e_x, e_y, e_pitch, e_roll = errors
-    if not unlearn or raw[0] * e_x <= 0.0:
+    if not unlearn or raw[0] * e_x <= 0.0 or e_x * ref_x >= 0.0:
         e_x = 0.0
-    if not unlearn or raw[1] * e_y <= 0.0:
+    if not unlearn or raw[1] * e_y <= 0.0 or e_y * ref_y >= 0.0:
         e_y = 0.0
     return (e_x, e_y, e_pitch, e_roll)
 

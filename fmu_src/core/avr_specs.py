@@ -187,13 +187,14 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
            "norm, rad/Hz, in [0, 1]: after every call that learns, a row whose norm exceeds it "
            "is scaled back to it (|Psi| <= norm times the norm of the rates, Hz); 0 switches "
            "it off (the paper's plain rule)"),
-    _param("unsettled_unlearn", 0, 0, 1, "1",
+    _param("overspeed_unlearn", 0, 0, 1, "1",
            "What the velocity networks (x, y) learn while they wait for a settled command "
-           "(learn_settled_steps), in [0, 1]: 0 nothing (their learning errors are 0); 1 only "
-           "errors that move the network's current output toward 0, so an offset learned on "
-           "the previous command is unlearned where the new one's transient works against it "
-           "(an overshoot against a learned speed-up), while the transient itself teaches no "
-           "new offset; no effect with learn_settled_steps = 0", type="Integer"),
+           "(learn_settled_steps), in [0, 1]: 0 nothing (their learning errors are 0); 1 the "
+           "errors of a robot faster than the command reference in the reference's direction, "
+           "where they move the network's current output toward 0: an offset that speeds the "
+           "robot up is unlearned while the new command's transient overshoots, and the "
+           "transient teaches no new offset; no effect with learn_settled_steps = 0",
+           type="Integer"),
 )
 
 

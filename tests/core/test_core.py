@@ -111,7 +111,7 @@ def test_specs_match_dataclasses_and_api_order():
         "adaptation_enabled", "velocity_scale_mps", "angle_scale_rad",
         "rate_scale_radps", "n_neurons", "seed", "delta_limit_rad",
         "leakage_per_s", "leakage_mode", "command_accel_limit_mps2", "learn_settled_steps",
-        "error_deadzone_mps", "weight_norm_max", "unsettled_unlearn"]
+        "error_deadzone_mps", "weight_norm_max", "overspeed_unlearn"]
     assert [f.name for f in dataclasses.fields(RegulatorParams)] == [s.name for s in PARAM_SPECS]
     p = RegulatorParams()
     for s in PARAM_SPECS:
@@ -959,6 +959,54 @@ def test_velocity_learning_waits_for_a_settled_reference():
         fields_[-1] = forged
         with pytest.raises(StateError, match=rf"settled_steps = {forged}: must be in \[0, min\(n_calls"):
             state_from_bytes(_recrc(h.pack(*fields_) + blob[h.size:-4]), waits.params)
+
+
+def test_overspeed_unlearn_unlearns_a_speed_up_only_while_the_robot_overshoots():
+    """With overspeed_unlearn = 1, while the velocity rows wait for a settled command, only the
+    error of a robot faster than the reference (in its direction) that moves a row's output
+    toward 0 is learned: a speed-up learned on a lagging robot is unlearned when the robot
+    overshoots the next command, never grown by its lag behind it; a slow-down learned on a
+    fast robot is kept while the robot lags (toward 0 there, but not an overspeed)."""
+    def seq(k0, k1, vx_des, vx):  # 10 calls per step
+        return [RegulatorInputs(vx=vx, vx_des=vx_des, pitch=0.1, step_index=k // 10) for k in range(k0, k1)]
+    settings = dict(learning_rate=1e-5, command_accel_limit_mps2=0.5, learn_settled_steps=3)
+    regs = {unlearn: Regulator(small(overspeed_unlearn=unlearn, **settings)) for unlearn in (0, 1)}
+    for reg in regs.values():  # settled at 0.4 m/s with the robot at 0.2: a speed-up offset
+        run(reg, seq(0, 300, 0.4, 0.2))
+    assert regs[0].state == regs[1].state  # settled, the two rules are the same rule
+    learned = [reg.step(seq(300, 301, 0.4, 0.2)[0], DT)["psi_x"] for reg in regs.values()][1]
+    assert learned < -1e-4  # lagging: vx_des - vx > 0 moves the output negative (speed up)
+    x_row, y_row = regs[1].state.weights[0].copy(), regs[1].state.weights[1].copy()
+    # a step up the robot lags behind (at 0.3 m/s, below the reference, which moves from 0.4
+    # toward 0.9 at 0.5 m/s^2, 200 calls from settling): its error would grow the offset, so
+    # neither rule learns it
+    outs = [run(reg, seq(301, 341, 0.9, 0.3))[-1] for reg in regs.values()]
+    assert outs[0] == outs[1] and np.array_equal(regs[1].state.weights[0], x_row)
+    assert regs[1].state.settled_steps == 0
+    # the robot overshoots the reference (40 calls at 1.3 m/s): that error moves the output
+    # toward 0, which only overspeed_unlearn learns; the torso rows learn as with 0, the y
+    # row (no error) stays
+    out0, out1 = [run(reg, seq(341, 381, 0.9, 1.3))[-1] for reg in regs.values()]
+    assert regs[1].state.settled_steps == 0
+    assert out0["psi_x"] == pytest.approx(learned, rel=0.05)  # held (it drifts only with the rates)
+    # unlearned to 0 and held there: once the output crosses 0 (by at most one call's
+    # increment) the same error would move it away from 0, so it is dropped
+    assert abs(out1["psi_x"]) < 0.05 * abs(learned)
+    assert np.array_equal(regs[1].state.weights[1], y_row)
+    assert np.array_equal(regs[1].state.weights[2:], regs[0].state.weights[2:])
+    # a slow-down (robot settled at 0.6 against 0.4), then a step up it lags behind: the error
+    # would move the output toward 0, but the robot is slower than the reference: kept
+    slow = Regulator(small(overspeed_unlearn=1, **settings))
+    run(slow, seq(0, 300, 0.4, 0.6))
+    kept = slow.step(seq(300, 301, 0.4, 0.6)[0], DT)["psi_x"]
+    row = slow.state.weights[0].copy()
+    run(slow, seq(301, 341, 0.9, 0.3))
+    assert kept > 1e-4 and slow.state.settled_steps == 0 and np.array_equal(slow.state.weights[0], row)
+
+
+def test_overspeed_unlearn_range_is_named():
+    with pytest.raises(ParameterError, match=r"overspeed_unlearn = 2: must be an integer in \[0, 1\]"):
+        small(overspeed_unlearn=2)
 
 
 def test_learn_settled_steps_range_is_named():

@@ -143,15 +143,15 @@ REMEDIES = {
     # the velocity rows wait 3 steps after the reference settles, at the start and after 30 s
     "settled_learning": {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3},
     # while they wait, the velocity rows unlearn toward 0 where the transient's error says so
-    "unsettled_unlearn": {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3,
-                          "unsettled_unlearn": 1},
+    "overspeed_unlearn": {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3,
+                          "overspeed_unlearn": 1},
     "all": {"leakage_per_s": 0.05, "leakage_mode": 1, "error_deadzone_mps": 0.05,
             "weight_norm_max": 3e-6, "command_accel_limit_mps2": 0.5, "learn_settled_steps": 3,
-            "unsettled_unlearn": 1},
+            "overspeed_unlearn": 1},
 }
 #: A remedy that builds on another must also act beyond it on the recorded run.
 ACTS_BEYOND = {"settled_learning": "command_reference",  # the wait, beyond the reference it needs
-               "unsettled_unlearn": "settled_learning"}  # the unlearning, beyond the wait
+               "overspeed_unlearn": "settled_learning"}  # the unlearning, beyond the wait
 _remedy_reference = {}
 
 

@@ -305,9 +305,9 @@ static void learn(AvrCore *core, const double *values, double dt, const double d
     double e_x = V(vx_des) - V(vx), zone = V(error_deadzone_mps);
     if (zone != 0.0) e_x = dead_zone(e_x, zone), e_y = dead_zone(e_y, zone);
     if ((double)core->settled_steps < V(learn_settled_steps)) { /* avr_regulator._unsettled_errors */
-        int unlearn = V(unsettled_unlearn) != 0.0;
-        if (!unlearn || raw[0] * e_x <= 0.0) e_x = 0.0;
-        if (!unlearn || raw[1] * e_y <= 0.0) e_y = 0.0;
+        int unlearn = V(overspeed_unlearn) != 0.0; /* vx_des, vy_des: the reference when it is on */
+        if (!unlearn || raw[0] * e_x <= 0.0 || e_x * V(vx_des) >= 0.0) e_x = 0.0;
+        if (!unlearn || raw[1] * e_y <= 0.0 || e_y * V(vy_des) >= 0.0) e_y = 0.0;
     }
     double err[AVR_N_ROWS] = {e_x, e_y, V(pitch_des) - V(pitch), e_roll};
     double keep = leak_factor(V(leakage_per_s), dt);
