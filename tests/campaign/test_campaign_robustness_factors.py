@@ -297,3 +297,19 @@ def test_robustness_random_start_gives_each_run_its_own_start_nuisance():
                 first = [p for p in sc.pushes if p.t_s == 1.0]
                 assert [(p.force_n, p.duration_s, p.body) for p in first] == [((fx_n, fy_n, 0.0), 0.1, "cassie-pelvis")]
                 assert all(p.t_s >= 3.0 for p in sc.pushes if p is not first[0])
+
+
+def test_robustness_random_overspeed_is_the_start_campaign_with_the_speed_up_unlearned():
+    """robustness_random_start with overspeed_unlearn = 1 on the regulator arms and nothing else
+    changed, on a seed no setting or design was chosen on; the parsed scenarios carry it."""
+    over, start = resolved("robustness_random_overspeed"), resolved("robustness_random_start")
+    assert over["base"]["regulator"].pop("overspeed_unlearn") == 1
+    assert {k: v for k, v in over.items() if k not in ("name", "description", "seed")} == \
+        {k: v for k, v in start.items() if k not in ("name", "description", "seed")}
+    assert over["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026, 2027, 2028, 2029, 2030)
+    c = spec.load_campaign(spec.resolve_campaign("robustness_random_overspeed"))
+    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
+                                     check_plant=False)
+    regulated = [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+    assert len(regulated) == 2 and all(o["overspeed_unlearn"] == 1 and o["learn_settled_steps"] == 8
+                                       for o in regulated)

@@ -70,6 +70,8 @@ WINDOW_S = 300.0
 #: and robustness_random_start wait 8 settled steps): the long walks hold for them too.
 CAMPAIGN_SETTINGS = {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3, "learning_rate": 2e-6}
 NUISANCE_SETTINGS = {**CAMPAIGN_SETTINGS, "learn_settled_steps": 8}
+#: robustness_random_overspeed's: the nuisance settings with the speed-up unlearned on overshoots.
+OVERSPEED_SETTINGS = {**NUISANCE_SETTINGS, "overspeed_unlearn": 1}
 
 
 def changing_command_walk(seed: int, duration_s: float, pushes: bool, regulator: dict | None = None) -> dict:
@@ -115,8 +117,8 @@ class NormRecorder(InProcessRegulator):
 
 
 @pytest.mark.long
-@pytest.mark.parametrize("settings", [None, CAMPAIGN_SETTINGS, NUISANCE_SETTINGS],
-                         ids=["defaults", "campaign_settings", "nuisance_settings"])
+@pytest.mark.parametrize("settings", [None, CAMPAIGN_SETTINGS, NUISANCE_SETTINGS, OVERSPEED_SETTINGS],
+                         ids=["defaults", "campaign_settings", "nuisance_settings", "overspeed_settings"])
 @pytest.mark.parametrize("pushes", [False, True], ids=["no_pushes", "pushes"])
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_thirty_minutes_of_changing_commands_stay_stable(seed, pushes, settings):
