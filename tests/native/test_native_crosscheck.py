@@ -142,7 +142,7 @@ REMEDIES = {
     "command_reference": {"command_accel_limit_mps2": 0.5},  # the run's speed change at 30 s
     # the velocity rows wait 3 steps after the reference settles, at the start and after 30 s
     "settled_learning": {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3},
-    # while they wait, the velocity rows unlearn toward 0 where the transient's error says so
+    # while they wait, the velocity rows unlearn a speed-up where the robot overshoots the reference
     "overspeed_unlearn": {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3,
                           "overspeed_unlearn": 1},
     "all": {"leakage_per_s": 0.05, "leakage_mode": 1, "error_deadzone_mps": 0.05,
