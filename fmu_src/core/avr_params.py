@@ -63,6 +63,7 @@ class RegulatorParams:
     error_deadzone_mps: float = _default("error_deadzone_mps")  # m/s
     weight_norm_max: float = _default("weight_norm_max")  # rad/Hz
     overspeed_unlearn: int = _default("overspeed_unlearn")
+    learn_ramp_max_mps2: float = _default("learn_ramp_max_mps2")  # m/s^2
 
     def __post_init__(self):
         values, problems = _checked(self)

@@ -172,7 +172,8 @@ def step(state: RegulatorState, inputs, dt: float, params, networks) -> tuple[Re
         values = (vx, vy, ref_x, ref_y, pitch, roll, pitch_rate, roll_rate, step_index)
     else:
         ref_x, ref_y = vx_des, vy_des
-    settled_steps = _advance_settled(state, reference, vx_des, vy_des, step_index)
+    settled_steps = _advance_settled(state, reference, vx_des, vy_des, step_index,
+                                     params.learn_ramp_max_mps2 * dt)
     pd_x, pd_y, vx_at, vy_at = _held_pd_terms(state, params, vx, vy, ref_x, ref_y, step_index)
     stride = _advance_stride(state, step_index, vy, roll)
     pd_pitch, pd_roll = _torso_pd_terms(params, pitch, roll, pitch_rate, roll_rate)
@@ -294,15 +295,23 @@ SETTLED_TOLERANCE_MPS = 1e-9
 
 
 def _advance_settled(state: RegulatorState, reference: dict, vx_des: float, vy_des: float,
-                     step_index: int) -> int:
-    """``settled_steps`` after this call: 0 while the reference (``ref_vx``, ``ref_vy`` and the
-    step mean ``ref_vx_step``, after this call) differs from the command by more than
-    ``SETTLED_TOLERANCE_MPS``, else one more at each change of step_index (the first call
-    counts as one), up to ``SETTLED_STEPS_MAX``."""
+                     step_index: int, ramp_per_call: float = 0.0) -> int:
+    """``settled_steps`` after this call: 0 while the reference (after this call) is not
+    settled, else one more at each change of step_index (the first call counts as one), up
+    to ``SETTLED_STEPS_MAX``.  With ``ramp_per_call`` = 0 (``learn_ramp_max_mps2`` 0) settled
+    means ``ref_vx``, ``ref_vy`` and the step mean ``ref_vx_step`` are each within
+    ``SETTLED_TOLERANCE_MPS`` of the command; with r > 0, that ``ref_vx`` and ``ref_vy`` are
+    and that each moved by at most r (+ the tolerance) since the last call (not checked at
+    the first call, where the reference starts): a slow ramp counts as settled."""
     tolerance = SETTLED_TOLERANCE_MPS
-    if (abs(reference["ref_vx"] - vx_des) > tolerance
-            or abs(reference["ref_vy"] - vy_des) > tolerance
-            or abs(reference["ref_vx_step"] - vx_des) > tolerance):
+    if abs(reference["ref_vx"] - vx_des) > tolerance or abs(reference["ref_vy"] - vy_des) > tolerance:
+        return 0
+    if ramp_per_call == 0.0:
+        if abs(reference["ref_vx_step"] - vx_des) > tolerance:
+            return 0
+    elif state.last_step_index >= 0 and (
+            abs(reference["ref_vx"] - state.ref_vx) > ramp_per_call + tolerance
+            or abs(reference["ref_vy"] - state.ref_vy) > ramp_per_call + tolerance):
         return 0
     if step_index != state.last_step_index and state.settled_steps < SETTLED_STEPS_MAX:
         return state.settled_steps + 1

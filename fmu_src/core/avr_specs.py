@@ -195,6 +195,15 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
            "robot up is unlearned while the new command's transient overshoots, and the "
            "transient teaches no new offset; no effect with learn_settled_steps = 0",
            type="Integer"),
+    _param("learn_ramp_max_mps2", 0.0, 0.0, 10.0, "m/s2",
+           "How fast the command may ramp and still count as settled for learn_settled_steps, "
+           "m/s2, in [0, 10]: with a > 0, settled means the reference equals the command (the "
+           "acceleration limit is not limiting) and it moved by at most a dt on each axis since "
+           "the last call, so a slow ramp (which the gait follows without a transient) is "
+           "learned from while a command step, a fast ramp or the limiter's catch-up resets the "
+           "count; 0 keeps the rule of learn_settled_steps (the reference and its step mean "
+           "must equal the command: no learning while the command moves); no effect with "
+           "learn_settled_steps = 0"),
 )
 
 

@@ -111,7 +111,7 @@ def test_specs_match_dataclasses_and_api_order():
         "adaptation_enabled", "velocity_scale_mps", "angle_scale_rad",
         "rate_scale_radps", "n_neurons", "seed", "delta_limit_rad",
         "leakage_per_s", "leakage_mode", "command_accel_limit_mps2", "learn_settled_steps",
-        "error_deadzone_mps", "weight_norm_max", "overspeed_unlearn"]
+        "error_deadzone_mps", "weight_norm_max", "overspeed_unlearn", "learn_ramp_max_mps2"]
     assert [f.name for f in dataclasses.fields(RegulatorParams)] == [s.name for s in PARAM_SPECS]
     p = RegulatorParams()
     for s in PARAM_SPECS:
@@ -1007,6 +1007,49 @@ def test_overspeed_unlearn_unlearns_a_speed_up_only_while_the_robot_overshoots()
 def test_overspeed_unlearn_range_is_named():
     with pytest.raises(ParameterError, match=r"overspeed_unlearn = 2: must be an integer in \[0, 1\]"):
         small(overspeed_unlearn=2)
+
+
+def test_learn_ramp_max_learns_on_a_slow_ramp_and_waits_after_a_step():
+    """With learn_ramp_max_mps2 = a > 0 a command ramping at most a counts as settled (the
+    velocity rows learn on it after learn_settled_steps step changes), a faster ramp or a
+    step (which the acceleration limit turns into its catch-up) restarts the count; with 0
+    no moving command counts (the rule of learn_settled_steps)."""
+    def ramp(k0, k1, v0, rate):  # 10 calls per step; the command moves rate m/s^2 after v0 (k0 - 1)
+        return [RegulatorInputs(vx=v0 + rate * (k + 1 - k0) * DT - 0.2, vx_des=v0 + rate * (k + 1 - k0) * DT,
+                                pitch=0.1, step_index=k // 10) for k in range(k0, k1)]
+    settings = dict(learning_rate=1e-4, command_accel_limit_mps2=0.5, learn_settled_steps=3)
+    regs = {a: Regulator(small(learn_ramp_max_mps2=a, **settings)) for a in (0.0, 0.25)}
+    for reg in regs.values():  # settled at 0.3 m/s (the reference starts 0.2 below: 80 calls)
+        run(reg, ramp(0, 200, 0.3, 0.0))
+    # (with a > 0 the count starts when the reference reaches the command, with 0 one step
+    # later, when its step mean has too)
+    assert [reg.state.settled_steps for reg in regs.values()] == [11, 12]
+    # a ramp at 0.2 m/s^2 (below 0.25): the count goes on with a = 0.25, restarts with 0
+    rows = {a: reg.state.weights[0].copy() for a, reg in regs.items()}
+    counts = {a: [] for a in regs}
+    for u in ramp(200, 400, 0.3, 0.2):
+        for a, reg in regs.items():
+            reg.step(u, DT)
+            counts[a].append(reg.state.settled_steps)
+    assert set(counts[0.0]) == {0} and np.array_equal(regs[0.0].state.weights[0], rows[0.0])
+    assert min(counts[0.25]) > 3 and np.any(regs[0.25].state.weights[0] != rows[0.25])
+    assert np.array_equal(regs[0.25].state.weights[2:], regs[0.0].state.weights[2:])  # torso as with 0
+    # a ramp at 0.3 m/s^2 (above 0.25) restarts the count and stops the velocity learning
+    row = regs[0.25].state.weights[0].copy()
+    run(regs[0.25], ramp(400, 440, 0.7, 0.3))
+    assert regs[0.25].state.settled_steps == 0 and np.array_equal(regs[0.25].state.weights[0], row)
+    # a step: the reference catches up at 0.5 m/s^2 (above a): no count until it arrives
+    fast = Regulator(small(learn_ramp_max_mps2=0.25, **settings))
+    run(fast, ramp(0, 200, 0.3, 0.0))
+    run(fast, ramp(200, 300, 0.8, 0.0))  # 0.5 m/s away: 200 calls to get there
+    assert fast.state.settled_steps == 0
+    run(fast, ramp(300, 440, 0.8, 0.0))  # arrives at call 399: counts at 400, 410, 420, 430
+    assert fast.state.settled_steps == 4
+
+
+def test_learn_ramp_max_range_is_named():
+    with pytest.raises(ParameterError, match=r"learn_ramp_max_mps2 = 11(\.0)?: must be .*\[0(\.0)?, 10(\.0)?\]"):
+        small(learn_ramp_max_mps2=11.0)
 
 
 def test_learn_settled_steps_range_is_named():

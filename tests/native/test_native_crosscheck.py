@@ -145,13 +145,18 @@ REMEDIES = {
     # while they wait, the velocity rows unlearn a speed-up where the robot overshoots the reference
     "overspeed_unlearn": {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3,
                           "overspeed_unlearn": 1},
+    # slow ramps count as settled: here the count starts when the reference reaches the
+    # command, one step before its step mean does
+    "learn_ramp_max": {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3,
+                       "learn_ramp_max_mps2": 0.25},
     "all": {"leakage_per_s": 0.05, "leakage_mode": 1, "error_deadzone_mps": 0.05,
             "weight_norm_max": 3e-6, "command_accel_limit_mps2": 0.5, "learn_settled_steps": 3,
-            "overspeed_unlearn": 1},
+            "overspeed_unlearn": 1, "learn_ramp_max_mps2": 0.25},
 }
 #: A remedy that builds on another must also act beyond it on the recorded run.
 ACTS_BEYOND = {"settled_learning": "command_reference",  # the wait, beyond the reference it needs
-               "overspeed_unlearn": "settled_learning"}  # the unlearning, beyond the wait
+               "overspeed_unlearn": "settled_learning",  # the unlearning, beyond the wait
+               "learn_ramp_max": "settled_learning"}
 _remedy_reference = {}
 
 
@@ -176,6 +181,36 @@ def test_remedies_against_drift_match_the_core(native_fmus, closed_loop_inputs, 
     out = np.array([slave.step(k, u) for k, u in enumerate(closed_loop_inputs)])
     slave.close()
     assert np.array_equal(out.view(np.uint64), reference.view(np.uint64))  # every bit, -0.0 too
+
+
+def _ramped(inputs):
+    """The recorded inputs with the command replaced by ramps: vx_des 0.5 m/s to 30 s, then
+    up at 0.1 m/s^2 for 3 s, down at 0.4 m/s^2 for 1 s from 40 s; vy_des up at 0.1 m/s^2
+    for 1 s from 45 s, back at 0.4 m/s^2 at 50 s. A replay, not a closed loop: the same
+    inputs for the core and the FMUs."""
+    out = []
+    for k, u in enumerate(inputs):
+        t = k * H
+        vx_des = 0.5 + 0.1 * min(max(t - 30.0, 0.0), 3.0) - 0.4 * min(max(t - 40.0, 0.0), 1.0)
+        vy_des = 0.1 * min(max(t - 45.0, 0.0), 1.0) - 0.4 * min(max(t - 50.0, 0.0), 0.25)
+        out.append(dict(u, vx_des=vx_des, vy_des=vy_des))
+    return out
+
+
+@pytest.mark.parametrize("fmi", [2, 3])
+def test_ramp_settling_matches_the_core(native_fmus, closed_loop_inputs, fmi):
+    """learn_ramp_max_mps2 in C as in the core where commands ramp: the 0.1 m/s^2 ramps count
+    as settled at 0.25 (the velocity rows learn on them, unlike with 0) and the 0.4 m/s^2
+    ones do not (the rows learn as with a limit just below 0.4, not as with one above)."""
+    seq = _ramped(closed_loop_inputs)
+    params = {**LOOP_PARAMS, "command_accel_limit_mps2": 0.5, "learn_settled_steps": 3}
+    ref = {a: core_outputs(seq, **params, learn_ramp_max_mps2=a) for a in (0.0, 0.25, 0.39, 0.41)}
+    assert not np.array_equal(ref[0.25], ref[0.0])  # learning on the slow ramps
+    assert np.array_equal(ref[0.25], ref[0.39]) and not np.array_equal(ref[0.39], ref[0.41])
+    slave = AnySlave(native_fmus[fmi]).init(**params, learn_ramp_max_mps2=0.25)
+    out = np.array([slave.step(k, u) for k, u in enumerate(seq)])
+    slave.close()
+    assert np.array_equal(out.view(np.uint64), ref[0.25].view(np.uint64))
 
 
 @pytest.mark.parametrize("fmi", [2, 3])

@@ -415,12 +415,23 @@ static void advance_reference(AvrCore *c, const double *values, int64_t si, doub
 }
 
 /* settled_steps after this call (avr_regulator._advance_settled): 0 while the reference (after
- * advance_reference) differs from the command by more than AVR_SETTLED_TOLERANCE_MPS, else one
- * more at each change of step_index, up to AVR_SETTLED_STEPS_MAX. */
-static void advance_settled(AvrCore *c, const double *values, int64_t si) {
-    double tol = AVR_SETTLED_TOLERANCE_MPS;
-    if (fabs(c->ref_vx - V(vx_des)) > tol || fabs(c->ref_vy - V(vy_des)) > tol
-        || fabs(c->ref_vx_step - V(vx_des)) > tol)
+ * advance_reference; prev_x, prev_y its value before) is not settled, else one more at each
+ * change of step_index, up to AVR_SETTLED_STEPS_MAX. With learn_ramp_max_mps2 = 0 settled means
+ * ref_vx, ref_vy and ref_vx_step within AVR_SETTLED_TOLERANCE_MPS of the command; with a > 0,
+ * ref_vx and ref_vy within it and each moved by at most a dt (+ the tolerance) since the last
+ * call (not checked at the first call). */
+static void advance_settled(AvrCore *c, const double *values, int64_t si, double prev_x, double prev_y,
+                            double dt) {
+    double tol = AVR_SETTLED_TOLERANCE_MPS, ramp = V(learn_ramp_max_mps2) * dt;
+    int moved;
+    if (fabs(c->ref_vx - V(vx_des)) > tol || fabs(c->ref_vy - V(vy_des)) > tol)
+        moved = 1;
+    else if (ramp == 0.0)
+        moved = fabs(c->ref_vx_step - V(vx_des)) > tol;
+    else
+        moved = c->last_step_index >= 0
+                && (fabs(c->ref_vx - prev_x) > ramp + tol || fabs(c->ref_vy - prev_y) > ramp + tol);
+    if (moved)
         c->settled_steps = 0;
     else if (si != c->last_step_index && c->settled_steps < AVR_SETTLED_STEPS_MAX)
         c->settled_steps += 1;
@@ -429,8 +440,9 @@ static void advance_settled(AvrCore *c, const double *values, int64_t si) {
 void avr_step(const AvrNetworks *net, AvrCore *core, double *values, double dt) {
     double vx = V(vx), vy = V(vy);
     int64_t si = (int64_t)V(step_index);
+    double ref_x_before = core->ref_vx, ref_y_before = core->ref_vy;
     advance_reference(core, values, si, dt);
-    advance_settled(core, values, si);
+    advance_settled(core, values, si, ref_x_before, ref_y_before, dt);
     /* With the limit on, PD, network inputs and learning read the reference in place of the
      * command (restored below for the error outputs). */
     double vx_des = V(vx_des), vy_des = V(vy_des);
