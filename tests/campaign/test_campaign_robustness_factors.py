@@ -313,3 +313,24 @@ def test_robustness_random_overspeed_is_the_start_campaign_with_the_speed_up_unl
     regulated = [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
     assert len(regulated) == 2 and all(o["overspeed_unlearn"] == 1 and o["learn_settled_steps"] == 8
                                        for o in regulated)
+
+
+def test_robustness_random_ramp_is_the_start_campaign_learning_on_slow_ramps():
+    """robustness_random_start with learn_ramp_max_mps2 = 0.25 on the regulator arms and
+    nothing else changed, on a seed no setting or design was chosen on; its limit is above the
+    ramps of the command profiles it draws (at most the vx range over one hold) and below the
+    command reference's rate limit (so a step still waits); the parsed arms carry it."""
+    ramp, start = resolved("robustness_random_ramp"), resolved("robustness_random_start")
+    limit = ramp["base"]["regulator"].pop("learn_ramp_max_mps2")
+    assert {k: v for k, v in ramp.items() if k not in ("name", "description", "seed")} == \
+        {k: v for k, v in start.items() if k not in ("name", "description", "seed")}
+    assert ramp["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026, 2027, 2028, 2029, 2030, 2031)
+    profiles = ramp["factors"]["command_profile"]["values"]
+    steepest = max((p["vx_des"][1] - p["vx_des"][0]) / p["hold_s"] for p in profiles if p["shape"] == "ramped")
+    assert steepest < limit < ramp["base"]["regulator"]["command_accel_limit_mps2"]
+    c = spec.load_campaign(spec.resolve_campaign("robustness_random_ramp"))
+    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
+                                     check_plant=False)
+    regulated = [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+    assert len(regulated) == 2 and all(o["learn_ramp_max_mps2"] == 0.25 and o["learn_settled_steps"] == 8
+                                       for o in regulated)

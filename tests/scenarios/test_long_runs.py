@@ -72,16 +72,23 @@ CAMPAIGN_SETTINGS = {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 3, 
 NUISANCE_SETTINGS = {**CAMPAIGN_SETTINGS, "learn_settled_steps": 8}
 #: robustness_random_overspeed's: the nuisance settings with the speed-up unlearned on overshoots.
 OVERSPEED_SETTINGS = {**NUISANCE_SETTINGS, "overspeed_unlearn": 1}
+#: robustness_random_ramp's: the nuisance settings with learning on slow ramps, walked with
+#: every command ramped to from the one before (0.1 m/s^2 at most over 10 s).
+RAMP_SETTINGS = {**NUISANCE_SETTINGS, "learn_ramp_max_mps2": 0.25}
 
 
-def changing_command_walk(seed: int, duration_s: float, pushes: bool, regulator: dict | None = None) -> dict:
+def changing_command_walk(seed: int, duration_s: float, pushes: bool, regulator: dict | None = None,
+                          ramped: bool = False) -> dict:
     """The drift setup as a scenario: a seeded command every 10 s (vx in [0, 1] m/s, vy in
     [-0.2, 0.2] m/s), network ``seed``; with ``pushes`` a 25 N, 0.1 s pelvis push every 60 s
     (at 35 s, 95 s, ...), its direction turning 90 degrees each time; ``regulator``: the
-    regulator's parameters other than its defaults."""
+    regulator's parameters other than its defaults; with ``ramped`` each command after the
+    first is reached linearly from the one before over the 10 s."""
     rng = np.random.default_rng(25)
     commands = [{"t_s": 10.0 * k, "vx_des": round(float(rng.uniform(0.0, 1.0)), 3),
                  "vy_des": round(float(rng.uniform(-0.2, 0.2)), 3)} for k in range(int(duration_s // 10.0))]
+    if ramped:
+        commands = [dict(c, ramp=True) if k else c for k, c in enumerate(commands)]
     doc = {"name": f"long_changing_commands_seed{seed}", "description": "30 min, command every 10 s",
            "duration_s": duration_s, "model": "menagerie", "comm_step_s": 0.005, "seed": seed,
            "compare": ["adaptive"], "command": commands, **DRIFT_PERTURBATION}
@@ -117,14 +124,17 @@ class NormRecorder(InProcessRegulator):
 
 
 @pytest.mark.long
-@pytest.mark.parametrize("settings", [None, CAMPAIGN_SETTINGS, NUISANCE_SETTINGS, OVERSPEED_SETTINGS],
-                         ids=["defaults", "campaign_settings", "nuisance_settings", "overspeed_settings"])
+@pytest.mark.parametrize("settings, ramped", [(None, False), (CAMPAIGN_SETTINGS, False), (NUISANCE_SETTINGS, False),
+                                              (OVERSPEED_SETTINGS, False), (RAMP_SETTINGS, True)],
+                         ids=["defaults", "campaign_settings", "nuisance_settings", "overspeed_settings",
+                              "ramp_settings_ramped"])
 @pytest.mark.parametrize("pushes", [False, True], ids=["no_pushes", "pushes"])
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_thirty_minutes_of_changing_commands_stay_stable(seed, pushes, settings):
-    """Default parameters (the leakage on), and the randomization campaigns' settings: no
-    fall in 30 min; the error per 5-minute window does not grow; the weight norms level off."""
-    scenario = spec.parse_scenario(changing_command_walk(seed, THIRTY_MINUTES_S, pushes, settings))
+def test_thirty_minutes_of_changing_commands_stay_stable(seed, pushes, settings, ramped):
+    """Default parameters (the leakage on), and the randomization campaigns' settings (with
+    learning on slow ramps, on ramped commands): no fall in 30 min; the error per 5-minute
+    window does not grow; the weight norms level off."""
+    scenario = spec.parse_scenario(changing_command_walk(seed, THIRTY_MINUTES_S, pushes, settings, ramped))
     recorder = NormRecorder(WINDOW_S)
     result = master.run_arm(scenario, scenario.arms[0], recorder)
     assert not result.fell, (result.t_fall_s, result.fall_reason)
