@@ -299,6 +299,15 @@ def test_robustness_random_start_gives_each_run_its_own_start_nuisance():
                 assert all(p.t_s >= 3.0 for p in sc.pushes if p is not first[0])
 
 
+def _first_sample_regulator_overrides(name: str) -> list[dict]:
+    """The regulator settings of the regulated arms (all but RL-HZD) of campaign ``name``'s
+    first sample, as its parsed scenario carries them."""
+    c = spec.load_campaign(spec.resolve_campaign(name))
+    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
+                                     check_plant=False)
+    return [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+
+
 def test_robustness_random_overspeed_is_the_start_campaign_with_the_speed_up_unlearned():
     """robustness_random_start with overspeed_unlearn = 1 on the regulator arms and nothing else
     changed, on a seed no setting or design was chosen on; the parsed scenarios carry it."""
@@ -307,10 +316,7 @@ def test_robustness_random_overspeed_is_the_start_campaign_with_the_speed_up_unl
     assert {k: v for k, v in over.items() if k not in ("name", "description", "seed")} == \
         {k: v for k, v in start.items() if k not in ("name", "description", "seed")}
     assert over["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026, 2027, 2028, 2029, 2030)
-    c = spec.load_campaign(spec.resolve_campaign("robustness_random_overspeed"))
-    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
-                                     check_plant=False)
-    regulated = [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+    regulated = _first_sample_regulator_overrides("robustness_random_overspeed")
     assert len(regulated) == 2 and all(o["overspeed_unlearn"] == 1 and o["learn_settled_steps"] == 8
                                        for o in regulated)
 
@@ -328,9 +334,6 @@ def test_robustness_random_ramp_is_the_start_campaign_learning_on_slow_ramps():
     profiles = ramp["factors"]["command_profile"]["values"]
     steepest = max((p["vx_des"][1] - p["vx_des"][0]) / p["hold_s"] for p in profiles if p["shape"] == "ramped")
     assert steepest < limit < ramp["base"]["regulator"]["command_accel_limit_mps2"]
-    c = spec.load_campaign(spec.resolve_campaign("robustness_random_ramp"))
-    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
-                                     check_plant=False)
-    regulated = [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+    regulated = _first_sample_regulator_overrides("robustness_random_ramp")
     assert len(regulated) == 2 and all(o["learn_ramp_max_mps2"] == 0.25 and o["learn_settled_steps"] == 8
                                        for o in regulated)
