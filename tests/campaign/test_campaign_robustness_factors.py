@@ -164,6 +164,15 @@ def resolved(name: str) -> dict:
     return doc
 
 
+def _first_sample_regulator_overrides(name: str) -> list[dict]:
+    """The regulator settings of the regulated arms (all but RL-HZD) of campaign ``name``'s
+    first sample, as its parsed scenario carries them."""
+    c = spec.load_campaign(spec.resolve_campaign(name))
+    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
+                                     check_plant=False)
+    return [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+
+
 # Each variant campaign: (its file, the file it varies, the regulator setting it adds, as
 # its description spells it, the settings its regulator arms then carry).
 VARIANTS = [
@@ -188,10 +197,7 @@ def test_variant_campaigns_differ_from_their_parent_by_one_regulator_setting(var
     base.pop("description")
     assert var["base"]["regulator"].pop(key) == value
     assert var == base
-    c = spec.load_campaign(spec.resolve_campaign(variant))
-    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
-                                     check_plant=False)
-    regulated = [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+    regulated = _first_sample_regulator_overrides(variant)
     for name, expected in carried.items():
         assert {o.get(name) for o in regulated} == {expected}, name
 
@@ -299,22 +305,22 @@ def test_robustness_random_start_gives_each_run_its_own_start_nuisance():
                 assert all(p.t_s >= 3.0 for p in sc.pushes if p is not first[0])
 
 
-def _first_sample_regulator_overrides(name: str) -> list[dict]:
-    """The regulator settings of the regulated arms (all but RL-HZD) of campaign ``name``'s
-    first sample, as its parsed scenario carries them."""
-    c = spec.load_campaign(spec.resolve_campaign(name))
-    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
-                                     check_plant=False)
-    return [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+def _start_plus_one_setting(name: str, key: str) -> tuple[dict, object]:
+    """Campaign ``name`` resolved, and the value of its regulator setting ``key``, checking
+    that without that setting it is robustness_random_start but for its name, description
+    and seed (its own set)."""
+    variant, start = resolved(name), resolved("robustness_random_start")
+    value = variant["base"]["regulator"].pop(key)
+    assert {k: v for k, v in variant.items() if k not in ("name", "description", "seed")} == \
+        {k: v for k, v in start.items() if k not in ("name", "description", "seed")}
+    return variant, value
 
 
 def test_robustness_random_overspeed_is_the_start_campaign_with_the_speed_up_unlearned():
     """robustness_random_start with overspeed_unlearn = 1 on the regulator arms and nothing else
     changed, on a seed no setting or design was chosen on; the parsed scenarios carry it."""
-    over, start = resolved("robustness_random_overspeed"), resolved("robustness_random_start")
-    assert over["base"]["regulator"].pop("overspeed_unlearn") == 1
-    assert {k: v for k, v in over.items() if k not in ("name", "description", "seed")} == \
-        {k: v for k, v in start.items() if k not in ("name", "description", "seed")}
+    over, value = _start_plus_one_setting("robustness_random_overspeed", "overspeed_unlearn")
+    assert value == 1
     assert over["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026, 2027, 2028, 2029, 2030)
     regulated = _first_sample_regulator_overrides("robustness_random_overspeed")
     assert len(regulated) == 2 and all(o["overspeed_unlearn"] == 1 and o["learn_settled_steps"] == 8
@@ -326,10 +332,7 @@ def test_robustness_random_ramp_is_the_start_campaign_learning_on_slow_ramps():
     nothing else changed, on a seed no setting or design was chosen on; its limit is above the
     ramps of the command profiles it draws (at most the vx range over one hold) and below the
     command reference's rate limit (so a step still waits); the parsed arms carry it."""
-    ramp, start = resolved("robustness_random_ramp"), resolved("robustness_random_start")
-    limit = ramp["base"]["regulator"].pop("learn_ramp_max_mps2")
-    assert {k: v for k, v in ramp.items() if k not in ("name", "description", "seed")} == \
-        {k: v for k, v in start.items() if k not in ("name", "description", "seed")}
+    ramp, limit = _start_plus_one_setting("robustness_random_ramp", "learn_ramp_max_mps2")
     assert ramp["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026, 2027, 2028, 2029, 2030, 2031)
     profiles = ramp["factors"]["command_profile"]["values"]
     steepest = max((p["vx_des"][1] - p["vx_des"][0]) / p["hold_s"] for p in profiles if p["shape"] == "ramped")
