@@ -295,14 +295,14 @@ SETTLED_TOLERANCE_MPS = 1e-9
 
 
 def _advance_settled(state: RegulatorState, reference: dict, vx_des: float, vy_des: float,
-                     step_index: int, ramp_per_call: float = 0.0) -> int:
+                     step_index: int, ramp_per_call: float) -> int:
     """``settled_steps`` after this call: 0 while the reference (after this call) is not
     settled, else one more at each change of step_index (the first call counts as one), up
     to ``SETTLED_STEPS_MAX``.  With ``ramp_per_call`` = 0 (``learn_ramp_max_mps2`` 0) settled
     means ``ref_vx``, ``ref_vy`` and the step mean ``ref_vx_step`` are each within
     ``SETTLED_TOLERANCE_MPS`` of the command; with r > 0, that ``ref_vx`` and ``ref_vy`` are
-    and that each moved by at most r (+ the tolerance) since the last call (not checked at
-    the first call, where the reference starts): a slow ramp counts as settled."""
+    within it and that each moved by at most r (+ the tolerance) since the last call (not
+    checked at the first call, where the reference starts): a slow ramp counts as settled."""
     tolerance = SETTLED_TOLERANCE_MPS
     if abs(reference["ref_vx"] - vx_des) > tolerance or abs(reference["ref_vy"] - vy_des) > tolerance:
         return 0
