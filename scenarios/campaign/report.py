@@ -171,7 +171,38 @@ def _agreement_lines(data: analysis.CampaignData, b: str) -> list[str]:
              f"split; an arm that differs from {b} by a small change of one gain shows how many such "
              "samples chance alone gives):", ""]
             + _md_table(["arm", "paired", f"fell where {b} walked", f"{b} fell where it walked", "McNemar p",
-                         f"samples where it fell and {b} walked"], rows) + [""])
+                         f"samples where it fell and {b} walked"], rows) + [""]
+            + _never_reading_lines(data, b))
+
+
+def _never_reading_lines(data: analysis.CampaignData, b: str) -> list[str]:
+    """The "never falls where ``b`` walks" reading of the verdicts, for every other arm with
+    as many replicas as ``b`` (with ``replicate_over``, every arm): an arm that differs from
+    ``b`` by a small change of one gain measures the count two equally robust controllers give,
+    beside the swap model of it."""
+    n_rep = len(data.replicas(b)) + 1
+    if n_rep == 1:
+        return []
+    vrows = data.verdict_rows()
+    rows = []
+    for arm in data.arms:
+        if arm == b or len(data.replicas(arm)) != n_rep - 1:
+            continue
+        v = analysis.verdicts(vrows, arm, b, metric=data.metric, replicas_a=data.replicas(arm),
+                              replicas_b=data.replicas(b))
+        null = v["only_a_fell_null"]
+        chance = "-" if null is None else (f"{null['mean']:.1f} ({null['low']:.0f}-{null['high']:.0f}); "
+                                           f"{100 * null['at_least_observed']:.0f} %")
+        rows.append([arm, str(v["n"]), str(len(v["only_a_fell"])), chance, ", ".join(v["only_a_fell"]) or "none"])
+    if not rows:
+        return []
+    return ([f"The \"never falls where {b} walks\" reading for every arm against {b}: samples where the arm fell "
+             f"on more than half of the {n_rep} replicas and {b} on fewer than half, with the chance level of "
+             f"the verdict (mean count over the swaps, its 95 % range; the share of swaps listing as many). "
+             f"An arm that differs from {b} by a small change of one gain measures the count two equally robust "
+             "controllers give:", ""]
+            + _md_table(["arm", "samples", "listed", "chance level; swaps with as many", "listed samples"], rows)
+            + [""])
 
 
 def _worst_lines(data: analysis.CampaignData) -> list[str]:

@@ -658,6 +658,38 @@ def test_report_judges_a_draw_over_its_grounds(tmp_path):
     assert "beats pd_only on >= 90 % of paired samples: FAIL** (1 of 2 samples" in text
 
 
+def test_report_gives_the_never_reading_of_every_arm_against_the_reference(tmp_path):
+    """With replicas, the report lists for every arm (a control arm too) the draws the
+    "never falls where pd_only walks" reading lists, beside that reading's chance level."""
+    from scenarios.campaign import report
+
+    def r(sample, arm, fell):
+        return {"sample": sample, "arm": arm, "status": "complete", "fell": fell, "t_fall_s": 3.0 if fell else None,
+                "steady_state_error_vx": None, "steady_state_error_vy": None,
+                "settled_error_vx": None if fell else 0.05, "convergence_time_s": None, "run_dir": None}
+    arms = ["adaptive", "pd_only", "pd_gain"]
+    # 2 draws on 3 grounds (draw 0: s0000, s0002, s0004; draw 1: s0001, s0003, s0005). pd_gain
+    # falls on two grounds of draw 1 where pd_only walks; adaptive falls once where pd_only does.
+    falls = {"s0000": (False, False, False), "s0002": (True, True, False), "s0004": (False, False, False),
+             "s0001": (False, False, True), "s0003": (False, False, True), "s0005": (False, False, False)}
+    rows = [r(s, arm, f) for s, fs in falls.items() for arm, f in zip(arms, fs)]
+    manifest = {"name": "t", "n_samples": 6, "arms": arms, "seed": 1, "metric": "settled_error_vx", "replicas": {},
+                "replicate_over": {"factor": "floor_terrain_seed", "draws": 2, "cells": [3], "index": 0}}
+    text = report.render(analysis.CampaignData(tmp_path, manifest, rows, []), [])
+    assert 'The "never falls where pd_only walks" reading for every arm against pd_only' in text
+    assert "| adaptive | 2 | 0 | " in text and text.count("| none |") >= 1
+    # pd_gain: draw s0001 listed; swapping its two runs of each pair lists it when neither of the
+    # two falling pairs is swapped: 1 in 4 on average, and at least one listed in 1 of 4 swaps
+    line = next(x for x in text.splitlines() if x.startswith("| pd_gain | 2 | 1 | "))
+    assert line.endswith("| s0001 |")
+    mean, share = float(line.split(" | ")[3].split(" ")[0]), float(line.split("; ")[1].split(" %")[0])
+    # (the mean is printed to one decimal; 2000 swaps put the share within 3 points of 25 %)
+    assert mean in (0.2, 0.3) and share == pytest.approx(25, abs=3)
+    # without replicas the verdicts' own reading is the single run's, and no such table is given
+    flat = {**manifest, "replicate_over": None}
+    assert "reading for every arm" not in report.render(analysis.CampaignData(tmp_path, flat, rows, []), [])
+
+
 def _nominal_doc() -> dict:
     return tomllib.loads((REPO_ROOT / "scenarios" / "suite" / "nominal.toml").read_text())
 
