@@ -7,7 +7,7 @@ import tomllib
 
 import pytest
 
-from fmu_src.core.avr_specs import PARAM_SPECS
+from fmu_src.core.avr_specs import PARAM_BY_NAME, PARAM_SPECS
 from scenarios.campaign import analysis, sampling, spec
 from scenarios.errors import ScenarioError
 from scenarios.lang.fields import Problems
@@ -340,3 +340,21 @@ def test_robustness_random_ramp_is_the_start_campaign_learning_on_slow_ramps():
     regulated = _first_sample_regulator_overrides("robustness_random_ramp")
     assert len(regulated) == 2 and all(o["learn_ramp_max_mps2"] == 0.25 and o["learn_settled_steps"] == 8
                                        for o in regulated)
+
+
+def test_robustness_random_control_runs_a_nudged_pd_only_in_place_of_rl_hzd():
+    """robustness_random_ramp with one change of arms on its own set: RL-HZD is replaced by
+    PD-only with Kp_x 5 % up, and nothing else differs, so the control arm meets the same
+    samples as adaptive and PD-only; parsed, it is PD-only's settings with that one gain."""
+    control, ramp = resolved("robustness_random_control"), resolved("robustness_random_ramp")
+    assert control.pop("compare") == ["adaptive", "pd_only", "pd_kpx_105"] and ramp.pop("compare")[2] == "rl_hzd"
+    assert control["base"].pop("arm") == [{"name": "pd_kpx_105", "regulator": {"adaptation_enabled": False, "Kp_x": 0.105},
+                                           "description": "PD-only with Kp_x = 0.105 (5 % above the default 0.1)"}]
+    assert "arm" not in ramp["base"]
+    assert {k: v for k, v in control.items() if k not in ("name", "description", "seed")} == \
+        {k: v for k, v in ramp.items() if k not in ("name", "description", "seed")}
+    assert control["seed"] not in range(2021, 2033)
+    adaptive, pd_only, nudged = _first_sample_regulator_overrides("robustness_random_control")
+    assert pd_only["adaptation_enabled"] is False and "Kp_x" not in pd_only  # the FMU's default:
+    assert PARAM_BY_NAME["Kp_x"].default == 0.1  # 0.105 is 5 % above it
+    assert nudged == {**pd_only, "Kp_x": 0.105} and "adaptation_enabled" not in adaptive  # on by default
