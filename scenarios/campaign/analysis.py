@@ -325,6 +325,73 @@ def mcnemar_exact(k: int, m: int) -> float | None:
     return min(1.0, 2.0 * tail)
 
 
+#: The confirmation stage's folder inside a campaign folder (a campaign folder itself).
+CONFIRM_DIR = "confirm"
+#: Level of the confirmation test: one-sided exact McNemar per listed draw, Holm's step-down
+#: over the listed draws, so the chance of confirming any draw where the two arms are in truth
+#: equally likely to fall is at most this.
+CONFIRM_ALPHA = 0.05
+
+
+def one_sided_exact(k: int, m: int) -> float:
+    """P[X >= k] for X ~ Binomial(k + m, 1/2): the chance, were either arm as likely as the
+    other to be the one that falls, that at least ``k`` of the ``k + m`` discordant pairs go
+    against the first arm (1 without discordant pairs)."""
+    n = k + m
+    return sum(math.comb(n, i) for i in range(k, n + 1)) / 2 ** n if n else 1.0
+
+
+def holm(pvalues: Sequence[float], alpha: float) -> list[bool]:
+    """Holm's step-down: which of ``pvalues`` are rejected at family-wise level ``alpha``."""
+    order = sorted(range(len(pvalues)), key=lambda i: pvalues[i])
+    rejected = [False] * len(pvalues)
+    for rank, i in enumerate(order):
+        if pvalues[i] > alpha / (len(pvalues) - rank):
+            break
+        rejected[i] = True
+    return rejected
+
+
+def confirmation(listed: Sequence[str], stage_rows: Sequence[dict[str, Any]], of: dict[str, str], a: str, b: str,
+                 runs: int, alpha: float = CONFIRM_ALPHA) -> dict[str, Any]:
+    """The verdict "``a`` never falls where ``b`` walks" after its confirmation stage.
+
+    The majority reading of the campaign's replicas lists draws by chance too: at the edge
+    of falling, two equally robust controllers each fall on about half of a draw's runs, and
+    the reading then lists the draw for one of them one time in four. Every listed draw was
+    therefore run again on ``runs`` fresh replicas (``stage_rows``; ``of`` maps each stage
+    sample to its draw), ``a`` paired with ``b`` on each. A draw is *confirmed* when its
+    fresh pairs where only ``a`` fell outnumber those where only ``b`` fell beyond chance:
+    one-sided exact McNemar p (:func:`one_sided_exact`), Holm's step-down over the listed
+    draws at ``alpha``. Only fresh runs count: the runs that listed a draw were selected for
+    going against ``a``.
+
+    Returns per draw its counts, p and whether it is confirmed; ``complete`` when every
+    listed draw has ``runs`` complete pairs; ``holds`` when complete and none is confirmed
+    (a confirmed draw fails the verdict even before the stage is complete)."""
+    by = {(r["sample"], r["arm"]): r for r in stage_rows if r["status"] == COMPLETE}
+    draws = []
+    for d in listed:
+        pairs = [(by[(s, a)]["fell"], by[(s, b)]["fell"]) for s in sorted(of) if of[s] == d
+                 and (s, a) in by and (s, b) in by]
+        k = sum(fa and not fb for fa, fb in pairs)
+        m = sum(fb and not fa for fa, fb in pairs)
+        draws.append({"draw": d, "runs": len(pairs), "a_fell": sum(fa for fa, _ in pairs),
+                      "b_fell": sum(fb for _, fb in pairs), "only_a": k, "only_b": m, "p": one_sided_exact(k, m)})
+    for x, confirmed in zip(draws, holm([x["p"] for x in draws], alpha)):
+        x["confirmed"] = confirmed
+    complete = all(x["runs"] == runs for x in draws)
+    confirmed = [x["draw"] for x in draws if x["confirmed"]]
+    return {"draws": draws, "runs": runs, "alpha": alpha, "complete": complete, "confirmed": confirmed,
+            "holds": complete and not confirmed}
+
+
+def load_confirmation(root: Path) -> CampaignData | None:
+    """The confirmation stage's folder of campaign folder ``root``, if it has one."""
+    stage = Path(root) / CONFIRM_DIR
+    return load(stage) if is_campaign_dir(stage) else None
+
+
 def fall_agreement(rows: Sequence[dict[str, Any]], b: str, arms: Sequence[str]) -> list[dict[str, Any]]:
     """Every arm of ``arms`` other than ``b`` against ``b``, counted on falls only: the
     samples where it fell and ``b`` walked, the samples where ``b`` fell and it walked,

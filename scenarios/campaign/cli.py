@@ -3,8 +3,9 @@
 Validates the campaign and every sample before anything runs (exit 2 with every
 problem), claims DIR (exit 2 if it holds another campaign, or this one without
 ``--resume``), runs the samples that are not complete on Dask, streams the rows to
-``DIR/campaign.csv``, then writes ``DIR/campaign.md`` and prints the table per arm.
-Exit status: 0 every row complete; 1 some failed (they are in the CSV with the reason;
+``DIR/campaign.csv``, then (with ``confirm_runs``) runs the confirmation stage in
+``DIR/confirm``, writes ``DIR/campaign.md`` and prints the table per arm.
+Exit status: 0 every row complete (the stage's too); 1 some failed (they are in the CSV with the reason;
 ``--resume`` runs them again); 2 invalid campaign, arguments or DIR; 130 interrupted.
 """
 from __future__ import annotations
@@ -136,10 +137,13 @@ def cmd_campaign(args) -> int:
                                   fmu=fmu, timeout_s=args.task_timeout, retries=args.retries,
                                   fork_runs=args.fork_runs)
         execute.run(campaign, cdir, values, opts, fmu)
+        cdir.finish()
+        stage_ok = not campaign.confirm_runs or _run_confirmation(campaign, out, opts, fmu)
     except execute.CampaignInterrupted as exc:
-        print(f"interrupted: {exc.done} sample(s) finished in this run and are in {cdir.csv_path}, {exc.remaining} "
-              f"not run; continue with: python -m scenarios campaign {args.campaign} --out {out} --resume",
-              file=sys.stderr)
+        seed = "" if args.seed is None else f" --seed {args.seed}"
+        print(f"interrupted: {exc.done} sample(s) finished in this run and are in "
+              f"{getattr(exc, 'csv_path', cdir.csv_path)}, {exc.remaining} not run; continue with: "
+              f"python -m scenarios campaign {args.campaign} --out {out}{seed} --resume", file=sys.stderr)
         return 130
     except OSError as exc:  # e.g. the scheduler address cannot be reached
         print(f"campaign {campaign.name}: {type(exc).__name__}: {exc}", file=sys.stderr)
@@ -147,7 +151,57 @@ def cmd_campaign(args) -> int:
     finally:
         cdir.finish()
         cdir.close()
-    return _finish(out, write_report, text_table)
+    rc = _finish(out, write_report, text_table)
+    return rc if stage_ok else 2
+
+
+def _run_confirmation(campaign, out: Path, opts, fmu) -> bool:
+    """The confirmation stage (``confirm_runs``) in ``out/confirm``: every draw the "never
+    falls where b walks" reading lists, on fresh replicas (:func:`sampling.confirmation`).
+    Runs only once the campaign is complete (a partial campaign lists other draws); the
+    stage resumes with the campaign. False (with the reason printed) if it cannot start."""
+    from scenarios.campaign import analysis, execute, sampling
+    from scenarios.campaign.store import CampaignDir, CampaignDirError
+
+    data = analysis.load(out)
+    expected = data.manifest["n_samples"] * len(data.arms)
+    if len(data.rows) < expected or any(r["status"] != analysis.COMPLETE for r in data.rows):
+        print(f"confirmation stage not run: the campaign in {out} is not complete", file=sys.stderr)
+        return True  # _finish reports the incomplete campaign
+    a, b = data.arms[:2]
+    v = analysis.verdicts(data.verdict_rows(), a, b, metric=data.metric, replicas_a=data.replicas(a),
+                          replicas_b=data.replicas(b))
+    listed = v["only_a_fell"]
+    if not listed:
+        print(f"confirmation stage: the screen lists no draw where {a} fell and {b} walked", file=sys.stderr)
+        return True
+    try:
+        stage, samples, of = sampling.confirmation(campaign, listed)
+        texts = sampling.build_samples(stage, samples)
+    except ScenarioError as exc:
+        print(f"confirmation stage: {exc}", file=sys.stderr)
+        return False
+    names = [f.name for f in stage.factors]
+    print(f"confirmation stage: {len(listed)} listed draw(s) ({', '.join(listed)}) x {campaign.confirm_runs} fresh "
+          f"runs of {a} and {b} in {out / analysis.CONFIRM_DIR}", file=sys.stderr)
+    sdir = CampaignDir(out / analysis.CONFIRM_DIR, stage.name, texts, stage.arm_names(), names,
+                       {"confirm_of": of, "listed": listed, "runs": campaign.confirm_runs})
+    try:
+        sdir.open(resume=(out / analysis.CONFIRM_DIR).exists(), campaign_file=None,
+                  campaign_text=campaign.resolved_text)
+    except CampaignDirError as exc:
+        print(str(exc), file=sys.stderr)
+        return False
+    try:
+        values = {s.id: {k: sampling.format_value(v) for k, v in s.values.items()} for s in samples}
+        execute.run(stage, sdir, values, opts, fmu)
+    except execute.CampaignInterrupted as exc:
+        exc.csv_path = sdir.csv_path  # the message names the stage's rows
+        raise
+    finally:
+        sdir.finish()
+        sdir.close()
+    return True
 
 
 def _controller_ready(args) -> bool:
@@ -188,4 +242,12 @@ def _finish(out: Path, write_report, text_table) -> int:
     failed = sum(r["status"] != "complete" for r in data.rows)
     expected = data.manifest["n_samples"] * len(data.arms)
     print(f"\n{len(data.rows)} of {expected} rows, {failed} failed; {out / 'campaign.csv'}; report {report}")
-    return 1 if failed or len(data.rows) < expected else 0
+    incomplete = failed or len(data.rows) < expected
+    stage = analysis.load_confirmation(out)
+    if stage is not None:
+        s_failed = sum(r["status"] != "complete" for r in stage.rows)
+        s_expected = stage.manifest["n_samples"] * len(stage.arms)
+        print(f"confirmation stage: {len(stage.rows)} of {s_expected} rows, {s_failed} failed; "
+              f"{stage.root / 'campaign.csv'}")
+        incomplete = incomplete or s_failed or len(stage.rows) < s_expected
+    return 1 if incomplete else 0

@@ -117,15 +117,19 @@ def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
                   f"{', '.join([a, *ra])} against {', '.join([b, *rb])}. Near the edge of falling any change of "
                   "the walk tips a sample into a fall or out of one, so the verdicts judge each sample by its "
                   f"outcomes over the {n_rep} pairs.", ""]
+    runs = (data.manifest.get("confirm_runs") or 0) if n_rep > 1 else 0  # confirm_runs needs replicate_over
+    ok = v["never_falls_where_b_walks"]
+    head = (f"Screen of the majority reading: {'no draw listed' if ok else 'draws listed'}" if runs else
+            f"**Verdict: {a} never falls where {b} walks: {'PASS' if ok else 'FAIL'}**")
     if n_rep > 1:
-        never = (f"**Verdict: {a} never falls where {b} walks: {'PASS' if v['never_falls_where_b_walks'] else 'FAIL'}**"
+        never = (f"{head}"
                  f" (samples where {a} fell on more than half of the {n_rep} replicas and {b} on fewer than half: "
                  f"{len(v['only_a_fell'])} of {v['n']}, exact 95 % interval {_pct(v['only_a_fell_ci'])}; {fell}. "
                  f"Samples where {a} fell on some replica and {b} on none, with {a}'s falls: {some}).")
         win = (f"a pair is won when only {b} fell, or both walked and {a}'s {label} is lower; a sample is won "
                "with more than half of its pairs where at least one arm walked")
     else:
-        never = (f"**Verdict: {a} never falls where {b} walks: {'PASS' if v['never_falls_where_b_walks'] else 'FAIL'}**"
+        never = (f"{head}"
                  f" ({len(v['only_a_fell'])} of {v['n']} paired samples, exact 95 % interval "
                  f"{_pct(v['only_a_fell_ci'])}; samples: {fell}).")
         win = f"a win: only {b} fell, or both walked and {a}'s {label} is lower"
@@ -135,8 +139,8 @@ def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
                   f"as if either arm were as likely to be the one that falls, the same reading lists "
                   f"{null['mean']:.1f} samples on average (95 %: {null['low']:.0f}-{null['high']:.0f}), and "
                   f"{len(v['only_a_fell'])} or more in {100 * null['at_least_observed']:.0f} % of the swaps.")
-    lines += [never, "",
-              f"**Verdict: {a} beats {b} on >= {100 * analysis.WIN_SHARE_REQUIRED:.0f} % of paired samples: "
+    lines += [never, ""] + (_confirm_lines(data, a, b, v["only_a_fell"], runs) if runs else [])
+    lines += [f"**Verdict: {a} beats {b} on >= {100 * analysis.WIN_SHARE_REQUIRED:.0f} % of paired samples: "
               f"{'PASS' if v['beats'] else 'FAIL'}** ({v['wins']} of {v['contested']} samples where at least one arm "
               f"walked = {share}, exact 95 % interval {_pct(v['win_ci'])}; {win}). Median {metric} difference "
               f"{a} - {b} over the pairs both walked: {_f(v['median_diff'], 4)} m/s (bootstrap 95 % interval "
@@ -155,6 +159,31 @@ def _verdict_lines(data: analysis.CampaignData, a: str, b: str) -> list[str]:
         lines += _md_table(["sample", "pairs won", f"{a} fell", f"{b} fell", f"{a} {metric} (mean of walked)",
                             f"{b} {metric}", "factors"], rows) + [""]
     return lines
+
+
+def _confirm_lines(data: analysis.CampaignData, a: str, b: str, listed: Sequence[str], runs: int) -> list[str]:
+    """The verdict "``a`` never falls where ``b`` walks" after the confirmation stage
+    (:func:`scenarios.campaign.analysis.confirmation`), with every listed draw's fresh runs."""
+    head = f"**Verdict: {a} never falls where {b} walks, confirmed on {runs} fresh runs of each listed draw: "
+    alpha = analysis.CONFIRM_ALPHA
+    test = (f"a listed draw is confirmed when its fresh runs where only {a} fell outnumber those where only {b} "
+            f"fell beyond chance: one-sided exact McNemar test, Holm's step-down over the listed draws at "
+            f"{alpha:g}; only fresh runs count, as the runs that listed a draw were selected for going against {a}")
+    if not listed:
+        return [head + f"PASS** (the screen lists no draw; {test}).", ""]
+    stage = analysis.load_confirmation(data.root)
+    of = (stage.manifest.get("confirm_of") or {}) if stage is not None else {}
+    c = analysis.confirmation(listed, stage.rows if stage is not None else [], of, a, b, runs)
+    verdict = "FAIL" if c["confirmed"] else "PASS" if c["complete"] else "INCOMPLETE"
+    done = sum(x["runs"] for x in c["draws"])
+    status = "" if c["complete"] else (f" The stage is not complete: {done} of {runs * len(listed)} fresh pairs "
+                                       f"({'none run' if stage is None else f'in {stage.root}'}).")
+    confirmed = ", ".join(c["confirmed"]) or "none"
+    rows = [[x["draw"], f"{x['runs']}/{runs}", f"{x['a_fell']}", f"{x['b_fell']}", f"{x['only_a']}",
+             f"{x['only_b']}", f"{x['p']:.3g}", "yes" if x["confirmed"] else "no"] for x in c["draws"]]
+    return ([head + f"{verdict}** (confirmed: {confirmed}; {test}).{status}", ""]
+            + _md_table(["draw", "fresh pairs", f"{a} fell", f"{b} fell", f"only {a} fell", f"only {b} fell",
+                         "one-sided p", "confirmed"], rows) + [""])
 
 
 def _agreement_lines(data: analysis.CampaignData, b: str) -> list[str]:

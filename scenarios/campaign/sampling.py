@@ -6,11 +6,14 @@ share one generator (seed, ``"lhs"``) and one Latin hypercube. Sample ``i`` is g
 ``i // samples`` (grid factors in file order, the last varying fastest) with random draw
 ``i % samples``: every grid cell sees the same random draws (paired comparisons), except
 the campaign's ``redraw`` factors, drawn anew on each value ``k`` > 0 of its
-``replicate_over`` factor from the generator (campaign seed, ``"NAME@k"``).
+``replicate_over`` factor from the generator (campaign seed, ``"NAME@k"``). The
+confirmation stage (:func:`confirmation`) continues that factor's values, so its draws
+come from streams the campaign itself never used.
 """
 from __future__ import annotations
 
 import copy
+import dataclasses
 import itertools
 import json
 import tomllib
@@ -99,6 +102,64 @@ def draw(campaign: Campaign) -> list[Sample]:
             values = {f.name: drawn[f.name] for f in campaign.factors}
             samples.append(Sample(f"s{i:0{width}d}", i, values))
     return samples
+
+
+#: Suffix of the confirmation stage's campaign name (its samples' tags and descriptions).
+CONFIRM_SUFFIX = "_confirm"
+
+
+def _draw_key(index: int, campaign: Campaign) -> tuple[tuple[int, ...], int, int]:
+    """(grid cell without ``replicate_over``, random draw, value index of ``replicate_over``)
+    of sample ``index``: a draw is the same robot on every value of that factor."""
+    n, over = campaign.samples, campaign.replicate_index
+    cell = np.unravel_index(index // n, [len(f.values) for f in campaign.grid])
+    return tuple(int(c) for j, c in enumerate(cell) if j != over), index % n, int(cell[over])
+
+
+def confirmation(campaign: Campaign, listed: list[str]) -> tuple[Campaign, list[Sample], dict[str, str]]:
+    """The confirmation stage of a campaign with ``confirm_runs``: every draw of ``listed``
+    (named by its sample on the first value of ``replicate_over``, as the verdicts name it)
+    on ``confirm_runs`` fresh values of that factor, the largest value + 1, + 2, ... Each
+    fresh run keeps the draw's factors, except the ``redraw`` factors, drawn anew on each
+    fresh value (streams ``NAME@k`` with k past the campaign's values: no run repeats a
+    walk of the campaign). The stage runs the verdicts' two arms (the first two of
+    ``compare``).
+
+    Returns (the stage as a campaign, its samples ``DRAW_cJ``: fresh run J of draw DRAW,
+    {stage sample id: listed draw})."""
+    over = campaign.replicate_index
+    if not campaign.confirm_runs or over is None:
+        raise ValueError(f"campaign {campaign.name!r} has no confirmation stage (confirm_runs with replicate_over)")
+    factor = campaign.grid[over]
+    first = len(factor.values)
+    fresh = tuple(max(factor.values) + 1 + j for j in range(campaign.confirm_runs))
+    longer = dataclasses.replace(factor, values=factor.values + fresh)
+    pair = campaign.arm_names()[:2]
+    base = {**copy.deepcopy(dict(campaign.base_doc)), "compare": pair}
+    if "arm" in base:  # the scenario format refuses an [[arm]] that compare does not list
+        base["arm"] = [arm for arm in base["arm"] if arm.get("name") in pair]
+        if not base["arm"]:
+            del base["arm"]
+    stage = dataclasses.replace(campaign, name=campaign.name + CONFIRM_SUFFIX, base_doc=base, confirm_runs=0,
+                                factors=tuple(longer if f is factor else f for f in campaign.factors))
+    names = {}
+    for sid in listed:
+        index = int(sid[1:])
+        cell, r, k = _draw_key(index, campaign)
+        if k != 0 or index >= campaign.n_samples:
+            raise ValueError(f"{sid} does not name a draw of {campaign.name!r} (its sample on the first value of "
+                             f"{factor.name})")
+        names[(cell, r)] = sid
+    samples, of = [], {}
+    width = len(str(campaign.confirm_runs))
+    for s in draw(stage):
+        cell, r, k = _draw_key(s.index, stage)
+        if k >= first and (cell, r) in names:
+            d = names[(cell, r)]
+            sid = f"{d}_c{k - first + 1:0{width}d}"  # the draw's fresh run 1, 2, ...
+            samples.append(dataclasses.replace(s, id=sid))
+            of[sid] = d
+    return stage, samples, of
 
 
 def format_value(v: Any) -> Any:

@@ -34,6 +34,13 @@ Layout (every key below is known; anything else is an error)::
                                     # anew on each of its values (a nuisance of every
                                     # replica, e.g. the pushes); its first value keeps the
                                     # draws it has without redraw
+    confirm_runs = 20               # optional, with replicate_over over integer values: every
+                                    # draw the "never" reading lists is run again on this
+                                    # many fresh values of that factor (the largest + 1,
+                                    # + 2, ...; redraw factors drawn anew), the verdicts'
+                                    # two arms only; the verdict then holds when no listed
+                                    # draw's fresh runs show the first arm falling more
+                                    # (see scenarios.campaign.analysis.confirmation)
 
     [factors.torso_mass_kg]         # see scenarios.campaign.factors for the names
     dist = "uniform"                # uniform | lhs: low, high (+ step); randint: low, high
@@ -66,7 +73,8 @@ from scenarios.lang.tomlfile import depth_problem, read_toml
 
 CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
 TOP_KEYS = ("name", "description", "extends", "drop", "base", "duration_s", "compare", "samples", "seed",
-            "task_timeout_s", "retries", "factors", "metric", "replicas", "replicate_over", "redraw")
+            "task_timeout_s", "retries", "factors", "metric", "replicas", "replicate_over", "redraw",
+            "confirm_runs")
 #: The errors the paired verdicts may compare (columns of campaign.csv), the default first.
 VERDICT_METRICS = ("steady_state_error_vx", "settled_error_vx")
 DISTS = ("uniform", "lhs", "randint", "choice", "grid")
@@ -81,6 +89,8 @@ MAX_SAMPLES = 100_000
 MAX_TASK_TIMEOUT_S = 7 * 24 * 3600.0
 MAX_RETRIES = 10
 DEFAULT_RETRIES = 2
+#: Most fresh runs ``confirm_runs`` gives each listed draw.
+MAX_CONFIRM_RUNS = 1000
 #: Longest chain of ``extends`` (a campaign over a campaign over ...).
 MAX_EXTENDS = 8
 
@@ -120,6 +130,7 @@ class Campaign:
     replicate_over: str | None = None  # a grid factor whose cells are the verdicts' replicas
     redraw: tuple[str, ...] = ()  # random factors drawn anew on each value of replicate_over
     resolved_text: str | None = None  # with extends: the whole campaign as one file (the run folder's copy)
+    confirm_runs: int = 0  # fresh runs of each draw the "never" reading lists (0: no confirmation stage)
 
     def analysis_settings(self) -> dict[str, Any]:
         """What the campaign's report needs beyond the rows (written into campaign.json)."""
@@ -129,7 +140,8 @@ class Campaign:
                     "cells": [len(f.values) for f in self.grid], "index": self.replicate_index,
                     "redraw": list(self.redraw)}
         return {"seed": self.seed, "metric": self.metric,
-                "replicas": {arm: list(more) for arm, more in self.replicas}, "replicate_over": over}
+                "replicas": {arm: list(more) for arm, more in self.replicas}, "replicate_over": over,
+                "confirm_runs": self.confirm_runs}
 
     @property
     def grid(self) -> tuple[Factor, ...]:
@@ -364,6 +376,37 @@ def _redraw(doc: Mapping[str, Any], factors: Sequence[Factor], over: str | None,
     return tuple(out) if over is not None else ()
 
 
+def _confirm_runs(doc: Mapping[str, Any], factors: Sequence[Factor], over: str | None,
+                  arms: Sequence[str] | None, probs: Problems) -> int:
+    """``confirm_runs``: how many fresh runs each draw the "never falls where b walks"
+    reading lists gets in the confirmation stage (1 to :data:`MAX_CONFIRM_RUNS`). The fresh
+    runs are new values of ``replicate_over``, counting on from its largest, so that factor
+    must hold integers (e.g. ``floor_terrain_seed``); the verdicts' two arms run them."""
+    raw = doc.get("confirm_runs")
+    if raw is None:
+        return 0
+    runs = integer(doc, "confirm_runs", "confirm_runs", probs, ge=1)
+    if runs is None:
+        return 0
+    if runs > MAX_CONFIRM_RUNS:
+        probs.add("confirm_runs", runs, f"must be <= {MAX_CONFIRM_RUNS}")
+        return 0
+    if "replicate_over" not in doc:
+        probs.add("confirm_runs", runs, "runs listed draws on fresh values of replicate_over: give replicate_over too")
+        return 0
+    if arms is not None and len(arms) < 2:
+        probs.add("confirm_runs", runs, f"confirms the verdicts of the first two arms of compare; compare has {len(arms)}")
+        return 0
+    if over is None:
+        return 0
+    factor = next(f for f in factors if f.name == over)
+    if not all(isinstance(v, int) and not isinstance(v, bool) for v in factor.values):
+        probs.add("confirm_runs", runs, f"the fresh runs take the values after the largest of replicate_over = "
+                                        f"{over!r}; its values {list(factor.values)} are not all integers")
+        return 0
+    return runs
+
+
 def _replicas(doc: Mapping[str, Any], arms: Sequence[str] | None,
               probs: Problems) -> tuple[tuple[str, tuple[str, ...]], ...]:
     """``[replicas]``: ``ARM = [replica arms]``. The verdicts of the first two arms of
@@ -457,14 +500,21 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
     replicas = _replicas(doc, list(base.get("compare") or ["adaptive"]) if base is not None else None, probs)
     replicate_over = _replicate_over(doc, factors, probs)
     redraw = _redraw(doc, factors, replicate_over, probs)
+    arms = list(base.get("compare") or ["adaptive"]) if base is not None else None
+    confirm_runs = _confirm_runs(doc, factors, replicate_over, arms, probs)
     if base is not None and not probs.items:
         _probe_factors(factors, base, base_dir, probs)
+        if confirm_runs:  # the confirmation stage's last fresh value, checked like a factor's extremes
+            over = next(f for f in factors if f.name == replicate_over)
+            _probe_factors([Factor(over.name, over.kind, "grid", values=(max(over.values) + confirm_runs,))],
+                           base, base_dir, probs)
     if probs.items:
         raise ScenarioError(probs.items, source=source)
     order = fx.apply_order([f.name for f in factors])
     factors.sort(key=lambda f: order.index(f.name))
     return Campaign(name, description, ref, base, base_dir, samples, seed, tuple(factors), retries, timeout,
-                    source, float(base["comm_step_s"]), metric, replicas, replicate_over, redraw, resolved_text)
+                    source, float(base["comm_step_s"]), metric, replicas, replicate_over, redraw, resolved_text,
+                    confirm_runs)
 
 
 def _lay_over(parent: Mapping[str, Any], child: Mapping[str, Any], under_factors: bool = False) -> dict[str, Any]:

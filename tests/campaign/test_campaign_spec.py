@@ -723,7 +723,8 @@ def test_campaign_metric_and_replicas_are_checked_up_front():
     c = spec.parse_campaign({**doc, "base": {**_nominal_doc(), "arm": doc_arms}, "metric": "settled_error_vx",
                              "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}})
     assert c.analysis_settings() == {"seed": 1, "metric": "settled_error_vx",
-                                     "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}, "replicate_over": None}
+                                     "replicas": {"adaptive": ["a2"], "pd_only": ["p2"]}, "replicate_over": None,
+                                     "confirm_runs": 0}
 
 
 GROUND_FACTORS = """
