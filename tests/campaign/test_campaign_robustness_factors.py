@@ -310,6 +310,7 @@ def _start_plus_one_setting(name: str, key: str) -> tuple[dict, object]:
     that without that setting it is robustness_random_start but for its name, description
     and seed (its own set)."""
     variant, start = resolved(name), resolved("robustness_random_start")
+    variant.pop("confirm_runs", None)  # how the verdict is decided, not what runs (test below)
     value = variant["base"]["regulator"].pop(key)
     assert {k: v for k, v in variant.items() if k not in ("name", "description", "seed")} == \
         {k: v for k, v in start.items() if k not in ("name", "description", "seed")}
@@ -340,6 +341,19 @@ def test_robustness_random_ramp_is_the_start_campaign_learning_on_slow_ramps():
     regulated = _first_sample_regulator_overrides("robustness_random_ramp")
     assert len(regulated) == 2 and all(o["learn_ramp_max_mps2"] == 0.25 and o["learn_settled_steps"] == 8
                                        for o in regulated)
+
+
+def test_robustness_random_ramp_decides_never_by_a_40_run_confirmation_stage():
+    """Its listed draws run again on 40 fresh grounds, numbered on from the five of every
+    draw (floor_terrain_seed 6..45); the control campaign inherits the stage."""
+    for name in ("robustness_random_ramp", "robustness_random_control"):
+        c = spec.load_campaign(spec.resolve_campaign(name))
+        assert c.confirm_runs == 40 and c.replicate_over == "floor_terrain_seed"
+        assert c.analysis_settings()["confirm_runs"] == 40
+    c = spec.load_campaign(spec.resolve_campaign("robustness_random_ramp"))
+    first = next(s for s in sampling.draw(c) if s.values["floor_terrain_seed"] == 1)
+    _, fresh, _ = sampling.confirmation(c, [first.id])
+    assert [s.values["floor_terrain_seed"] for s in fresh] == list(range(6, 46))
 
 
 def test_robustness_random_control_runs_a_nudged_pd_only_in_place_of_rl_hzd():
