@@ -190,7 +190,8 @@ def _run_confirmation(campaign, out: Path, opts, fmu) -> bool:
         sdir.open(resume=(out / analysis.CONFIRM_DIR).exists(), campaign_file=None,
                   campaign_text=campaign.resolved_text)
     except CampaignDirError as exc:
-        print(str(exc), file=sys.stderr)
+        print(f"confirmation stage: {exc} (that folder holds only the stage: remove it to run the stage "
+              "afresh)", file=sys.stderr)
         return False
     try:
         values = {s.id: {k: sampling.format_value(v) for k, v in s.values.items()} for s in samples}

@@ -281,6 +281,13 @@ def test_a_real_arm_that_falls_where_pd_only_walks_is_listed_and_confirmed(tmp_p
     assert r.returncode == 0, r.stderr[-3000:]
     assert "3 of 3 samples complete, 0 to run" in r.stderr
     assert (out / analysis.CONFIRM_DIR / "campaign.csv").read_text() == before
+    # a stage folder without its manifest (cut short while created) is refused, never overwritten
+    (out / analysis.CONFIRM_DIR / "campaign.json").unlink()
+    main_rows = (out / "campaign.csv").read_text()
+    r = _run([_real_campaign(tmp_path, "rolled"), "--out", out, "--resume"], tmp_path, built_fmu)
+    assert r.returncode == 2 and "remove it to run the stage afresh" in r.stderr, r.stderr[-3000:]
+    assert (out / analysis.CONFIRM_DIR / "campaign.csv").read_text() == before
+    assert (out / "campaign.csv").read_text() == main_rows
 
 
 def test_a_real_arm_that_walks_lists_no_draw_and_runs_no_stage(tmp_path, built_fmu):
