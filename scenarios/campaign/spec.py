@@ -497,10 +497,10 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
     if "terrain" in raw and any(n.startswith("terrain_") for n in raw):
         probs.note("factors.terrain", "give the terrain factor or terrain_* factors, not both")
     metric = _verdict_metric(doc, probs)
-    replicas = _replicas(doc, list(base.get("compare") or ["adaptive"]) if base is not None else None, probs)
+    arms = list(base.get("compare") or ["adaptive"]) if base is not None else None
+    replicas = _replicas(doc, arms, probs)
     replicate_over = _replicate_over(doc, factors, probs)
     redraw = _redraw(doc, factors, replicate_over, probs)
-    arms = list(base.get("compare") or ["adaptive"]) if base is not None else None
     confirm_runs = _confirm_runs(doc, factors, replicate_over, arms, probs)
     if base is not None and not probs.items:
         _probe_factors(factors, base, base_dir, probs)
