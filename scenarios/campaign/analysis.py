@@ -37,6 +37,20 @@ class CampaignData:
         return list(self.manifest["arms"])
 
     @property
+    def expected_rows(self) -> int:
+        """One row per sample and arm."""
+        return self.manifest["n_samples"] * len(self.arms)
+
+    @property
+    def failed_rows(self) -> int:
+        return sum(r["status"] != COMPLETE for r in self.rows)
+
+    @property
+    def complete(self) -> bool:
+        """Every sample x arm has a row, and none failed."""
+        return len(self.rows) >= self.expected_rows and not self.failed_rows
+
+    @property
     def metric(self) -> str:
         """The error the paired verdicts compare (the campaign file's ``metric``)."""
         return self.manifest.get("metric", "steady_state_error_vx")
@@ -318,11 +332,9 @@ def mcnemar_exact(k: int, m: int) -> float | None:
     probability, if either arm were as likely as the other to be the one that fell, of a
     split at least as uneven (binomial with p = 1/2 on k + m pairs). None when no pair
     is discordant."""
-    n = k + m
-    if n == 0:
+    if k + m == 0:
         return None
-    tail = sum(math.comb(n, i) for i in range(min(k, m) + 1)) / 2 ** n
-    return min(1.0, 2.0 * tail)
+    return min(1.0, 2.0 * one_sided_exact(max(k, m), min(k, m)))  # the lower tail, by symmetry
 
 
 #: The confirmation stage's folder inside a campaign folder (a campaign folder itself).

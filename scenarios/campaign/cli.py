@@ -164,8 +164,7 @@ def _run_confirmation(campaign, out: Path, opts, fmu) -> bool:
     from scenarios.campaign.store import CampaignDir, CampaignDirError
 
     data = analysis.load(out)
-    expected = data.manifest["n_samples"] * len(data.arms)
-    if len(data.rows) < expected or any(r["status"] != analysis.COMPLETE for r in data.rows):
+    if not data.complete:
         print(f"confirmation stage not run: the campaign in {out} is not complete", file=sys.stderr)
         return True  # _finish reports the incomplete campaign
     a, b = data.arms[:2]
@@ -240,15 +239,10 @@ def _finish(out: Path, write_report, text_table) -> int:
     report = write_report(out)
     data = analysis.load(out)
     print(text_table(data))
-    failed = sum(r["status"] != "complete" for r in data.rows)
-    expected = data.manifest["n_samples"] * len(data.arms)
-    print(f"\n{len(data.rows)} of {expected} rows, {failed} failed; {out / 'campaign.csv'}; report {report}")
-    incomplete = failed or len(data.rows) < expected
+    print(f"\n{len(data.rows)} of {data.expected_rows} rows, {data.failed_rows} failed; {out / 'campaign.csv'}; "
+          f"report {report}")
     stage = analysis.load_confirmation(out)
     if stage is not None:
-        s_failed = sum(r["status"] != "complete" for r in stage.rows)
-        s_expected = stage.manifest["n_samples"] * len(stage.arms)
-        print(f"confirmation stage: {len(stage.rows)} of {s_expected} rows, {s_failed} failed; "
+        print(f"confirmation stage: {len(stage.rows)} of {stage.expected_rows} rows, {stage.failed_rows} failed; "
               f"{stage.root / 'campaign.csv'}")
-        incomplete = incomplete or s_failed or len(stage.rows) < s_expected
-    return 1 if incomplete else 0
+    return 0 if data.complete and (stage is None or stage.complete) else 1

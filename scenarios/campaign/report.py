@@ -262,7 +262,7 @@ def _unconverged_lines(data: analysis.CampaignData) -> list[str]:
 def render(data: analysis.CampaignData, plots: Sequence[str]) -> str:
     m = data.manifest
     failed = [r for r in data.rows if r["status"] != "complete"]
-    expected = m["n_samples"] * len(data.arms)
+    expected = data.expected_rows
     drawn = f" (drawn from seed {m['seed']})" if "seed" in m else ""
     lines = [f"# Campaign {m['name']}", "",
              f"{m['n_samples']} samples{drawn} x {len(data.arms)} arms ({', '.join(data.arms)}); {len(data.rows)} of "
