@@ -128,6 +128,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     add_export_ssp_parser(sub)
 
+    from scenarios.docs import add_parser as add_docs_parser
+
+    add_docs_parser(sub)
+
     sp = sub.add_parser("report", help="write DIR/report.md over the results in DIR")
     sp.add_argument("dir")
     sp.set_defaults(func=cmd_report)

@@ -1,4 +1,4 @@
-"""The layers of the README's layout, held against the code: every project import (Python
+"""The layers of docs/architecture.md, held against the code: every project import (Python
 ``import``/``from``, C ``#include``) goes to the same layer or one below, and no module reaches
 itself again through its imports."""
 from __future__ import annotations
@@ -11,9 +11,9 @@ import pytest
 
 from support.paths import REPO_ROOT
 
-#: The README's rows, top first: each import must go to its own row or one below.
+#: docs/architecture.md's rows, top first: each import must go to its own row or one below.
 LAYERS = (
-    ("entry points", ("build.py", "benchmarks", "scenarios/cli.py", "scenarios/report.py", "scenarios/__main__.py")),
+    ("entry points", ("build.py", "benchmarks", "scenarios/cli.py", "scenarios/report.py", "scenarios/docs.py", "scenarios/__main__.py")),
     ("experiments", ("scenarios/run", "scenarios/campaign", "scenarios/ssp", "scenarios/gaits", "scenarios/rl_hzd")),
     ("results", ("scenarios/results",)),
     ("co-simulation", ("scenarios/cosim", "scenarios/rl_hzd/policy.py")),

@@ -1,0 +1,350 @@
+"""``python -m scenarios docs``: the results tables of README.md and docs/, generated from committed data.
+
+The data (``docs/data/``), each file written by a command, never typed into a page:
+
+- ``suite.json``: every suite arm's metrics and every claim's verdict from one main-job run
+  (``python -m scenarios docs --record-suite runs`` after ``python -m scenarios run all --out runs``),
+  with the commit, machine and date it was measured on;
+- ``robustness_study.csv``: the randomized-robots study, one row per campaign design x set x arm
+  (falls, the "never" reading and its chance level, "beats" with its exact interval, the median
+  settled errors, the commit that recorded it); ``robustness_confirm.csv``: the confirmation stage's
+  robots on fresh runs.
+
+A generated table sits in a page between ``<!-- table: NAME -->`` and ``<!-- /table -->``;
+``python -m scenarios docs`` rewrites every such block from the data, ``--check`` lists every block
+that differs (exit 1) and changes nothing (``tests/docs/test_docs_tables.py`` runs it).
+"""
+from __future__ import annotations
+
+import csv
+import datetime
+import json
+import platform
+import re
+import subprocess
+from pathlib import Path
+from typing import Any, Callable, Mapping, Sequence
+
+from fmu_src.core.avr_errors import AvrError
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+DATA_REL = Path("docs") / "data"
+DATA_DIR = REPO_ROOT / DATA_REL
+SUITE_DATA = DATA_DIR / "suite.json"
+STUDY_DATA = DATA_DIR / "robustness_study.csv"
+CONFIRM_DATA = DATA_DIR / "robustness_confirm.csv"
+#: Every page that may hold generated tables.
+PAGES = ("README.md", "docs/results.md")
+#: The arm metrics recorded per suite arm (times of the run itself, ``wall_s`` and the like, are not results).
+SUITE_METRICS = ("fell", "t_fall_s", "steady_state_error_vx", "steady_state_error_vy",
+                 "steady_state_error_vy_stride", "steady_state_error_yaw_rate", "run_error_vx",
+                 "settled_error_vx", "level_errors_vx", "convergence_time_s", "mean_vx_last_s",
+                 "mean_vy_last_s", "max_abs_pitch_rad", "max_abs_roll_rad", "sim_s")
+#: The README's headline rows: scenario and the perturbation it applies, in the paper's order.
+HEADLINE = (
+    ("nominal", "none, 0.5 m/s"),
+    ("mass_20kg", "torso 20 kg (nominal 10.33 kg)"),
+    ("com_fwd_10cm", "torso COM +0.1 m"),
+    ("damping_x10", "joint damping x10"),
+    ("push_fwd_30n", "30 N forward push for 0.1 s"),
+    ("fast_mass_20kg", "20 kg, 1.2 m/s"),
+    ("turning_mass_20kg", "20 kg, 0.3 rad/s turn"),
+    ("compare_staircase_rl", "+5 kg, COM +0.1 m, 0.2-0.8 m/s"),
+    ("terrain_mass_com", "+5 kg, COM +0.1 m, uneven terrain"),
+)
+#: The study's designs that ship (``scenarios/campaigns/robustness_random.toml``'s variants) and what each is.
+SHIPPED_DESIGNS = (
+    ("ramp", "adaptive, the `robust` settings (learning on settled commands and slow ramps, lr 2e-6)"),
+    ("control", "PD-only with `Kp_x` 5 % up (a control arm: the readings' noise floor)"),
+)
+BEGIN = re.compile(r"<!-- table: ([a-z_]+) -->\n")
+END = "<!-- /table -->"
+
+
+class DocsError(AvrError):
+    """The data or a page cannot give the tables (a missing file, a block without its end)."""
+
+
+# --------------------------------------------------------------------------- recording
+def _git_commit() -> str:
+    try:
+        out = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO_ROOT, capture_output=True,
+                             text=True, check=True, timeout=30)
+        return out.stdout.strip()
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+
+
+def _cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def suite_data(run_dir: Path) -> dict[str, Any]:
+    """The suite's results in ``run_dir`` as :data:`SUITE_DATA` holds them; every scenario of the
+    suite must be there, complete, or this raises naming each that is not."""
+    from scenarios.lang import spec
+    from scenarios.results.store import read_summary
+
+    scenarios: dict[str, Any] = {}
+    problems = []
+    for s in spec.load_suite(check_plant=False):
+        path = Path(run_dir) / s.name / "summary.json"
+        if not path.is_file():
+            problems.append(f"{path}: missing (run the whole suite into {run_dir})")
+            continue
+        summary, bad = read_summary(path)
+        if bad or summary is None:
+            problems.append(f"{path}: " + "; ".join(bad))
+            continue
+        if summary["status"] != "complete":
+            problems.append(f"{path}: status {summary['status']!r}, not complete")
+            continue
+        scenarios[s.name] = {
+            "path": {k: summary["path"][k] for k in ("regulator", "plant", "controller")},
+            "arms": {arm: {m: a.get(m) for m in SUITE_METRICS} for arm, a in summary["arms"].items()},
+            "verdict": summary["verdict"]["overall"],
+        }
+    if problems:
+        raise DocsError("cannot record the suite:\n  " + "\n  ".join(problems))
+    return {"measured": {"commit": _git_commit(), "date": datetime.date.today().isoformat(),
+                         "machine": f"{_cpu_name()}, {platform.system()} {platform.machine()}"},
+            "scenarios": scenarios}
+
+
+def record_suite(run_dir: Path, dest: Path | None = None) -> Path:
+    data = suite_data(run_dir)
+    dest = SUITE_DATA if dest is None else dest
+    dest.parent.mkdir(parents=True, exist_ok=True)
+    tmp = dest.with_suffix(".tmp")
+    tmp.write_text(json.dumps(data, indent=1, sort_keys=True) + "\n")
+    tmp.replace(dest)
+    return dest
+
+
+# --------------------------------------------------------------------------- reading
+def load_suite(path: Path = SUITE_DATA) -> dict[str, Any]:
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise DocsError(f"{path}: cannot read the suite data ({exc}); record it with "
+                        "python -m scenarios docs --record-suite RUN_DIR") from exc
+
+
+def load_csv(path: Path) -> list[dict[str, str]]:
+    try:
+        with open(path, newline="") as f:
+            return list(csv.DictReader(f))
+    except OSError as exc:
+        raise DocsError(f"{path}: cannot read ({exc})") from exc
+
+
+# --------------------------------------------------------------------------- tables
+def _f(v: Any, digits: int = 3) -> str:
+    return "-" if v is None else f"{v:.{digits}f}"
+
+
+def _md(header: Sequence[str], rows: Sequence[Sequence[str]]) -> list[str]:
+    return ["| " + " | ".join(header) + " |", "|" + "---|" * len(header),
+            *("| " + " | ".join(r) + " |" for r in rows)]
+
+
+def _measured(suite: Mapping[str, Any]) -> str:
+    m = suite["measured"]
+    return f"Measured on {m['machine']}, {m['date']}, at commit {m['commit']} (`docs/data/suite.json`)."
+
+
+def table_readme_suite(suite: Mapping[str, Any], study, confirm) -> list[str]:
+    sc = suite["scenarios"]
+    rows = []
+    for name, what in HEADLINE:
+        arms = sc[name]["arms"]
+        rows.append([f"`{name}`", what, _f(arms["adaptive"]["steady_state_error_vx"]),
+                     _f(arms["pd_only"]["steady_state_error_vx"]), _f(arms["adaptive"]["convergence_time_s"], 2)])
+    verdicts = [s["verdict"] for s in sc.values()]
+    passed = sum(v == "pass" for v in verdicts)
+    return [*_md(["scenario", "perturbation", "adaptive `sse_vx`", "PD-only `sse_vx`", "adaptive `t_conv`"], rows),
+            "", f"{passed} of {len(verdicts)} scenarios pass every claim check. {_measured(suite)}"]
+
+
+def table_suite(suite: Mapping[str, Any], study, confirm) -> list[str]:
+    rows = []
+    for name in sorted(suite["scenarios"]):
+        s = suite["scenarios"][name]
+        for arm, a in s["arms"].items():
+            rows.append([f"`{name}`", arm, "yes" if a["fell"] else "no", _f(a["steady_state_error_vx"]),
+                         _f(a["steady_state_error_vy"]), _f(a["steady_state_error_vy_stride"]),
+                         _f(a["steady_state_error_yaw_rate"]), _f(a["convergence_time_s"], 2), s["verdict"]])
+    return [*_md(["scenario", "arm", "fell", "sse_vx", "sse_vy", "sse_vy2", "sse_yaw", "t_conv_s", "verdict"], rows),
+            "", _measured(suite)]
+
+
+def table_rl_levels(suite: Mapping[str, Any], study, confirm) -> list[str]:
+    arms = suite["scenarios"]["compare_staircase_rl"]["arms"]
+    levels = arms["adaptive"]["level_errors_vx"]
+    rows = [[arm, *(_f(v["error_vx"]) for v in a["level_errors_vx"])] for arm, a in arms.items()]
+    return [*_md(["arm", *(f"{v['vx_des']:g} m/s from {v['t_s']:g} s" for v in levels)], rows), "", _measured(suite)]
+
+
+def _beats(r: Mapping[str, str]) -> str:
+    ok = "PASS" if float(r["beats_pct"]) >= 90.0 else "FAIL"
+    return f"{r['beats_pct']} % [{r['beats_lo']}, {r['beats_hi']}] {ok}"
+
+
+def _never(r: Mapping[str, str]) -> str:
+    return "PASS" if int(r["never_listed"]) == 0 else f"FAIL: {r['never_listed']}"
+
+
+def table_readme_study(suite, study: Sequence[Mapping[str, str]], confirm) -> list[str]:
+    rows = []
+    for variant, what in SHIPPED_DESIGNS:
+        mine = [r for r in study if r["variant"] == variant and not r["note"]]
+        if not mine:
+            continue
+        sets = ", ".join(r["set"] for r in mine)
+        confirmed = [r for r in mine if r["never_confirmed"]]
+        if confirmed:
+            never = f"{sum(r['never_confirmed'] == 'PASS' for r in confirmed)} of {len(confirmed)} (confirmed on fresh runs)"
+        else:
+            never = f"{sum(int(r['never_listed']) == 0 for r in mine)} of {len(mine)} (majority of five runs)"
+        beats = sum(float(r["beats_pct"]) >= 90.0 for r in mine)
+        falls = f"{sum(int(r['falls']) for r in mine)} / {sum(int(r['falls_against']) for r in mine)}"
+        spread = [(float(r["median_settled_mps"]), float(r["median_settled_against_mps"])) for r in mine]
+        med = " / ".join(f"{min(v):.3f}-{max(v):.3f}" for v in zip(*spread))
+        rows.append([f"`{variant}`: {what}", sets, falls, never, f"{beats} of {len(mine)}", med])
+    return [*_md(["design (`robustness_random --variant`)", "sets of 100 robots", "falls, it / PD-only (500 runs per set)",
+                  "sets where it never falls where PD-only walks", "sets where it beats PD-only (>= 90 % of contested robots)",
+                  "median settled error, it / PD-only (m/s)"], rows),
+            "", "From `docs/data/robustness_study.csv` (each row names the commit that recorded it)."]
+
+
+def table_study(suite, study: Sequence[Mapping[str, str]], confirm) -> list[str]:
+    rows = []
+    for r in study:
+        where = r["set"] + (f" ({r['note']})" if r["note"] else "")
+        rows.append([f"`{r['design']}`" + (f" (`{r['variant']}`)" if r["variant"] else ""), where,
+                     r["arm"], f"{r['falls']} / {r['falls_against']}", _never(r),
+                     f"{r['chance_mean']} [{r['chance_lo']}, {r['chance_hi']}]", r["never_confirmed"] or "-",
+                     _beats(r), f"{r['median_settled_mps']} / {r['median_settled_against_mps']}", r["recorded_in"]])
+    return _md(["campaign design", "set", "arm", "falls, arm / PD-only", "never (majority of 5)",
+                "chance level", "never, confirmed", "beats PD-only", "median settled error (m/s)", "recorded in"], rows)
+
+
+def table_confirm(suite, study, confirm: Sequence[Mapping[str, str]]) -> list[str]:
+    rows = [[r["set"], r["robot"], f"{r['falls_of_5']} / {r['falls_against_of_5']}",
+             f"{r['falls']} / {r['falls_against']}", f"{r['only_falls']} / {r['only_falls_against']}",
+             r["p_one_sided"]] for r in confirm]
+    return _md(["set", "robot", "falls of 5, adaptive / PD-only", "falls on 40 fresh runs",
+                "only one arm fell, adaptive / PD-only", "one-sided p"], rows)
+
+
+TABLES: dict[str, Callable[..., list[str]]] = {
+    "readme_suite": table_readme_suite,
+    "suite": table_suite,
+    "rl_levels": table_rl_levels,
+    "readme_study": table_readme_study,
+    "study": table_study,
+    "confirm": table_confirm,
+}
+
+
+# --------------------------------------------------------------------------- pages
+def render_page(text: str, tables: Mapping[str, str], where: str) -> str:
+    """``text`` with every generated block replaced by ``tables[NAME]``."""
+    out, pos = [], 0
+    for m in BEGIN.finditer(text):
+        if m.start() < pos:
+            continue
+        end = text.find(END, m.end())
+        if end < 0:
+            raise DocsError(f"{where}: table {m.group(1)!r} has no {END!r}")
+        if m.group(1) not in tables:
+            raise DocsError(f"{where}: unknown table {m.group(1)!r} (one of {', '.join(sorted(tables))})")
+        out += [text[pos:m.end()], tables[m.group(1)], "\n"]
+        pos = end
+    out.append(text[pos:])
+    return "".join(out)
+
+
+def all_tables(root: Path | None = None) -> dict[str, str]:
+    """Every table, from the data of the clone at ``root`` (default: this one)."""
+    data = (REPO_ROOT if root is None else root) / DATA_REL
+    suite = load_suite(data / SUITE_DATA.name)
+    study, confirm = load_csv(data / STUDY_DATA.name), load_csv(data / CONFIRM_DATA.name)
+    return {name: "\n".join(fn(suite, study, confirm)) for name, fn in TABLES.items()}
+
+
+def pages(root: Path | None = None, tables: Mapping[str, str] | None = None) -> dict[Path, tuple[str, str]]:
+    """Every page as (text now, text generated)."""
+    root = REPO_ROOT if root is None else root
+    tables = all_tables(root) if tables is None else tables
+    out = {}
+    for rel in PAGES:
+        path = root / rel
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise DocsError(f"{path}: cannot read ({exc}); the docs are generated in a clone of the repository") from exc
+        out[path] = (text, render_page(text, tables, rel))
+    return out
+
+
+def stale(root: Path | None = None, tables: Mapping[str, str] | None = None) -> list[str]:
+    """The pages whose generated blocks differ from the data (and which blocks)."""
+    root = REPO_ROOT if root is None else root
+    problems = []
+    for path, (now, generated) in pages(root, tables).items():
+        if now != generated:
+            names = [m.group(1) for m in BEGIN.finditer(now)]
+            ours = dict(zip(names, _blocks(now))), dict(zip(names, _blocks(generated)))
+            differ = [n for n in names if ours[0].get(n) != ours[1].get(n)]
+            problems.append(f"{path.relative_to(root)}: table {', '.join(differ)} differs from docs/data "
+                            "(run python -m scenarios docs)")
+    return problems
+
+
+def _blocks(text: str) -> list[str]:
+    return [text[m.end():text.find(END, m.end())] for m in BEGIN.finditer(text)]
+
+
+def write(root: Path | None = None) -> list[Path]:
+    changed = []
+    for path, (now, generated) in pages(root).items():
+        if now != generated:
+            path.write_text(generated)
+            changed.append(path)
+    return changed
+
+
+def add_parser(sub) -> None:
+    sp = sub.add_parser("docs", help="write the results tables of README.md and docs/ from docs/data "
+                                     "(--check: only list the stale ones)")
+    g = sp.add_mutually_exclusive_group()
+    g.add_argument("--check", action="store_true", help="change nothing; exit 1 if a page differs from the data")
+    g.add_argument("--record-suite", metavar="RUN_DIR", type=Path,
+                   help="first record docs/data/suite.json from a complete suite run in RUN_DIR")
+    sp.set_defaults(func=cmd_docs)
+
+
+def cmd_docs(args) -> int:
+    import sys
+
+    try:
+        if args.check:
+            problems = stale()
+            for p in problems:
+                print(p, file=sys.stderr)
+            return 1 if problems else 0
+        if args.record_suite is not None:
+            print(f"recorded {record_suite(args.record_suite)}")
+        for path in write():
+            print(f"wrote {path}")
+    except DocsError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    return 0
