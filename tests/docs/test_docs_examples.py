@@ -1,0 +1,131 @@
+"""Every code example in README.md and docs/ runs as written (Sybil parses the pages).
+
+- ``python`` blocks run in order in one namespace per page;
+- ``bash`` blocks run with ``bash -euo pipefail``, ``python`` being this interpreter;
+- ``toml`` blocks are validated: a whole file (it has ``name``) as a scenario or, in
+  docs/campaigns.md, as a campaign; a fragment merged into the ``nominal`` suite scenario;
+- ``text`` blocks are pictures, formulas and printed output, never run; a fence without a
+  language is refused, so nothing is left out by accident.
+
+Each page's examples run from a fresh working folder laid out like the clone (the code folders
+linked, ``dist/`` the session's own ``build.py`` run), so what they write (``runs/``, plots,
+exported files) lands under pytest's ``tmp_path``, never in the clone. A block the tests do not
+run carries ``<!-- skip: next "why" -->`` and says why in the page's own text.
+"""
+import os
+import subprocess
+import sys
+import tomllib
+import unittest
+from pathlib import Path
+
+import pytest
+from sybil import Sybil
+from sybil.parsers.markdown import CodeBlockParser, PythonCodeBlockParser, SkipParser
+
+from support.paths import REPO_ROOT
+
+PAGES = [REPO_ROOT / "README.md", *sorted((REPO_ROOT / "docs").glob("*.md"))]
+#: Fence languages that are shown, not run.
+SHOWN = ("text", "xml", "csv", "c")
+#: What a page's working folder links from the clone (the rest it makes itself).
+LINKED = ("build.py", "benchmarks", "fmu_src", "plant", "scenarios", "tests", "pyproject.toml")
+#: A bash block's time limit, s: the slowest documented example (a short campaign on a local
+#: Dask cluster) takes about a minute on the 2-core CI machine when nothing else runs.
+BASH_TIMEOUT_S = 600
+
+
+def _env() -> dict[str, str]:
+    env = dict(os.environ)
+    env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '/usr/bin:/bin')}"
+    root = env.get("MENAGERIE_ROOT")
+    if root:
+        env["MENAGERIE_ROOT"] = str((REPO_ROOT / root).resolve()) if not os.path.isabs(root) else root
+    return env
+
+
+def run_bash(example):
+    proc = subprocess.run(["bash", "-euo", "pipefail", "-c", example.parsed], cwd=os.getcwd(), env=_env(),
+                          capture_output=True, text=True, timeout=BASH_TIMEOUT_S)
+    if proc.returncode != 0:
+        return (f"{example.path}:{example.line}: exit {proc.returncode}\n--- stdout\n{proc.stdout[-3000:]}"
+                f"\n--- stderr\n{proc.stderr[-3000:]}")
+    return None
+
+
+def check_toml(example):
+    from scenarios.campaign.spec import parse_campaign
+    from scenarios.lang.spec import parse_scenario, suite_files
+
+    doc = tomllib.loads(example.parsed)
+    base_dir = Path(os.getcwd())
+    if Path(example.path).name == "campaigns.md":
+        parse_campaign(doc, f"{example.path}:{example.line}", base_dir=base_dir)
+    elif "name" in doc:
+        parse_scenario(doc, f"{example.path}:{example.line}", base_dir=base_dir)
+    else:
+        nominal = next(p for p in suite_files() if p.stem == "nominal")
+        parse_scenario({**tomllib.loads(nominal.read_text()), **doc}, f"{example.path}:{example.line}",
+                       base_dir=base_dir)
+    return None
+
+
+def untyped_fences(text: str) -> list[int]:
+    """The lines of opening fences that name no language."""
+    lines, inside = [], False
+    for number, line in enumerate(text.splitlines(), 1):
+        if line.lstrip().startswith("```"):
+            if not inside and not line.lstrip()[3:].strip():
+                lines.append(number)
+            inside = not inside
+    return lines
+
+
+SYBIL = Sybil(parsers=[
+    PythonCodeBlockParser(),
+    CodeBlockParser("bash", evaluator=run_bash),
+    CodeBlockParser("toml", evaluator=check_toml),
+    *(CodeBlockParser(lang, evaluator=lambda example: None) for lang in SHOWN),
+    SkipParser(),
+])
+
+
+def _workdir(tmp_path: Path, dist: Path) -> Path:
+    for name in LINKED:
+        (tmp_path / name).symlink_to(REPO_ROOT / name)
+    (tmp_path / "dist").symlink_to(dist)
+    return tmp_path
+
+
+@pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(REPO_ROOT)) for p in PAGES])
+def test_every_example_runs_as_written(page, tmp_path, built_all, monkeypatch):
+    assert untyped_fences(page.read_text()) == [], "fences without a language (```text for output and pictures)"
+    monkeypatch.chdir(_workdir(tmp_path, built_all.dist))
+    monkeypatch.setenv("MENAGERIE_ROOT", _env()["MENAGERIE_ROOT"]) if "MENAGERIE_ROOT" in os.environ else None
+    document = SYBIL.parse(page)
+    ran, skipped = 0, []
+    for example in document:
+        try:
+            example.evaluate()
+        except unittest.SkipTest as skip:
+            assert str(skip).strip(), f"{page.name}:{example.line}: a skipped block must say why"
+            skipped.append(example.line)
+            continue
+        ran += 1
+    assert not (set(os.listdir(REPO_ROOT)) - _clone_entries), "an example wrote into the clone"
+
+
+_clone_entries = set(os.listdir(REPO_ROOT))
+
+
+def test_fences_without_a_language_are_found():
+    assert untyped_fences("text\n\n```\npython -m scenarios list\n```\n\n```bash\nls\n```\n") == [3]
+
+
+def test_a_failing_shell_example_fails_the_page(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    page = tmp_path / "page.md"
+    page.write_text("```bash\npython -m scenarios run no_such_scenario --out runs\n```\n")
+    with pytest.raises(Exception, match="exit 2"):
+        for example in SYBIL.parse(page):
+            example.evaluate()
