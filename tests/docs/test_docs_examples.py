@@ -1,11 +1,15 @@
 """Every code example in README.md and docs/ runs as written (Sybil parses the pages).
 
-- ``python`` blocks run in order in one namespace per page;
+- ``python`` blocks run in order in one namespace per page (in this process);
 - ``bash`` blocks run with ``bash -euo pipefail``, ``python`` being this interpreter;
 - ``toml`` blocks are validated: a whole file (it has ``name``) as a scenario or, in
   docs/campaigns.md, as a campaign; a fragment merged into the ``nominal`` suite scenario;
 - ``text`` blocks are pictures, formulas and printed output, never run; a fence without a
   language is refused, so nothing is left out by accident.
+
+A long example runs shortened where the page marks it, right above the block, with
+``<!-- docs-test: "OLD" -> "NEW" -->`` (the text OLD of the block replaced by NEW) and says so in
+its own text.
 
 Each page's examples run from a fresh working folder laid out like the clone (the code folders
 linked, ``dist/`` the session's own ``build.py`` run), so what they write (``runs/``, plots,
@@ -13,6 +17,7 @@ exported files) lands under pytest's ``tmp_path``, never in the clone. A block t
 run carries ``<!-- skip: next "why" -->`` and says why in the page's own text.
 """
 import os
+import re
 import subprocess
 import sys
 import tomllib
@@ -21,7 +26,7 @@ from pathlib import Path
 
 import pytest
 from sybil import Sybil
-from sybil.parsers.markdown import CodeBlockParser, PythonCodeBlockParser, SkipParser
+from sybil.parsers.markdown import CodeBlockParser, SkipParser
 
 from support.paths import REPO_ROOT
 
@@ -44,8 +49,27 @@ def _env() -> dict[str, str]:
     return env
 
 
+SHORTEN = re.compile(r'<!-- docs-test: "(.+?)" -> "(.+?)" -->\n')
+
+
+def source(example) -> str:
+    """The block's text, with the page's ``docs-test`` replacement just above it applied."""
+    text = example.document.text[:example.region.start]
+    marks = list(SHORTEN.finditer(text))
+    code = example.parsed
+    if marks and marks[-1].end() == len(text.rstrip("\n")) + 1:
+        old, new = marks[-1].groups()
+        assert old in code, f"{example.path}:{example.line}: docs-test mark {old!r} not in the block"
+        code = code.replace(old, new)
+    return code
+
+
+def run_python(example):
+    exec(compile(source(example), f"{example.path}:{example.line}", "exec"), example.namespace)
+
+
 def run_bash(example):
-    proc = subprocess.run(["bash", "-euo", "pipefail", "-c", example.parsed], cwd=os.getcwd(), env=_env(),
+    proc = subprocess.run(["bash", "-euo", "pipefail", "-c", source(example)], cwd=os.getcwd(), env=_env(),
                           capture_output=True, text=True, timeout=BASH_TIMEOUT_S)
     if proc.returncode != 0:
         return (f"{example.path}:{example.line}: exit {proc.returncode}\n--- stdout\n{proc.stdout[-3000:]}"
@@ -57,7 +81,7 @@ def check_toml(example):
     from scenarios.campaign.spec import parse_campaign
     from scenarios.lang.spec import parse_scenario, suite_files
 
-    doc = tomllib.loads(example.parsed)
+    doc = tomllib.loads(source(example))
     base_dir = Path(os.getcwd())
     if Path(example.path).name == "campaigns.md":
         parse_campaign(doc, f"{example.path}:{example.line}", base_dir=base_dir)
@@ -82,7 +106,7 @@ def untyped_fences(text: str) -> list[int]:
 
 
 SYBIL = Sybil(parsers=[
-    PythonCodeBlockParser(),
+    CodeBlockParser("python", evaluator=run_python),
     CodeBlockParser("bash", evaluator=run_bash),
     CodeBlockParser("toml", evaluator=check_toml),
     *(CodeBlockParser(lang, evaluator=lambda example: None) for lang in SHOWN),
@@ -129,3 +153,10 @@ def test_a_failing_shell_example_fails_the_page(tmp_path, monkeypatch):
     with pytest.raises(Exception, match="exit 2"):
         for example in SYBIL.parse(page):
             example.evaluate()
+
+
+def test_a_docs_test_mark_shortens_only_the_block_below_it(tmp_path):
+    page = tmp_path / "page.md"
+    page.write_text('<!-- docs-test: "6000" -> "40" -->\n```python\nSTEPS = 6000\n```\n\n```python\nOTHER = 6000\n```\n')
+    examples = list(SYBIL.parse(page))
+    assert [source(e) for e in examples] == ["STEPS = 40\n", "OTHER = 6000\n"]
