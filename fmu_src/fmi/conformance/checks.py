@@ -44,8 +44,10 @@ CHECKS = (
            "no Error or Fatal", "4.2.4 (state machine of co-simulation)", "'State Machine for Co-Simulation'"),
     _check("machine.illegal_calls", "every function in every state that does not allow it: Error, "
            "never OK, never a crash", "4.2.4 (state machine of co-simulation)", "'State Machine for Co-Simulation'"),
-    _check("machine.error_state", "after an Error the instance can be reset and runs again like a new one",
-           "2.1.3 (fmi2Error) and 4.2.4", "'Status Returned by Functions' (fmi3Error) and 'State Machine for Co-Simulation'"),
+    _check("machine.error_state", "after an Error: getting values works, a state saved before restores and goes "
+           "on like no Error happened, and after fmiReset the instance runs like a new one",
+           "2.1.3 (fmi2Error) and 4.2.4", "'Status Returned by Functions' (fmi3Error) and 'State Machine for "
+           "Co-Simulation'"),
     _check("arguments.instantiate", "wrong, empty or NULL GUID/instantiation token and wrong FMU type refused "
            "(NULL), never a crash", "2.1.5 (fmi2Instantiate)", "'Creation, Destruction and Logging of FMU Instances' (fmi3InstantiateCoSimulation)"),
     _check("arguments.null_callbacks", "NULL callbacks (FMI 2.0 functions, FMI 3.0 logMessage) never crash "

@@ -15,7 +15,7 @@ from fmu_src.fmi.conformance.model import BadInput, Fmu, extract
 from fmu_src.fmi.conformance.runner import run_all
 
 #: option -> (lowest allowed value, highest allowed value)
-RANGES = {"timeout": (1, 86400), "steps": (1, 100000), "cycles": (2, 100000), "flips": (0, 1_000_000),
+RANGES = {"timeout": (1, 86400), "steps": (3, 100000), "cycles": (2, 100000), "flips": (0, 1_000_000),
           "max_growth_kib": (0, 1 << 30), "seed": (0, 2**63 - 1)}
 
 
@@ -29,7 +29,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--only", action="append", default=[], metavar="CHECK_OR_GROUP",
                    help=f"run only these checks or groups (repeatable; groups: {', '.join(GROUPS)})")
     p.add_argument("--timeout", type=float, default=120.0, help="time limit of each child process, s (default 120)")
-    p.add_argument("--steps", type=int, default=10, help="communication steps per run (default 10)")
+    p.add_argument("--steps", type=int, default=10, help="communication steps per run, at least 3 (default 10)")
     p.add_argument("--step", type=float, default=None,
                    help="communication step size, s (default: the DefaultExperiment's stepSize, else 1e-3)")
     p.add_argument("--cycles", type=int, default=20, help="instantiate/free cycles of lifecycle.memory (default 20)")

@@ -224,24 +224,35 @@ def illegal_calls(ctx: Context):
 
 
 def error_state(ctx: Context):
-    """An illegal call (initialization in the step state) answers Error; then fmiReset, a new
-    initialization and a run give the outputs of a new instance."""
-    api = ctx.api
+    """An illegal call (initialization in the step state) answers Error.  In the error state the
+    standard allows getting values, restoring an FMU state saved before and fmiReset: the
+    restored state must go on like an instance that never saw the Error, and after fmiReset a
+    new initialization and run must give the outputs of a new instance."""
+    api, n, seed = ctx.api, ctx.steps, ctx.options["seed"]
+    can_state = ctx.fmu.flag("canGetAndSetFMUstate")
     fresh = ctx.instance()
-    expected = ctx.run(fresh, 0, ctx.steps, seed=ctx.options["seed"])
+    expected = ctx.run(fresh, 0, n, seed)
     api.free(fresh)
     inst = ctx.instance()
-    ctx.run(inst, 0, 2, seed=ctx.options["seed"] + 1)
+    first = ctx.run(inst, 0, 2, seed)
+    if can_state:
+        status, saved = api.get_state(inst)
+        ctx.expect(status, ACCEPTED, "before the illegal call")
     ctx.expect(api.enter_init(inst)[-1], (ERROR,), "initialization is illegal in the step state")
     for var_type, group in _group(ctx.outputs).items():  # allowed in the error state (for debugging)
         api.get(inst, var_type, [x.vr for x in group])
+    if can_state:
+        ctx.expect(api.set_state(inst, saved), ACCEPTED, "restoring a state saved before the Error")
+        if first + ctx.run(inst, 2, n - 2, seed) != expected:
+            raise Failed("after an Error, the state restored does not go on like an instance that saw no Error")
+        api.free_state(inst, saved)
     ctx.expect(api.reset(inst), (OK,), "fmiReset after an Error")
     for status in api.enter_init(inst) + [api.exit_init(inst)]:
         ctx.expect(status, ACCEPTED, "initializing after the reset")
-    if ctx.run(inst, 0, ctx.steps, seed=ctx.options["seed"]) != expected:
+    if ctx.run(inst, 0, n, seed) != expected:
         raise Failed("after an Error and fmiReset the run's outputs differ from a new instance's")
     api.free(inst)
-    return {}
+    return {"restored": can_state}
 
 
 # ---- arguments ----------------------------------------------------------------------------------

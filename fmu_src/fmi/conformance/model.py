@@ -2,6 +2,8 @@
 flags and the binary this host can load, from a ``.fmu`` archive or an extracted folder."""
 from __future__ import annotations
 
+import copy
+import io
 import math
 import platform
 import zipfile
@@ -131,8 +133,16 @@ class Fmu:
         self.cs = self.root.find("CoSimulation")
         if self.cs is None:
             raise BadInput(f"{xml}: no CoSimulation element; this checker takes co-simulation FMUs only")
+        # fmpy reads the variables; the model structure (static.model_structure's business, which
+        # fmpy's reader cannot survive when it names unknown variables) is left out of its copy
+        variables_only = copy.deepcopy(self.root)
+        for structure in variables_only.findall("ModelStructure"):
+            structure.clear()
+        archive = io.BytesIO()
+        with zipfile.ZipFile(archive, "w") as z:  # fmpy reads a file-like object as an archive
+            z.writestr("modelDescription.xml", etree.tostring(variables_only))
         try:
-            self.md = read_model_description(str(self.dir), validate=False)
+            self.md = read_model_description(archive, validate=False)
         except Exception as exc:  # fmpy raises whatever its parser meets
             raise BadInput(f"{xml}: fmpy cannot read it ({exc})") from None
         self.identifier = self.cs.get("modelIdentifier")

@@ -80,8 +80,10 @@ def variables(fmu: Fmu) -> list[str]:
             problems.append(f"{name}: causality={causality!r} with variability={variability!r} is not allowed")
             continue
         if initial is not None and initial not in legal[key]:
+            allowed = sorted(i for i in legal[key] if i)
             problems.append(f"{name}: initial={initial!r} is not allowed for causality={causality!r}, "
-                            f"variability={variability!r} (allowed: {sorted(i for i in legal[key] if i)})")
+                            f"variability={variability!r} "
+                            + (f"(allowed: {', '.join(allowed)})" if allowed else "(no initial attribute allowed)"))
         if typed is not None and typed.tag not in FLOAT_TYPES and variability == "continuous":
             problems.append(f"{name}: a {typed.tag} variable cannot be continuous")
         effective = initial or default_initial(causality, variability)
