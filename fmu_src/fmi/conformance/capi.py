@@ -73,6 +73,13 @@ def signatures(version: int) -> dict:
     return found
 
 
+class Handle(int):
+    """An instance pointer: an int to ctypes, hexadecimal in the report."""
+
+    def __repr__(self):
+        return f"0x{int(self):x}"
+
+
 def show(value) -> str:
     """An argument as the report shows it."""
     if value is None:
@@ -86,7 +93,8 @@ def show(value) -> str:
         return show(value.value)
     if isinstance(value, (int, float, bool, str)):
         return repr(value)
-    return "&" + type(value).__name__ if "CArgObject" in type(value).__name__ else type(value).__name__
+    referenced = getattr(value, "_obj", None)  # what ctypes.byref points to
+    return "&" + type(referenced).__name__ if referenced is not None else type(value).__name__
 
 
 class Binary:
@@ -154,12 +162,17 @@ class Binary:
         token = self.token.encode() if token is None else token
         if self.version == 2:
             uri = self.resources.as_uri().encode()
-            return self.call("fmi2Instantiate", name, 1, token, uri, byref(self.callbacks) if callbacks else None,
-                             0, 0, restype=c_void_p)
+            return self.handle(self.call("fmi2Instantiate", name, 1, token, uri,
+                                         byref(self.callbacks) if callbacks else None, 0, 0, restype=c_void_p))
         path = (str(self.resources) + "/").encode()
         log = ctypes.cast(self._logger3, c_void_p) if logger else None
-        return self.call("fmi3InstantiateCoSimulation", name, token, path, False, False, False, False, None, 0,
-                         None, log, None, restype=c_void_p)
+        return self.handle(self.call("fmi3InstantiateCoSimulation", name, token, path, False, False, False, False,
+                                     None, 0, None, log, None, restype=c_void_p))
+
+    @staticmethod
+    def handle(pointer):
+        """The instance pointer an instantiate function returned (None for NULL)."""
+        return None if not pointer else Handle(pointer)
 
     def free(self, inst):
         self.call(f"fmi{self.version}FreeInstance", inst, restype=None)

@@ -269,8 +269,8 @@ def instantiate_arguments(ctx: Context):
             api.free(inst)
             raise Failed(f"{call} ({label}) returned an instance, expected NULL")
     if ctx.version == 2:
-        inst = api.call("fmi2Instantiate", b"conformance", 0, token, api.resources.as_uri().encode(),
-                        api_callbacks(api), 0, 0, restype=c_void_p)
+        inst = api.handle(api.call("fmi2Instantiate", b"conformance", 0, token, api.resources.as_uri().encode(),
+                                   api_callbacks(api), 0, 0, restype=c_void_p))
         if inst and ctx.fmu.root.find("ModelExchange") is None:
             call = ctx.last_call
             api.free(inst)
@@ -290,10 +290,11 @@ def api_callbacks(api):
 
 def _instantiate_null_token(api):
     if api.version == 2:
-        return api.call("fmi2Instantiate", b"conformance", 1, None, api.resources.as_uri().encode(),
-                        api_callbacks(api), 0, 0, restype=c_void_p)
-    return api.call("fmi3InstantiateCoSimulation", b"conformance", None, (str(api.resources) + "/").encode(),
-                    False, False, False, False, None, 0, None, None, None, restype=c_void_p)
+        return api.handle(api.call("fmi2Instantiate", b"conformance", 1, None, api.resources.as_uri().encode(),
+                                   api_callbacks(api), 0, 0, restype=c_void_p))
+    return api.handle(api.call("fmi3InstantiateCoSimulation", b"conformance", None,
+                               (str(api.resources) + "/").encode(), False, False, False, False, None, 0, None, None,
+                               None, restype=c_void_p))
 
 
 def null_callbacks(ctx: Context):
