@@ -8,7 +8,8 @@ Runs in a process of its own (a crash shows as a failed test, not a dead pytest)
 prints one JSON object {function: {state: {"status": s, "phase": bool, "messages": [...]}}}:
 ``phase`` is whether the FMU refused the call naming its state ("<function> refused: not allowed
 in state ...").  Every function is called through ctypes with its signature from the FMI
-standard's own header (fmu_src/fmi/third_party/), every argument zero or NULL: a call the
+standard's own header (fmu_src/fmi/third_party/, read by the conformance
+check's ``capi.signatures``), every argument zero or NULL: a call the
 state allows then goes on to the argument checks (refused or OK, but never for its state).
 A call that may change the state (initialization, terminate, reset) gets an instance of its own.
 """
@@ -16,8 +17,7 @@ import ctypes
 import json
 import re
 import sys
-from ctypes import POINTER, byref, c_bool, c_char_p, c_double, c_float, c_int, c_int32, c_int64, c_size_t
-from ctypes import c_uint32, c_uint64, c_void_p
+from ctypes import POINTER, byref, c_bool, c_char_p, c_double, c_int, c_size_t, c_void_p
 from pathlib import Path
 
 from fmpy import read_model_description
@@ -25,15 +25,8 @@ from fmpy.fmi2 import (fmi2CallbackAllocateMemoryTYPE, fmi2CallbackFreeMemoryTYP
                        fmi2CallbackLoggerTYPE)
 from fmpy.logging import addLoggerProxy
 
-THIRD_PARTY = Path(__file__).resolve().parents[3] / "fmu_src" / "fmi" / "third_party"
-#: C types of the scalar arguments (anything with * or [] is a pointer: NULL).
-SCALARS = {
-    "fmi2Component": c_void_p, "fmi2FMUstate": c_void_p, "fmi2Real": c_double, "fmi2Integer": c_int32,
-    "fmi2Boolean": c_int, "fmi2ValueReference": c_uint32, "fmi2StatusKind": c_int, "fmi2String": c_char_p,
-    "size_t": c_size_t, "fmi3Instance": c_void_p, "fmi3FMUState": c_void_p, "fmi3Float64": c_double,
-    "fmi3Float32": c_float, "fmi3Boolean": c_bool, "fmi3ValueReference": c_uint32, "fmi3Int32": c_int32,
-    "fmi3Int64": c_int64, "fmi3UInt64": c_uint64, "fmi3String": c_char_p, "fmi3Clock": c_bool,
-}
+from fmu_src.fmi.conformance.capi import signatures
+
 #: Not called: no instance to call them on, or they end it.
 SKIPPED = re.compile(r"fmi[23](Instantiate\w*|FreeInstance|GetVersion|GetTypesPlatform)$")
 #: Calls that may change the state when allowed: each gets an instance of its own.
@@ -46,25 +39,6 @@ ROUTES = {2: {"instantiated": [], "initializationMode": ["setup", "enter"],
               "stepComplete": ["setup", "enter", "exit"], "terminated": ["setup", "enter", "exit", "terminate"]},
           3: {"Instantiated": [], "InitializationMode": ["enter"], "StepMode": ["enter", "exit"],
               "Terminated": ["enter", "exit", "terminate"]}}
-
-
-def signatures(version: int) -> dict:
-    """{function: [ctypes argument types]} of every function type in fmi<version>FunctionTypes.h."""
-    text = (THIRD_PARTY / f"fmi{version}" / f"fmi{version}FunctionTypes.h").read_text()
-    text = re.sub(r"/\*.*?\*/", "", text, flags=re.S)
-    found = {}
-    for name, params in re.findall(rf"typedef\s+\w+\s*\*?\s*(fmi{version}\w+)TYPE\s*\(([^;]*?)\)\s*;", text):
-        types = []
-        for param in (p.strip() for p in params.split(",")):
-            if param in ("", "void") or param.startswith("..."):
-                continue
-            if "*" in param or "[" in param:
-                types.append(c_void_p)
-                continue
-            words = [w for w in param.split() if w != "const"]
-            types.append(SCALARS.get(words[0], param))  # a string: no ctypes type (refused if called)
-        found[name] = types
-    return found
 
 
 class Fmu:
