@@ -54,7 +54,7 @@ from fmu_src.core.avr_network import build_networks
 from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams
 from fmu_src.core.avr_regulator import initial_state, step
 from fmu_src.fmi.avr_slavebase import STEP_COMPLETE, SpecSlave
-from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, requires_problems
 from fmu_src.core.avr_statebytes import state_from_bytes, state_to_bytes
 
 _ALL_SPECS = (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)
@@ -96,9 +96,22 @@ class AdaptiveVelocityRegulator(SpecSlave):
     def _make_params(self) -> RegulatorParams:
         return RegulatorParams(**{spec.name: self._values[spec.name] for spec in PARAM_SPECS})  # validates
 
+    def set_problem(self, name: str, value) -> str | None:
+        """The base's rules, then, while stepping, the parameters' PARAM_REQUIRES rules with the new
+        value (during initialization they are checked when it ends: values come in any order)."""
+        problem = super().set_problem(name, value)
+        if problem is None and self._phase == STEP_COMPLETE and self._specs[name].causality == "parameter":
+            broken = requires_problems({**self._values, name: value})
+            problem = "; ".join(broken) if broken else None
+        return problem
+
     # -- FMI life cycle -----------------------------------------------------------------
     def exit_initialization_mode(self):
         self._in_phase("fmi2ExitInitializationMode")
+        broken = requires_problems(self._values)
+        if broken:  # logged, not raised: the guard answers fmi2Error and the instance stays in initialization
+            SpecSlave._refuse(self, "fmi2ExitInitializationMode refused: " + "; ".join(broken))
+            return
         self._params = self._make_params()
         if self._state is None:  # not already restored from an FMU state blob
             self._networks = build_networks(self._params)
