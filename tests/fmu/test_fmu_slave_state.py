@@ -126,5 +126,10 @@ def test_a_ramp_limit_without_settled_steps_is_refused_at_initialization_and_whi
     s._set("learn_settled_steps", 3)
     s.exit_initialization_mode()
     assert s._phase == "stepComplete"
-    assert s.set_problem("learn_settled_steps", 0) == "learn_ramp_max_mps2 = 0.25 requires learn_settled_steps > 0 (it is 0)"
-    assert s.set_problem("learn_ramp_max_mps2", 0.0) is None
+    logged.clear()
+    s._set("learn_settled_steps", 0)  # logged, not raised (the guard answers fmi2Error); nothing changes
+    assert logged == ["learn_ramp_max_mps2 = 0.25 requires learn_settled_steps > 0 (it is 0)"]
+    assert s._values["learn_settled_steps"] == 3 and s._params.learn_settled_steps == 3
+    s._set("learn_ramp_max_mps2", 0.0)  # in the other order both are legal
+    s._set("learn_settled_steps", 0)
+    assert s._params.learn_settled_steps == 0

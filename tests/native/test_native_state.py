@@ -106,13 +106,14 @@ def test_a_version_4_state_is_refused_naming_the_version(native_fmus, fmi):
     s.close()
 
 
-@FMI
-def test_a_ramp_limit_without_settled_steps_is_refused_naming_both(native_fmus, fmi):
+@pytest.mark.parametrize("fmi", [2, 3, "python"])
+def test_a_ramp_limit_without_settled_steps_is_refused_naming_both(native_fmus, built_fmu, fmi):
     """learn_ramp_max_mps2 > 0 requires learn_settled_steps > 0 (avr_specs.PARAM_REQUIRES): refused
-    when initialization ends (the instance stays in it and takes the missing value), and while
-    stepping on the set that would break it; a forged state that breaks it is refused."""
+    with Error when initialization ends (the instance stays in it and takes the missing value),
+    and while stepping on the set that would break it; a forged native state that breaks it is
+    refused.  The same in the pythonfmu FMU (its guard answers Error for the slave's logged refusal)."""
     messages = []
-    s = AnySlave(native_fmus[fmi], messages=messages)
+    s = AnySlave(built_fmu if fmi == "python" else native_fmus[fmi], messages=messages)
     s.set("learn_ramp_max_mps2", 0.25)
     if s.fmi3:
         s.fmu.enterInitializationMode(startTime=0.0)
@@ -129,6 +130,10 @@ def test_a_ramp_limit_without_settled_steps_is_refused_naming_both(native_fmus, 
     with pytest.raises(FMICallException):
         s.set("learn_settled_steps", 0)
     assert any("learn_ramp_max_mps2 = 0.25 requires learn_settled_steps > 0 (it is 0)" in m for m in messages)
+    assert np.all(np.isfinite(s.step(1, {"vx": 0.1})))  # refused, not fatal: the instance steps on
+    if fmi == "python":
+        s.close()
+        return
     blob = bytearray(s.serialize(s.get_state()))
     vr = s.vars["learn_settled_steps"].valueReference
     struct.pack_into("<d", blob, 248 + 8 * vr, 0.0)
