@@ -8,7 +8,7 @@
                             [--overwrite | --resume]
                             [--plant inprocess|fmu] [--plant-fmu PATH] [--render] [--require-pass]
     python -m scenarios report DIR
-    python -m scenarios export-ssp SCENARIO [--arm ARM] [--out FILE]   (scenarios.ssp.export_ssp)
+    python -m scenarios export-ssp SCENARIO [--arm ARM] [--profile NAME] [--out FILE]   (scenarios.ssp.export_ssp)
 
 ``run`` (:mod:`scenarios.run.command`, its options one :class:`scenarios.run.options.RunOptions`)
 checks everything before it simulates and names every problem at once: the

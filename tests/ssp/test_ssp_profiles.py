@@ -218,3 +218,29 @@ def test_fmpy_simulate_fmu_with_the_ssv_as_start_values_is_the_core_with_the_pro
         by_profile[name] = result["psi_x"]
     assert not np.array_equal(by_profile["paper"], by_profile["default"])
     assert not np.array_equal(by_profile["robust"], by_profile["default"])
+
+
+def test_export_ssp_with_a_profile_binds_its_values(system_dir, built_fmu, plant_fmu, profiles_dir, tmp_path):
+    """``python -m scenarios export-ssp SCENARIO --profile NAME``: the SSP's regulator parameter set
+    holds the profile's values (what libcosim and Ecos apply, test above); an unknown one: exit 2."""
+    import subprocess
+    import sys
+
+    from support.paths import REPO_ROOT
+
+    def export(profile, out):
+        return subprocess.run([sys.executable, "-m", "scenarios", "export-ssp", "nominal", "--profile", profile,
+                               "--out", str(out), "--fmu", str(built_fmu), "--plant-fmu", str(plant_fmu),
+                               "--command-fmu", str(system_dir / "CommandSource_fmi2.fmu")],
+                              cwd=REPO_ROOT, capture_output=True, text=True, timeout=300)
+
+    proc = export("robust", tmp_path / "robust.ssp")
+    assert proc.returncode == 0, proc.stderr
+    with zipfile.ZipFile(tmp_path / "robust.ssp") as archive:
+        ssv = ET.fromstring(archive.read(f"resources/{system.REGULATOR}_{system.PARAMETER_SET}.ssv"))
+    bound = {p.get("name"): p[0].get("value") for p in ssv.iter(f"{{{system.NS['ssv']}}}Parameter")}
+    for key, value in read_profile(profiles_dir / "robust.ssv").items():
+        assert bound[key] == system.value_text(PARAM_BY_NAME[key].type, value)
+    proc = export("fast", tmp_path / "fast.ssp")
+    assert proc.returncode == 2 and "profile = 'fast': unknown (allowed: paper, default, robust)" in proc.stderr
+    assert not (tmp_path / "fast.ssp").exists()
