@@ -121,6 +121,7 @@ def _units(comps) -> dict[str, dict[str, str]]:
 
 def parameter_set(name: str, rows) -> bytes:
     """An SSP 1.0 parameter-values file (``.ssv``): the set ``name`` of ``rows`` (variable, type, value as text)."""
+    _register_namespaces()
     root = ET.Element(_q("ssv:ParameterSet"), {"version": "1.0", "name": name})
     params = ET.SubElement(root, _q("ssv:Parameters"))
     for var, kind, value in rows:
@@ -143,9 +144,14 @@ def _component(parent, name: str, fmu: Path, md, connected: set[str], units, bou
         binding.set("source", f"resources/{name}_{PARAMETER_SET}.ssv")
 
 
-def _ssd(comps, bound: set[str], system_name: str, description: str, stop_s: float) -> bytes:
+def _register_namespaces() -> None:
+    """Write the SSP prefixes (ssd:, ssv:, ...) whatever was serialized before in this process."""
     for prefix, uri in NS.items():
         ET.register_namespace(prefix, uri)
+
+
+def _ssd(comps, bound: set[str], system_name: str, description: str, stop_s: float) -> bytes:
+    _register_namespaces()
     units = _units(comps)
     root = ET.Element(_q("ssd:SystemStructureDescription"), {"version": "1.0", "name": system_name})
     system = ET.SubElement(root, _q("ssd:System"), name=system_name, description=description)

@@ -244,3 +244,15 @@ def test_export_ssp_with_a_profile_binds_its_values(system_dir, built_fmu, plant
     proc = export("fast", tmp_path / "fast.ssp")
     assert proc.returncode == 2 and "profile = 'fast': unknown (allowed: paper, default, robust)" in proc.stderr
     assert not (tmp_path / "fast.ssp").exists()
+
+
+def test_a_profile_file_is_the_same_bytes_in_a_fresh_process(profiles_dir):
+    """What build.py writes does not depend on what the process serialized before (the ssv: prefix)."""
+    import subprocess
+    import sys
+
+    from support.paths import REPO_ROOT
+
+    code = "import sys; from scenarios.ssp.profiles import profile_ssv; sys.stdout.buffer.write(profile_ssv('robust'))"
+    fresh = subprocess.run([sys.executable, "-c", code], cwd=REPO_ROOT, capture_output=True, timeout=120).stdout
+    assert fresh == (profiles_dir / "robust.ssv").read_bytes() and b"<ssv:ParameterSet" in fresh
