@@ -12,6 +12,7 @@ binaries need cross compilers (Debian ``gcc-mingw-w64-x86-64``, ``gcc-aarch64-li
 without one, its platform is skipped with a warning naming the package, and the build goes on.
 
     python build.py [--out DIR] [--sanitize]
+    python build.py --parameter-table    # only docs/fmus.md's parameter table, from fmu_src/core
 
 Steps for a pythonfmu FMU: the slave and its modules become one package imported under a name
 private to the build (``fmu_src/packing/pack.py``), which pythonfmu packs; the model
@@ -294,7 +295,9 @@ def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Pa
     tmp = Path(out_dir) / (FMUS_JSON + ".tmp")
     tmp.write_text(json.dumps(listing, indent=2) + "\n")
     tmp.replace(Path(out_dir) / FMUS_JSON)
-    return [path for path, _ in built] + [build_ssp(out_dir, plant, regulator, command),
+    from scenarios.ssp.profiles import write_profiles
+
+    return [path for path, _ in built] + write_profiles(out_dir) + [build_ssp(out_dir, plant, regulator, command),
                                           build_osp(out_dir, plant, regulator, command),
                                           build_native_ssp(out_dir, native_plants[0], native_regulators[0], command)]
 
@@ -305,8 +308,17 @@ def main(argv=None) -> int:
     parser.add_argument("--sanitize", action="store_true",
                         help="compile the FMI guard with AddressSanitizer + UndefinedBehaviorSanitizer (for testing; "
                              "hosts must preload libasan)")
+    parser.add_argument("--parameter-table", action="store_true",
+                        help="only rewrite the regulator's parameter table in docs/fmus.md from fmu_src/core "
+                             "(fmu_src/packing/parameters.py) and build nothing")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
+    if args.parameter_table:
+        from fmu_src.packing.parameters import write_parameter_table
+
+        page = Path(__file__).resolve().parent / "docs" / "fmus.md"
+        print(f"{page}: {'rewritten' if write_parameter_table(page) else 'unchanged'}")
+        return 0
     for path in build_all(args.out, sanitize=args.sanitize):
         print(path if path.suffix != ".fmu" else f"{path}\nsha256 {sha256_of(path)}")
     return 0

@@ -13,9 +13,9 @@ row (x, y, pitch, roll; rad/Hz); then whether and when the robot fell.
     python benchmarks/bench_drift.py --variant all --json drift.json
     python benchmarks/bench_drift.py --variant defaults --require-stable   # the 10-minute check
 
-Variants (``VARIANTS``): plain (the paper's rule: every remedy off), leakage (uniform,
+Variants (``VARIANTS``): plain (the paper's rule: no leakage), leakage (uniform,
 ``leakage_mode`` 0), leakage_kept_output (``leakage_mode`` 1: only what the current rates do
-not use leaks), deadzone, projection, combined; ``defaults`` runs the shipped parameter defaults, ``pd_only`` the
+not use leaks); ``defaults`` runs the shipped parameter defaults, ``pd_only`` the
 PD regulator alone (adaptation off).
 """
 from __future__ import annotations
@@ -39,15 +39,12 @@ from scenarios.cosim.regulators import InProcessRegulator  # noqa: E402
 
 log = logging.getLogger("bench_drift")
 
-#: Every remedy off: the paper's plain PES rule.
-PLAIN = {"leakage_per_s": 0.0, "error_deadzone_mps": 0.0, "weight_norm_max": 0.0}
+#: The remedy (leakage) off: the paper's plain PES rule.
+PLAIN = {"leakage_per_s": 0.0}
 VARIANTS = {
     "plain": PLAIN,
     "leakage": {**PLAIN, "leakage_per_s": 0.01, "leakage_mode": 0},
     "leakage_kept_output": {**PLAIN, "leakage_per_s": 0.01, "leakage_mode": 1},
-    "deadzone": {**PLAIN, "error_deadzone_mps": 0.05},
-    "projection": {**PLAIN, "weight_norm_max": 1.5e-5},
-    "combined": {**PLAIN, "leakage_per_s": 0.01, "leakage_mode": 0, "weight_norm_max": 1.5e-5},
     "defaults": {},
     "pd_only": {"adaptation_enabled": False},
 }

@@ -4,10 +4,11 @@
     python -m scenarios validate FILE [FILE ...]
     python -m scenarios run NAME|FILE|all|paper [...] [--model M] [--out DIR]
                             [--regulator fmu|native|native-fmi3|inprocess] [--jobs N] [--fmu PATH]
-                            [--duration S] [--no-plots] [--rebuild-fmu] [--overwrite | --resume]
+                            [--duration S] [--profile paper|default|robust] [--no-plots] [--rebuild-fmu]
+                            [--overwrite | --resume]
                             [--plant inprocess|fmu] [--plant-fmu PATH] [--render] [--require-pass]
     python -m scenarios report DIR
-    python -m scenarios export-ssp SCENARIO [--arm ARM] [--out FILE]   (scenarios.ssp.export_ssp)
+    python -m scenarios export-ssp SCENARIO [--arm ARM] [--profile NAME] [--out FILE]   (scenarios.ssp.export_ssp)
 
 ``run`` (:mod:`scenarios.run.command`, its options one :class:`scenarios.run.options.RunOptions`)
 checks everything before it simulates and names every problem at once: the

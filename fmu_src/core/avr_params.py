@@ -11,7 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from fmu_src.core.avr_errors import InputError, ParameterError
-from fmu_src.core.avr_specs import INPUT_SPECS, PARAM_BY_NAME, PARAM_SPECS, check_param
+from fmu_src.core.avr_specs import INPUT_SPECS, PARAM_BY_NAME, PARAM_SPECS, check_param, requires_problems
 
 __all__ = ["RegulatorParams", "params_from_overrides", "validate_params", "network_key",
            "RegulatorInputs", "validate_inputs"]
@@ -60,9 +60,6 @@ class RegulatorParams:
     leakage_mode: int = _default("leakage_mode")
     command_accel_limit_mps2: float = _default("command_accel_limit_mps2")  # m/s^2
     learn_settled_steps: int = _default("learn_settled_steps")
-    error_deadzone_mps: float = _default("error_deadzone_mps")  # m/s
-    weight_norm_max: float = _default("weight_norm_max")  # rad/Hz
-    overspeed_unlearn: int = _default("overspeed_unlearn")
     learn_ramp_max_mps2: float = _default("learn_ramp_max_mps2")  # m/s^2
 
     def __post_init__(self):
@@ -111,14 +108,15 @@ def validate_params(params: RegulatorParams) -> None:
 
 
 def _checked(params) -> tuple[dict, list[str]]:
-    """Every field of ``params`` normalised by ``check_param``, and every problem found."""
+    """Every field of ``params`` normalised by ``check_param``, and every problem found: each
+    bad value, then (if every value is legal) each broken ``PARAM_REQUIRES`` rule."""
     values, problems = {}, []
     for spec in PARAM_SPECS:
         value, problem = check_param(spec, getattr(params, spec.name, None))
         values[spec.name] = value
         if problem is not None:
             problems.append(problem)
-    return values, problems
+    return values, problems or requires_problems(values)
 
 
 def network_key(params: RegulatorParams) -> tuple[int, float, float, float]:

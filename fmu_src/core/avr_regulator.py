@@ -368,9 +368,7 @@ def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, 
     limit = params.psi_limit
     psi = [limit if value > limit else (-limit if value < -limit else value) for value in raw]
     if params.learning_rate != 0.0 and step_index >= params.learn_from_step:
-        errors = _learning_errors(stride, vx, vx_des, vy_des, pitch, params)
-        if not velocity_learns:
-            errors = _unsettled_errors(errors, raw, params.overspeed_unlearn, vx_des, vy_des)
+        errors = _learning_errors(stride, vx, vx_des, vy_des, pitch, params, velocity_learns)
         weights = _pes_update(weights, row_rates, raw, sums, errors, dt, params)
     return weights, psi
 
@@ -379,46 +377,23 @@ def _adapt(weights: np.ndarray, values: tuple, stride: dict, dt: float, params, 
 _ROW_NETWORK = [0, 1, 2, 2]
 
 
-def _unsettled_errors(errors: tuple, raw: list, unlearn: int, ref_x: float, ref_y: float) -> tuple:
-    """The learning errors while the velocity networks wait for a settled command: x and y
-    are 0; with ``unlearn`` each is kept where the robot is beyond the reference in the
-    reference's direction (E_j ref_j < 0: overspeed) and the error moves its row's output
-    toward 0 (an update moves raw[j] toward -E_j: toward 0 where raw[j] E_j > 0)."""
-    e_x, e_y, e_pitch, e_roll = errors
-    if not unlearn or raw[0] * e_x <= 0.0 or e_x * ref_x >= 0.0:
-        e_x = 0.0
-    if not unlearn or raw[1] * e_y <= 0.0 or e_y * ref_y >= 0.0:
-        e_y = 0.0
-    return (e_x, e_y, e_pitch, e_roll)
-
-
 def _learning_errors(stride: dict, vx: float, vx_des: float, vy_des: float, pitch: float,
-                     params) -> tuple[float, float, float, float]:
+                     params, velocity_learns: bool) -> tuple[float, float, float, float]:
     """PES errors ``desired - actual`` (x, y, pitch, roll): instantaneous for x and pitch,
     stride-averaged for y and roll (0, i.e. no learning, until two steps are complete):
     vy and roll sway with the stance side every step, which no offset can remove and
     which PES would otherwise integrate without bound; the mean of the last two
-    completed steps (a left and a right one) cancels the sway."""
+    completed steps (a left and a right one) cancels the sway.  x and y are 0 while the
+    velocity networks wait for a settled command (not ``velocity_learns``)."""
     if stride["stride_boundaries"] >= STRIDE_READY:
         e_y = vy_des - 0.5 * (stride["vy_mean_prev"] + stride["vy_mean_last"])
         e_roll = params.roll_des - 0.5 * (stride["roll_mean_prev"] + stride["roll_mean_last"])
     else:
         e_y = e_roll = 0.0
-    zone = params.error_deadzone_mps
     e_x = vx_des - vx
-    if zone != 0.0:
-        e_x, e_y = _dead_zone(e_x, zone), _dead_zone(e_y, zone)
+    if not velocity_learns:
+        e_x = e_y = 0.0
     return (e_x, e_y, params.pitch_des - pitch, e_roll)
-
-
-def _dead_zone(error: float, zone: float) -> float:
-    """``error`` moved toward 0 by ``zone`` (0 inside ``[-zone, zone]``): errors within the
-    step-to-step noise of the velocity do not learn, larger ones learn their excess."""
-    if error > zone:
-        return error - zone
-    if error < -zone:
-        return error + zone
-    return 0.0
 
 
 def _leak_factor(leakage_per_s: float, dt: float) -> float:
@@ -431,8 +406,8 @@ def _leak_factor(leakage_per_s: float, dt: float) -> float:
 
 
 def _pes_update(weights, row_rates, raw, sums, errors, dt, params) -> np.ndarray:
-    """The weights after one PES step with conditional-integration anti-windup, the
-    leakage before it and the norm projection after it (both off at 0).
+    """The weights after one PES step with conditional-integration anti-windup and the
+    leakage before it (off at 0).
 
     The update moves raw[j] by ``-learning_rate dt/n E_j |rates|^2``, i.e. in the
     direction of -E_j; rows at or beyond the limit that it would push further out
@@ -447,16 +422,13 @@ def _pes_update(weights, row_rates, raw, sums, errors, dt, params) -> np.ndarray
     keep = _leak_factor(params.leakage_per_s, dt)
     if keep != 1.0 and params.leakage_mode == 1:
         coefficients = _keep_current_output(coefficients, row_rates, [0.0 + v for v in sums], 1.0 - keep)
-    bound = params.weight_norm_max
-    if not any(coefficients) and keep == 1.0 and bound == 0.0:
+    if not any(coefficients) and keep == 1.0:
         return weights  # nothing changes: keep (share) the read-only array
     new_weights = np.multiply(row_rates, np.array(coefficients)[:, None], out=row_rates)
     if keep == 1.0:
         new_weights += weights
     else:  # leak first (+ 0.0: an underflow gives +0.0, never -0.0), then the PES step
         new_weights += weights * keep + 0.0
-    if bound != 0.0:
-        _project(new_weights, bound)
     return readonly(new_weights)
 
 
@@ -471,16 +443,6 @@ def _keep_current_output(coefficients: list, row_rates: np.ndarray, sums: list,
     squares = np.cumsum(row_rates * row_rates, axis=1)[:, -1].tolist()
     return [c if sq == 0.0 else c + (amount * s) / sq
             for c, s, sq in zip(coefficients, sums, squares)]
-
-
-def _project(weights: np.ndarray, bound: float) -> None:
-    """Scale, in place, every row of ``weights`` whose Euclidean norm exceeds ``bound``
-    back to ``bound``.  The squared norm is summed in neuron order (a cumulative sum, as
-    the C core's loop), its square root is IEEE's correctly rounded one."""
-    norms = np.sqrt(np.cumsum(weights * weights, axis=1)[:, -1]).tolist()
-    for row, norm in enumerate(norms):
-        if norm > bound:
-            weights[row] = weights[row] * (bound / norm) + 0.0
 
 
 def _compose_outputs(pd_terms: tuple, psi: list | None, params) -> dict:

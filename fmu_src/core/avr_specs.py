@@ -19,7 +19,8 @@ __all__ = [
     "OUTPUT_JOINTS", "VarSpec", "PARAM_SPECS", "INPUT_SPECS", "OUTPUT_SPECS",
     "VELOCITY_LIMIT_MPS", "ANGLE_LIMIT_RAD", "RATE_LIMIT_RADPS", "INT32_MAX", "SETTLED_STEPS_MAX",
     "FIXED_PARAMS", "PARAM_BY_NAME", "OUTPUT_NAMES", "OFFSET_NAMES", "PYTHON_TYPES",
-    "format_range", "check_param",
+    "TIERS", "METHOD", "TUNING", "EXPERIMENTAL", "PARAM_REQUIRES",
+    "format_range", "check_param", "requires_problems",
 ]
 
 #: The six joints that get an offset, in the order of the ``delta_*`` outputs.
@@ -54,10 +55,25 @@ class VarSpec:
     causality: str  # "parameter" | "input" | "output"
     variability: str  # "tunable" | "fixed" | "continuous" | "discrete"
     description: str
+    tier: str | None = None  # a parameter's tier (TIERS); None for inputs and outputs
+
+    @property
+    def fmi_description(self) -> str:
+        """The description as the model descriptions write it: the tier first, if any."""
+        return self.description if self.tier is None else f"[{self.tier}] {self.description}"
 
 
-def _param(name, default, lo, hi, unit, description, type="Real", variability="tunable"):
-    return VarSpec(name, type, default, lo, hi, unit, "parameter", variability, description)
+#: The parameter tiers, each with what it holds (the documentation pages and docs/fmus.md say it).
+METHOD, TUNING, EXPERIMENTAL = "method", "tuning", "experimental"
+TIERS = {
+    METHOD: "the paper's method: its gains, learning rate, networks and output switches",
+    TUNING: "gains, rates and limits this implementation adds, which a user may tune",
+    EXPERIMENTAL: "research switches, off by default",
+}
+
+
+def _param(name, tier, default, lo, hi, unit, description, type="Real", variability="tunable"):
+    return VarSpec(name, type, default, lo, hi, unit, "parameter", variability, description, tier)
 
 
 _GAIN_RANGE = (-5.0, 5.0)
@@ -65,101 +81,101 @@ _SIGN_NOTE = ("; negative values flip the sign for plants whose joint convention
               "opposite one")
 
 PARAM_SPECS: tuple[VarSpec, ...] = (
-    _param("Kp_x", 0.1, *_GAIN_RANGE, "rad.s/m",
+    _param("Kp_x", METHOD, 0.1, *_GAIN_RANGE, "rad.s/m",
            "Longitudinal P gain: swing hip pitch offset per m/s of (vx - vx_des), "
            "rad/(m/s), in [-5, 5]; 0.1 is tuned on the MuJoCo Cassie (0.25 oscillates step to "
            "step)" + _SIGN_NOTE),
-    _param("Kd_x", 0.0, *_GAIN_RANGE, "rad.s/m",
+    _param("Kd_x", METHOD, 0.0, *_GAIN_RANGE, "rad.s/m",
            "Longitudinal D gain: swing hip pitch offset per m/s change of vx between two "
            "walking steps, rad/(m/s), in [-5, 5]" + _SIGN_NOTE),
-    _param("Kp_y", 0.1, *_GAIN_RANGE, "rad.s/m",
+    _param("Kp_y", METHOD, 0.1, *_GAIN_RANGE, "rad.s/m",
            "Lateral P gain: swing hip roll offset per m/s of (vy - vy_des), rad/(m/s), "
            "in [-5, 5]" + _SIGN_NOTE),
-    _param("Kd_y", 0.0, *_GAIN_RANGE, "rad.s/m",
+    _param("Kd_y", METHOD, 0.0, *_GAIN_RANGE, "rad.s/m",
            "Lateral D gain: swing hip roll offset per m/s change of vy between two walking "
            "steps, rad/(m/s), in [-5, 5]" + _SIGN_NOTE),
-    _param("Kp_pitch", 0.0, *_GAIN_RANGE, "1",
+    _param("Kp_pitch", METHOD, 0.0, *_GAIN_RANGE, "1",
            "Torso pitch P gain: stance hip pitch offset per rad of (pitch - pitch_des), "
            "rad/rad, in [-5, 5]; 0 by default (the plant's stance controller stabilises "
            "the torso)"),
-    _param("Kd_pitch", 0.0, *_GAIN_RANGE, "s",
+    _param("Kd_pitch", METHOD, 0.0, *_GAIN_RANGE, "s",
            "Torso pitch D gain: stance hip pitch offset per rad/s of pitch_rate, "
            "rad/(rad/s), in [-5, 5]; 0 by default"),
-    _param("Kp_roll", 0.0, *_GAIN_RANGE, "1",
+    _param("Kp_roll", METHOD, 0.0, *_GAIN_RANGE, "1",
            "Torso roll P gain: stance hip roll offset per rad of (roll - roll_des), "
            "rad/rad, in [-5, 5]; 0 by default"),
-    _param("Kd_roll", 0.0, *_GAIN_RANGE, "s",
+    _param("Kd_roll", METHOD, 0.0, *_GAIN_RANGE, "s",
            "Torso roll D gain: stance hip roll offset per rad/s of roll_rate, "
            "rad/(rad/s), in [-5, 5]; 0 by default"),
-    _param("pitch_des", 0.0, -0.5, 0.5, "rad", "Desired torso pitch, rad, in [-0.5, 0.5]"),
-    _param("roll_des", 0.0, -0.5, 0.5, "rad", "Desired torso roll, rad, in [-0.5, 0.5]"),
-    _param("learning_rate", 1e-6, 0.0, 1e-3, "1",
+    _param("pitch_des", METHOD, 0.0, -0.5, 0.5, "rad", "Desired torso pitch, rad, in [-0.5, 0.5]"),
+    _param("roll_des", METHOD, 0.0, -0.5, 0.5, "rad", "Desired torso roll, rad, in [-0.5, 0.5]"),
+    _param("learning_rate", METHOD, 1e-6, 0.0, 1e-3, "1",
            "PES learning rate kappa (nengo 4 convention: W -= kappa dt/n outer(E, h), "
            "h in Hz), in [0, 1e-3]; the default 1e-6 moves Psi by ~0.05 rad in ~10 s of "
            "a constant 0.3 m/s velocity error; 0 freezes the weights"),
-    _param("psi_limit", 0.3, 0.0, 1.0, "rad",
+    _param("psi_limit", TUNING, 0.3, 0.0, 1.0, "rad",
            "Saturation of every network output Psi (before psi_gain), rad, in [0, 1]; "
            "saturated outputs stop integrating outward (anti-windup)"),
-    _param("learn_from_step", 12, 0, INT32_MAX, "1",
+    _param("learn_from_step", TUNING, 12, 0, INT32_MAX, "1",
            "The networks learn only while step_index >= learn_from_step, in [0, 2147483647]; "
            "the default 12 waits out the start-up (the step-averaged vx is 0 until the first "
            "completed step and lags after it; the gait ramps to the command at 0.5 m/s^2, "
            "to 1 m/s by about step 8): until then the offsets are PD-only's; 1 learns from "
            "the first completed step, 0 from the first call. Psi is still applied while "
            "learning waits", type="Integer"),
-    _param("psi_gain_swing_hip_pitch", 1.0, *_GAIN_RANGE, "1",
+    _param("psi_gain_swing_hip_pitch", METHOD, 1.0, *_GAIN_RANGE, "1",
            "Gain of Psi_x[0] on delta_swing_hip_pitch, in [-5, 5]; 0 switches it off"),
-    _param("psi_gain_swing_knee", 1.0, *_GAIN_RANGE, "1",
+    _param("psi_gain_swing_knee", METHOD, 1.0, *_GAIN_RANGE, "1",
            "Gain of Psi_x[1] on delta_swing_knee, in [-5, 5]; 0 switches it off"),
-    _param("psi_gain_swing_hip_roll", 1.0, *_GAIN_RANGE, "1",
+    _param("psi_gain_swing_hip_roll", METHOD, 1.0, *_GAIN_RANGE, "1",
            "Gain of Psi_y[0] on delta_swing_hip_roll, in [-5, 5]; 0 switches it off"),
-    _param("psi_gain_stance_hip_roll", 1.0, *_GAIN_RANGE, "1",
+    _param("psi_gain_stance_hip_roll", METHOD, 1.0, *_GAIN_RANGE, "1",
            "Gain of Psi_y[1] and Psi_torso[2] on delta_stance_hip_roll, in [-5, 5]; "
            "0 switches them off"),
-    _param("psi_gain_stance_hip_pitch", 1.0, *_GAIN_RANGE, "1",
+    _param("psi_gain_stance_hip_pitch", METHOD, 1.0, *_GAIN_RANGE, "1",
            "Gain of Psi_torso[0] on delta_stance_hip_pitch, in [-5, 5]; 0 switches it off"),
-    _param("psi_gain_stance_knee", 1.0, *_GAIN_RANGE, "1",
+    _param("psi_gain_stance_knee", METHOD, 1.0, *_GAIN_RANGE, "1",
            "Gain of Psi_torso[1] on delta_stance_knee, in [-5, 5]; 0 switches it off"),
-    _param("adaptation_enabled", True, None, None, "1",
+    _param("adaptation_enabled", METHOD, True, None, None, "1",
            "If false: no learning and Psi contributes 0 (exactly the classic PD "
            "regulator); the learned weights are kept and used again when re-enabled",
            type="Boolean"),
-    _param("velocity_scale_mps", 1.5, 0.05, 10.0, "m/s",
+    _param("velocity_scale_mps", METHOD, 1.5, 0.05, 10.0, "m/s",
            "Velocities are divided by this before entering the longitudinal/lateral "
            "networks (then radially projected into the unit ball), m/s, in [0.05, 10]",
            variability="fixed"),
-    _param("angle_scale_rad", 0.3, 0.01, 3.2, "rad",
+    _param("angle_scale_rad", METHOD, 0.3, 0.01, 3.2, "rad",
            "Torso pitch/roll are divided by this before entering the torso network, rad, "
            "in [0.01, 3.2]", variability="fixed"),
-    _param("rate_scale_radps", 2.0, 0.01, 50.0, "rad/s",
+    _param("rate_scale_radps", METHOD, 2.0, 0.01, 50.0, "rad/s",
            "Torso pitch/roll rates are divided by this before entering the torso network, "
            "rad/s, in [0.01, 50]", variability="fixed"),
-    _param("n_neurons", 1000, 1, 10000, "1",
+    _param("n_neurons", METHOD, 1000, 1, 10000, "1",
            "Neurons per network (three networks), in [1, 10000]", type="Integer",
            variability="fixed"),
-    _param("seed", 0, 0, INT32_MAX, "1",
+    _param("seed", METHOD, 0, 0, INT32_MAX, "1",
            "Seed of the random encoders, max rates and intercepts, in [0, 2147483647]; "
            "same seed -> identical networks", type="Integer", variability="fixed"),
-    _param("delta_limit_rad", 1.0, 0.0, math.pi, "rad",
+    _param("delta_limit_rad", TUNING, 1.0, 0.0, math.pi, "rad",
            "Bound on each of the six joint offsets delta_*, rad, in [0, 3.14159]: an offset "
            "beyond +-delta_limit_rad is clipped to it (a safety net against a runaway "
            "regulator, not part of the method). The default 1 rad never engages in the "
            "paper's suite (largest |delta| there 0.152 rad) nor with default gains inside "
            "the declared input ranges of a walking robot (the networks add at most "
            "2 psi_limit = 0.6 rad); 0 makes every offset 0"),
-    # Robust-adaptive-control remedies against parameter drift (docs/adaptation.md); each
-    # acts only on calls that learn, and with all three 0 the rule is the paper's plain PES.
-    _param("leakage_per_s", 0.01, 0.0, 1.0, "1/s",
+    # The remedy against parameter drift (docs/adaptation.md): acts only on calls that learn;
+    # at 0 the rule is the paper's plain PES.
+    _param("leakage_per_s", TUNING, 0.01, 0.0, 1.0, "1/s",
            "Leakage (sigma-modification) of the learned weights toward zero, 1/s, in [0, 1]: "
            "every call that learns first scales every weight by (1 - leakage_per_s dt) (by 0 "
            "if leakage_per_s dt >= 1); 0 switches it off (the paper's plain rule)"),
-    _param("leakage_mode", 1, 0, 1, "1",
+    _param("leakage_mode", TUNING, 1, 0, 1, "1",
            "Which part of the weights leaks, in [0, 1]: 0 every weight (sigma-modification: "
            "each row decays toward zero, its output with it); 1 only the part of each row "
            "orthogonal to its current presynaptic rates (the row's output at this call is "
            "kept; what the current state does not use decays at leakage_per_s)",
            type="Integer"),
-    _param("command_accel_limit_mps2", 0.0, 0.0, 10.0, "m/s2",
+    _param("command_accel_limit_mps2", TUNING, 0.0, 0.0, 10.0, "m/s2",
            "Rate limit of the regulator's own command reference, m/s^2, in [0, 10]: the "
            "reference follows (vx_des, vy_des) changing by at most command_accel_limit_mps2 dt "
            "per call (from the measured velocity at the first call), and the longitudinal PD "
@@ -168,7 +184,7 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
            "controller's gait ramp, so a command step is not answered twice (once by the gait, "
            "once by an offset against an error the gait is already removing); 0 switches it "
            "off (vx_des and vy_des are used as they come, the paper's rule)"),
-    _param("learn_settled_steps", 0, 0, SETTLED_STEPS_MAX, "1",
+    _param("learn_settled_steps", EXPERIMENTAL, 0, 0, SETTLED_STEPS_MAX, "1",
            "The velocity networks (x, y) learn only once the command reference has been "
            "settled over this many step_index changes, in [0, 1000]: settled means the "
            "reference equals the command (vx_des, vy_des) and so does its mean over the last "
@@ -177,33 +193,15 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
            "torso networks learn as usual. Errors during a command change are mostly the "
            "gait's own transient, which a learned offset carries over to the next command; "
            "0 switches it off (the paper's rule: learn at every call)", type="Integer"),
-    _param("error_deadzone_mps", 0.0, 0.0, 1.0, "m/s",
-           "Dead-zone on the two velocity learning errors (x: vx_des - vx; y: vy_des - the "
-           "stride-averaged vy), m/s, in [0, 1]: an error e learns as e - d if e > d, e + d "
-           "if e < -d and 0 otherwise (d = error_deadzone_mps); the torso errors are not "
-           "affected; 0 switches it off (the paper's plain rule)"),
-    _param("weight_norm_max", 0.0, 0.0, 1.0, "rad/Hz",
-           "Projection of every weight row (x, y, pitch, roll) onto the ball of this Euclidean "
-           "norm, rad/Hz, in [0, 1]: after every call that learns, a row whose norm exceeds it "
-           "is scaled back to it (|Psi| <= norm times the norm of the rates, Hz); 0 switches "
-           "it off (the paper's plain rule)"),
-    _param("overspeed_unlearn", 0, 0, 1, "1",
-           "What the velocity networks (x, y) learn while they wait for a settled command "
-           "(learn_settled_steps), in [0, 1]: 0 nothing (their learning errors are 0); 1 the "
-           "errors of a robot faster than the command reference in the reference's direction, "
-           "where they move the network's current output toward 0: an offset that speeds the "
-           "robot up is unlearned while the new command's transient overshoots, and the "
-           "transient teaches no new offset; no effect with learn_settled_steps = 0",
-           type="Integer"),
-    _param("learn_ramp_max_mps2", 0.0, 0.0, 10.0, "m/s2",
+    _param("learn_ramp_max_mps2", EXPERIMENTAL, 0.0, 0.0, 10.0, "m/s2",
            "How fast the command may ramp and still count as settled for learn_settled_steps, "
            "m/s2, in [0, 10]: with a > 0, settled means the reference equals the command (the "
            "acceleration limit is not limiting) and it moved by at most a dt on each axis since "
            "the last call, so a slow ramp (which the gait follows without a transient) is "
            "learned from while a command step, a fast ramp or the limiter's catch-up resets the "
            "count; 0 keeps the rule of learn_settled_steps (the reference and its step mean "
-           "must equal the command: no learning while the command moves); no effect with "
-           "learn_settled_steps = 0"),
+           "must equal the command: no learning while the command moves); a > 0 requires "
+           "learn_settled_steps > 0"),
 )
 
 
@@ -269,6 +267,9 @@ OUTPUT_SPECS: tuple[VarSpec, ...] = (
 
 
 PARAM_BY_NAME = {spec.name: spec for spec in PARAM_SPECS}
+#: Parameters that act only together: ``(a, b)``, a nonzero ``a`` requires a nonzero ``b`` (``a``
+#: has no effect without it).  Checked with every parameter set (:func:`requires_problems`).
+PARAM_REQUIRES = (("learn_ramp_max_mps2", "learn_settled_steps"),)
 #: Parameters that define the networks and cannot change once a regulator exists.
 FIXED_PARAMS = tuple(spec.name for spec in PARAM_SPECS if spec.variability == "fixed")
 OUTPUT_NAMES = tuple(spec.name for spec in OUTPUT_SPECS)
@@ -311,3 +312,11 @@ def check_param(spec: VarSpec, value) -> tuple[object, str | None]:
         if math.isfinite(number) and spec.min <= number <= spec.max:
             return number, None
     return value, f"{spec.name} = {value!r}: must be a finite number in {format_range(spec)}"
+
+
+def requires_problems(values) -> list[str]:
+    """Every ``PARAM_REQUIRES`` rule that the parameter values ``values`` (name -> value)
+    break, each naming both fields, e.g. ``"learn_ramp_max_mps2 = 0.25 requires
+    learn_settled_steps > 0 (it is 0)"``."""
+    return [f"{a} = {values[a]!r} requires {b} > 0 (it is {values[b]!r})"
+            for a, b in PARAM_REQUIRES if values[a] != 0 and values[b] == 0]

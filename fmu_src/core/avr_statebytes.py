@@ -1,6 +1,6 @@
 """The regulator state as bytes: :func:`state_to_bytes` and its checked inverse.
 
-Deterministic (identical states give identical bytes), no pickle, format version 4.
+Deterministic (identical states give identical bytes), no pickle, format version 5.
 Layout (little-endian): header ``_HEADER`` (magic ``b"AVRSTATE"``, format version
 uint16, number of weight rows (4) uint16, n_neurons uint32, then the network key:
 seed uint32 and the three input scales float64 (NaN = unknown), then
@@ -26,8 +26,9 @@ from fmu_src.core.avr_specs import INPUT_SPECS, SETTLED_STEPS_MAX
 __all__ = ["state_to_bytes", "state_from_bytes"]
 
 _MAGIC = b"AVRSTATE"
-_VERSION = 4  # 2: the stride accumulators (version 1 had none); 3: the command reference;
-# 4: settled_steps
+_VERSION = 5  # 2: the stride accumulators (version 1 had none); 3: the command reference;
+# 4: settled_steps; 5: the same layout for the regulator without error_deadzone_mps,
+# weight_norm_max and overspeed_unlearn (a version 4 state may have learned with them)
 # magic, version, n_rows, n_neurons, seed, velocity/angle/rate scales,
 # last_step_index, n_calls, vx_at_step, vy_at_step, pd_x, pd_y, time_s,
 # stride_boundaries, stride_calls, stride_sum_vy, stride_sum_roll,
@@ -130,8 +131,9 @@ def _checked_frame(blob) -> bytes:
     if version != _VERSION:
         raise StateError(f"unsupported state format version {version} (this build reads "
                          f"{_VERSION}; older states predate the stride-averaged lateral/roll "
-                         f"learning (version 1), the command reference (version 2) or the "
-                         f"settled-step count (version 3) and cannot be continued)")
+                         f"learning (version 1), the command reference (version 2), the "
+                         f"settled-step count (version 3) or the retirement of error_deadzone_mps, "
+                         f"weight_norm_max and overspeed_unlearn (version 4) and cannot be continued)")
     if len(blob) < _HEADER.size + _CRC.size:
         raise StateError(f"state blob too short ({len(blob)} bytes)")
     _, _, n_rows, n_neurons = _COUNTS.unpack_from(blob, 0)

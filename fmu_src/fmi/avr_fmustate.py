@@ -2,7 +2,7 @@
 
 Layout (little endian)::
 
-    "AVRS"  u32 version (2)  u32 json bytes  u32 core bytes    header, 16 bytes
+    "AVRS"  u32 version (3)  u32 json bytes  u32 core bytes    header, 16 bytes
     JSON    {"phase": ..., "time_s": ..., "values": {name: value, ...}}
     core    avr_core.state_to_bytes(...) (empty before initialization)
     u32     CRC-32 (zlib) of every byte before it
@@ -28,7 +28,7 @@ from dataclasses import dataclass
 from fmu_src.core.avr_errors import StateError
 
 MAGIC = b"AVRS"
-VERSION = 2
+VERSION = 3  # 3: the regulator without error_deadzone_mps, weight_norm_max, overspeed_unlearn
 HEADER = struct.Struct("<4sIII")
 CRC = struct.Struct("<I")
 #: FMI phases the slave tracks (FMI 2.0 section 4.2.4)
@@ -93,9 +93,12 @@ def decode(blob, specs) -> FmuStateParts:
     if len(blob) < HEADER.size + CRC.size:
         raise StateError(f"FMU state of {len(blob)} bytes is shorter than its header and checksum")
     magic, version, n_text, n_core = HEADER.unpack_from(blob)
-    if magic != MAGIC or version != VERSION:
-        raise StateError(f"not an AdaptiveVelocityRegulator state of format {VERSION} "
-                         f"(magic {magic!r}, version {version})")
+    if magic != MAGIC:
+        raise StateError(f"not an AdaptiveVelocityRegulator state (magic {magic!r}, expected {MAGIC!r})")
+    if version != VERSION:
+        raise StateError(f"AdaptiveVelocityRegulator state of format version {version}: this FMU reads "
+                         f"version {VERSION} (older states hold parameters this FMU no longer has and "
+                         f"cannot be continued)")
     if len(blob) != HEADER.size + n_text + n_core + CRC.size:
         raise StateError(f"FMU state has {len(blob)} bytes, its header says {HEADER.size + n_text + n_core + CRC.size}")
     if zlib.crc32(blob[:-CRC.size]) != CRC.unpack_from(blob, len(blob) - CRC.size)[0]:

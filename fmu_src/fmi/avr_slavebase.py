@@ -69,7 +69,7 @@ class SpecSlave(Fmi2Slave):
         extra = {} if spec.causality == "input" else {"initial": Fmi2Initial.exact}  # FMI: no `initial` on inputs
         return _VARIABLE_CLASSES[spec.type](
             spec.name, causality=getattr(Fmi2Causality, spec.causality),
-            variability=getattr(Fmi2Variability, spec.variability), description=spec.description,
+            variability=getattr(Fmi2Variability, spec.variability), description=spec.fmi_description,
             getter=lambda name=spec.name: self._values[name], **extra)
 
     def _refuse(self, message: str) -> None:

@@ -135,14 +135,17 @@ def model_description(xml_bytes: bytes, specs, extra_units: dict | None = None,
 
 
 def variables_table(specs) -> str:
-    """The HTML table of every variable (the documentation pages' last section)."""
+    """The HTML table of every variable (the documentation pages' last section); a tier column
+    when some variable has a tier (the regulator's parameters)."""
+    tiers = any(getattr(s, "tier", None) for s in specs)
+    tier = (lambda s: f"<td>{s.tier or ''}</td>") if tiers else (lambda s: "")
     rows = "\n".join(
-        f"<tr><td>{s.name}</td><td>{s.causality}</td><td>{s.type}</td><td>{s.variability}</td>"
+        f"<tr><td>{s.name}</td><td>{s.causality}</td>{tier(s)}<td>{s.type}</td><td>{s.variability}</td>"
         f"<td>{html.escape(s.unit)}</td><td>{xml_value(s.default)}</td>"
         f"<td>{'' if s.min is None else xml_value(s.min)}</td><td>{'' if s.max is None else xml_value(s.max)}</td>"
         f"<td>{html.escape(s.description)}</td></tr>" for s in specs)
     return f"""<h2>Variables</h2>
-<table border="1"><tr><th>name</th><th>causality</th><th>type</th><th>variability</th><th>unit</th>
+<table border="1"><tr><th>name</th><th>causality</th>{'<th>tier</th>' if tiers else ''}<th>type</th><th>variability</th><th>unit</th>
 <th>default</th><th>min</th><th>max</th><th>description</th></tr>
 {rows}
 </table></body></html>

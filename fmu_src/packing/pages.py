@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from fmu_src.packing.describe import variables_table
 from fmu_src.packing.method_page import method_html
+from fmu_src.packing.parameters import parameters_html
 
 
 def regulator_page(model_identifier: str, specs) -> str:
@@ -23,7 +24,7 @@ fmi2Error naming why; so is a state whose checksums are right but whose contents
 contents disagreeing on the phase or time, a value outside its range, counters beyond what a run counts).
 Requires Python 3 with numpy in the host process
 (see <code>resources/requirements.txt</code>).</p>
-{variables_table(specs)}"""
+{parameters_html()}{variables_table(specs)}"""
 
 
 def plant_page(model_identifier: str, plant_lib: str, specs) -> str:

@@ -39,6 +39,11 @@ Statuses (host sees; linux64 with the guard / pythonfmu's library alone):
     set of an output, of a fixed parameter after initialization, of anything
     after terminate, a value NaN or outside its declared [min, max] (inputs too):
         fmi2Error (guard) / fmi2Fatal (pythonfmu);
+    fmi2ExitInitializationMode with parameters that break a rule between them
+    (``avr_specs.PARAM_REQUIRES``: learn_ramp_max_mps2 > 0 requires learn_settled_steps > 0; the
+    instance stays in initialization mode), a parameter set while stepping that breaks one:
+        fmi2Error (guard, from the slave's logged refusal) / fmi2OK with the refusal logged and
+        nothing changed (pythonfmu's library alone cannot return fmi2Error);
     corrupt, truncated, foreign or non-finite state blob, or one saved with other
     fixed parameters: fmi2Error (the guard checks its CRC-64, GUID, time and fixed
     parameters in C, then the slave's verdict) / deserialize OK, then fmi2Fatal
@@ -54,7 +59,7 @@ from fmu_src.core.avr_network import build_networks
 from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams
 from fmu_src.core.avr_regulator import initial_state, step
 from fmu_src.fmi.avr_slavebase import STEP_COMPLETE, SpecSlave
-from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, requires_problems
 from fmu_src.core.avr_statebytes import state_from_bytes, state_to_bytes
 
 _ALL_SPECS = (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)
@@ -96,9 +101,26 @@ class AdaptiveVelocityRegulator(SpecSlave):
     def _make_params(self) -> RegulatorParams:
         return RegulatorParams(**{spec.name: self._values[spec.name] for spec in PARAM_SPECS})  # validates
 
+    def _set(self, name: str, value) -> None:
+        """The base's set; while stepping, a parameter value that breaks a PARAM_REQUIRES rule is
+        refused by logging only (during initialization the rules are checked when it ends: values
+        come in any order).  The guard cannot check these rules, so it must not see an exception
+        (pythonfmu's fmi2Fatal): it answers fmi2Error for the logged error."""
+        if (self._phase == STEP_COMPLETE and self._specs[name].causality == "parameter"
+                and self.set_problem(name, value) is None):
+            broken = requires_problems({**self._values, name: value})
+            if broken:
+                SpecSlave._refuse(self, "; ".join(broken))
+                return
+        super()._set(name, value)
+
     # -- FMI life cycle -----------------------------------------------------------------
     def exit_initialization_mode(self):
         self._in_phase("fmi2ExitInitializationMode")
+        broken = requires_problems(self._values)
+        if broken:  # logged, not raised: the guard answers fmi2Error and the instance stays in initialization
+            SpecSlave._refuse(self, "fmi2ExitInitializationMode refused: " + "; ".join(broken))
+            return
         self._params = self._make_params()
         if self._state is None:  # not already restored from an FMU state blob
             self._networks = build_networks(self._params)

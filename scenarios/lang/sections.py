@@ -11,6 +11,7 @@ together, arm names and claim checks.
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -26,7 +27,8 @@ from scenarios.lang.scenario import (BUILTIN_ARMS, BUILTIN_MODELS, CHECK_OPS, CH
                                 CommandPoint, CommandProfile, Event, LinkMass, PELVIS, Push, RandomPushes,
                                 Terrain)
 from fmu_src.core.avr_params import params_from_overrides
-from fmu_src.core.avr_specs import PARAM_SPECS
+from fmu_src.core.avr_profiles import profile_overrides, unknown_profile
+from fmu_src.core.avr_specs import PARAM_SPECS, check_param
 
 TOP_KEYS = (
     "name", "description", "tags", "duration_s", "model", "comm_step_s", "seed",
@@ -435,23 +437,34 @@ def regulator_param_specs() -> dict[str, Any]:
 def overrides(raw: Any, field: str, probs: Problems) -> dict[str, Any]:
     """FMU parameter overrides checked by the regulator core, one by one so each problem
     names its field (``field.name``; ``name`` alone for top-level keys, ``field = ""``);
-    returns the core's normalised values of the good ones."""
+    returns the core's normalised values of the good ones.  ``profile = "NAME"`` applies
+    a named profile (``fmu_src.core.avr_profiles``) first, the table's other keys on top of
+    it.  The rules between parameters are checked on each arm's whole set (:func:`arms`)."""
     if not isinstance(raw, dict):
         probs.add(field, raw, "must be a table of FMU parameter overrides")
         return {}
     known = regulator_param_specs()
     out: dict[str, Any] = {}
+    if "profile" in raw:
+        f = f"{field}.profile" if field else "profile"
+        problem = unknown_profile(raw["profile"])
+        if problem is None:
+            out.update(profile_overrides(raw["profile"]))
+        else:
+            probs.note(f, problem)
     for key, v in raw.items():
         f = f"{field}.{key}" if field else key
+        if key == "profile":
+            continue
         if key not in known:
             probs.note(f, "unknown regulator parameter" + did_you_mean(key, known, "; see the FMU's parameters "
-                                                                               "(PARAM_SPECS)"))
+                                                                               "(PARAM_SPECS) or give a profile"))
             continue
-        try:
-            out[key] = getattr(params_from_overrides({key: v}), key)
-        except ParameterError as exc:
-            for p in exc.problems:
-                _core_problem(f, key, v, p, probs)
+        value, problem = check_param(known[key], v)
+        if problem is None:
+            out[key] = value
+        else:
+            _core_problem(f, key, v, problem, probs)
     return out
 
 
@@ -485,6 +498,27 @@ def arms(doc: Mapping[str, Any], seed: int | None, probs: Problems) -> tuple[tup
             for p in exc.problems:
                 probs.note(f"arm {arm.name!r} parameters", p)
     return out, names
+
+
+def arms_with_profile(arms_: tuple[Arm, ...], profile: Any, field: str, probs: Problems) -> tuple[Arm, ...] | None:
+    """``arms_`` with every regulator arm's overrides on top of ``profile``'s values (None and a
+    problem if the profile is unknown or an arm's whole set breaks a rule of the core)."""
+    problem = unknown_profile(profile)
+    if problem is not None:
+        probs.note(field, problem)
+        return None
+    out = []
+    for arm in arms_:
+        if arm.controller == "regulator":
+            arm = dataclasses.replace(arm, overrides=tuple(sorted({**profile_overrides(profile),
+                                                                    **arm.overrides_dict()}.items())))
+            try:
+                params_from_overrides(arm.overrides)
+            except ParameterError as exc:
+                for p in exc.problems:
+                    probs.note(f"{field} {profile}, arm {arm.name!r} parameters", p)
+        out.append(arm)
+    return tuple(out)
 
 
 def _defined_arms(doc: Mapping[str, Any], base: dict[str, Any], probs: Problems) -> dict[str, Arm]:

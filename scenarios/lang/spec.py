@@ -142,11 +142,17 @@ def _check_plant(scenario: Scenario, probs: Problems) -> None:
 
 
 def override(scenario: Scenario, *, model: str | None = None, duration_s: float | None = None,
-             base_dir: Path | None = None, check_plant: bool = True) -> Scenario:
-    """The scenario with another model and/or duration (CLI flags), re-checked (a new
-    model is compiled and checked as in :func:`parse_scenario` unless ``check_plant`` is false)."""
+             profile: str | None = None, base_dir: Path | None = None, check_plant: bool = True) -> Scenario:
+    """The scenario with another model, duration and/or regulator profile (CLI flags), re-checked
+    (a new model is compiled and checked as in :func:`parse_scenario` unless ``check_plant`` is
+    false).  ``profile``: every regulator arm starts from that profile's values
+    (``fmu_src.core.avr_profiles``) instead of the FMU's defaults; the file's own values stay on top."""
     probs = Problems()
     changes: dict[str, Any] = {}
+    if profile is not None:
+        arms = sections.arms_with_profile(scenario.arms, profile, "--profile", probs)
+        if arms is not None:
+            changes["arms"] = arms
     if model is not None:
         changes["model"] = resolve_model(model, base_dir or Path.cwd(), probs)
     if duration_s is not None:

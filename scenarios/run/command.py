@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Sequence
 
 from fmu_src.core.avr_errors import AvrError
+from fmu_src.core.avr_profiles import PROFILES
 from scenarios.cosim.fmus import REGULATOR_FMUS, REPO_ROOT, ensure_fmu, ensure_plant_fmu
 from scenarios.errors import USER_ERRORS, ScenarioError
 from scenarios.run.options import (CONTROLLERS, DEFAULT_CONTROLLER, DEFAULT_OUT, DEFAULT_REGULATOR, PLANTS,
@@ -42,6 +43,9 @@ def add_arguments(sp: argparse.ArgumentParser) -> None:
                          "file in dist/, built if missing or stale)")
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--duration", type=float, default=None, help="override every scenario's duration_s (quick runs)")
+    sp.add_argument("--profile", default=None, metavar="NAME",
+                    help=f"every regulator arm starts from the named profile ({', '.join(PROFILES)}; "
+                         "dist/profiles/NAME.ssv) instead of the FMU's defaults; the files' own values stay on top")
     sp.add_argument("--no-plots", action="store_true",
                     help="write no PNG plots (time series and summary only: campaign tasks, which plot "
                          "the whole campaign themselves, or any run where ~1 s per scenario matters)")
@@ -123,12 +127,12 @@ def _targets(options: RunOptions) -> tuple[list, list[str]]:
         scenarios = spec.resolve_targets(list(options.targets))
     except ScenarioError as exc:
         return [], [str(exc)]
-    if options.model is None and options.duration_s is None:
+    if options.model is None and options.duration_s is None and options.profile is None:
         return scenarios, []
     out, problems = [], []
     for s in scenarios:
         try:
-            out.append(spec.override(s, model=options.model, duration_s=options.duration_s))
+            out.append(spec.override(s, model=options.model, duration_s=options.duration_s, profile=options.profile))
         except ScenarioError as exc:
             problems.append(str(exc))
     return out, problems

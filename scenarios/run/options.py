@@ -42,6 +42,7 @@ class RunOptions:
     targets: tuple[str, ...] = ()
     model: str | None = None
     duration_s: float | None = None
+    profile: str | None = None
     out: Path = DEFAULT_OUT
     regulator: str = DEFAULT_REGULATOR
     fmu: Path | None = None
@@ -65,7 +66,8 @@ class RunOptions:
         controller = args.controller
         if controller is None:  # the CassiePlant FMU carries its own (Python) controller
             controller = "python" if args.plant == "fmu" else DEFAULT_CONTROLLER
-        return cls(targets=tuple(args.targets), model=args.model, duration_s=args.duration, out=Path(args.out),
+        return cls(targets=tuple(args.targets), model=args.model, duration_s=args.duration, profile=args.profile,
+                   out=Path(args.out),
                    regulator=resolve_regulator(args.regulator, args.fmu), fmu=args.fmu, controller=controller, plant=args.plant,
                    plant_fmu=args.plant_fmu,
                    rebuild_fmu=args.rebuild_fmu, jobs=args.jobs, plots=not args.no_plots, render=args.render,

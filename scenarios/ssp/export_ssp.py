@@ -7,7 +7,8 @@ schedule and pushes (:func:`schedule_rows`); the wiring and parameter sets are
 :mod:`scenarios.ssp.system`'s.  Parameter sets bind only parameters: the plant's (the
 scenario's model and perturbation, as ``--plant fmu`` sets them) and the regulator's
 (the arm's configuration: ``[regulator]`` and the arm's overrides, its ``seed`` included, e.g.
-``adaptation_enabled = false`` for ``pd_only``).  One SSP per arm: an SSP has one
+``adaptation_enabled = false`` for ``pd_only``; with ``--profile NAME`` on top of that profile's
+values, as ``run --profile`` does).  One SSP per arm: an SSP has one
 regulator configuration; ``--arm`` picks it (default: the scenario's first arm).
 Its default experiment is the scenario's duration with its 5 ms step.
 
@@ -132,6 +133,8 @@ def cmd_export_ssp(args) -> int:
 
     try:
         (scenario,) = spec.resolve_targets([args.scenario])
+        if args.profile is not None:
+            scenario = spec.override(scenario, profile=args.profile)
     except ScenarioError as exc:
         print(str(exc), file=sys.stderr)
         return 2
@@ -154,6 +157,9 @@ def add_parser(sub) -> None:
                                            "source FMUs) that any SSP importer runs")
     sp.add_argument("scenario", metavar="SCENARIO", help="a suite scenario's name or a scenario file")
     sp.add_argument("--arm", default=None, help="the arm (one regulator configuration per SSP; default: the first)")
+    sp.add_argument("--profile", default=None, metavar="NAME",
+                    help="the regulator starts from the named profile (dist/profiles/NAME.ssv) instead of the FMU's "
+                         "defaults, as with `run --profile`: the SSP's regulator parameter set holds its values")
     sp.add_argument("--out", default=None, help="the SSP file (default: <scenario>_<arm>.ssp)")
     sp.add_argument("--fmu", type=Path, default=None, help="regulator FMU (default dist/AdaptiveVelocityRegulator.fmu)")
     sp.add_argument("--plant-fmu", type=Path, default=None, help="CassiePlant FMU (default dist/CassiePlant.fmu)")

@@ -78,7 +78,8 @@ def connections(comps) -> list[tuple[str, str, str]]:
     return out
 
 
-def _text(kind: str, value: Any) -> str:
+def value_text(kind: str, value: Any) -> str:
+    """``value`` as an SSV/SSD attribute of type ``kind`` (Real, Integer, Boolean, String) writes it."""
     if kind == "Boolean":
         return ("true" if value else "false") if isinstance(value, bool) else str(value).lower()
     if kind == "Real":
@@ -100,7 +101,7 @@ def parameter_values(comps, values: Mapping[str, Mapping[str, Any]] | None = Non
         if unknown:
             raise KeyError(f"{name}: no parameter(s) {', '.join(unknown)} (parameters: {', '.join(params)})")
         if params:
-            out[name] = [(v.name, v.type, _text(v.type, given[v.name]) if v.name in given else v.start)
+            out[name] = [(v.name, v.type, value_text(v.type, given[v.name]) if v.name in given else v.start)
                          for v in params.values()]
     return out
 
@@ -118,7 +119,9 @@ def _units(comps) -> dict[str, dict[str, str]]:
     return units
 
 
-def _ssv(name: str, rows) -> bytes:
+def parameter_set(name: str, rows) -> bytes:
+    """An SSP 1.0 parameter-values file (``.ssv``): the set ``name`` of ``rows`` (variable, type, value as text)."""
+    _register_namespaces()
     root = ET.Element(_q("ssv:ParameterSet"), {"version": "1.0", "name": name})
     params = ET.SubElement(root, _q("ssv:Parameters"))
     for var, kind, value in rows:
@@ -141,9 +144,14 @@ def _component(parent, name: str, fmu: Path, md, connected: set[str], units, bou
         binding.set("source", f"resources/{name}_{PARAMETER_SET}.ssv")
 
 
-def _ssd(comps, bound: set[str], system_name: str, description: str, stop_s: float) -> bytes:
+def _register_namespaces() -> None:
+    """Write the SSP prefixes (ssd:, ssv:, ...) whatever was serialized before in this process."""
     for prefix, uri in NS.items():
         ET.register_namespace(prefix, uri)
+
+
+def _ssd(comps, bound: set[str], system_name: str, description: str, stop_s: float) -> bytes:
+    _register_namespaces()
     units = _units(comps)
     root = ET.Element(_q("ssd:SystemStructureDescription"), {"version": "1.0", "name": system_name})
     system = ET.SubElement(root, _q("ssd:System"), name=system_name, description=description)
@@ -181,7 +189,7 @@ def ssp_entries(plant_fmu: Path, regulator_fmu: Path, command_fmu: Path, *,
     for name, fmu, _ in comps:
         entries[f"resources/{fmu.name}"] = fmu.read_bytes()
         if name in params:
-            entries[f"resources/{name}_{PARAMETER_SET}.ssv"] = _ssv(PARAMETER_SET, params[name])
+            entries[f"resources/{name}_{PARAMETER_SET}.ssv"] = parameter_set(PARAMETER_SET, params[name])
     return entries
 
 

@@ -317,17 +317,6 @@ def _start_plus_one_setting(name: str, key: str) -> tuple[dict, object]:
     return variant, value
 
 
-def test_robustness_random_overspeed_is_the_start_campaign_with_the_speed_up_unlearned():
-    """robustness_random_start with overspeed_unlearn = 1 on the regulator arms and nothing else
-    changed, on a seed no setting or design was chosen on; the parsed scenarios carry it."""
-    over, value = _start_plus_one_setting("robustness_random_overspeed", "overspeed_unlearn")
-    assert value == 1
-    assert over["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026, 2027, 2028, 2029, 2030)
-    regulated = _first_sample_regulator_overrides("robustness_random_overspeed")
-    assert len(regulated) == 2 and all(o["overspeed_unlearn"] == 1 and o["learn_settled_steps"] == 8
-                                       for o in regulated)
-
-
 def test_robustness_random_ramp_is_the_start_campaign_learning_on_slow_ramps():
     """robustness_random_start with learn_ramp_max_mps2 = 0.25 on the regulator arms and
     nothing else changed, on a seed no setting or design was chosen on; its limit is above the

@@ -81,8 +81,7 @@ def test_core_matches_nengo_pes_networks(n_neurons, dt, n_steps, learning_rate, 
     # remedies against drift off: nengo's PES is the paper's plain rule.
     params = RegulatorParams(n_neurons=n_neurons, seed=seed, learn_from_step=0, learning_rate=learning_rate,
                              psi_limit=1.0, Kp_x=0.0, Kd_x=0.0, Kp_y=0.0, Kd_y=0.0,
-                             pitch_des=0.02, roll_des=-0.01, leakage_per_s=0.0,
-                             error_deadzone_mps=0.0, weight_norm_max=0.0)
+                             pitch_des=0.02, roll_des=-0.01, leakage_per_s=0.0)
     seq = random_walk(seed, n_steps)
     reg = Regulator(params)
     ours, weights_after = [], []

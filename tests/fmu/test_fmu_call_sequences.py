@@ -3,7 +3,8 @@
 An independent model of the FMI 2.0 co-simulation state machine (section 4.2.4; for FMI 3.0
 the same phases without SetupExperiment), of the FMU's variable table and of its FMU-state
 rule (a state is restored only into an instance whose fixed parameters have the values it
-was saved with) says which calls are legal.  Property: the process never dies, every legal
+was saved with) and of the rules between parameters (``PARAM_REQUIRES``: checked when
+initialization ends and on every set while stepping) says which calls are legal.  Property: the process never dies, every legal
 call returns OK and no illegal call returns OK.
 """
 import json
@@ -16,7 +17,7 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
+from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_REQUIRES, PARAM_SPECS, requires_problems
 from fmu_src.fmi import phase_rules
 
 from support.native_support import DRIVERS, H, REGULATOR_FMUS
@@ -27,6 +28,8 @@ ERROR = 3
 SPECS = {s.name: s for s in (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)}
 LIVE = {"instantiated", "initializationMode", "stepComplete", "stepFailed", "terminated"}
 FIXED_DEFAULTS = {s.name: s.default for s in PARAM_SPECS if s.variability == "fixed"}
+#: The parameters of the rules between parameters, at their defaults.
+RULED_DEFAULTS = {name: SPECS[name].default for rule in PARAM_REQUIRES for name in rule}
 
 
 class FmiModel:
@@ -36,7 +39,8 @@ class FmiModel:
         self.phase = None  # not instantiated
         self.time = 0.0
         self.fixed = dict(FIXED_DEFAULTS)  # current values of the fixed parameters
-        self.states = []  # (phase, time, fixed) per FMUstate index
+        self.ruled = dict(RULED_DEFAULTS)  # and of the parameters the rules between parameters read
+        self.states = []  # (phase, time, fixed, ruled) per FMUstate index
         self.blobs = []
 
     def legal(self, op, *args):  # noqa: C901 - one branch per FMI function, as in the standard's table
@@ -50,7 +54,7 @@ class FmiModel:
         if op == "enter":
             return p == "instantiated"
         if op == "exit":
-            return p == "initializationMode"
+            return p == "initializationMode" and not requires_problems(self.ruled)
         if op == "step":
             t, h = args
             return (p == "stepComplete" and math.isfinite(h) and h > 0
@@ -64,7 +68,9 @@ class FmiModel:
                 return False
             if isinstance(value, float) and not math.isfinite(value):
                 return False
-            return not ((spec.min is not None and value < spec.min) or (spec.max is not None and value > spec.max))
+            if (spec.min is not None and value < spec.min) or (spec.max is not None and value > spec.max):
+                return False
+            return not (p == "stepComplete" and name in self.ruled and requires_problems({**self.ruled, name: value}))
         if op == "get":
             return p in ("initializationMode", "stepComplete", "stepFailed", "terminated")
         if op == "terminate":
@@ -87,9 +93,11 @@ class FmiModel:
         """Update the model after a call that succeeded."""
         if op == "instantiate":
             self.phase, self.time, self.states, self.blobs = "instantiated", 0.0, [], []
-            self.fixed = dict(FIXED_DEFAULTS)
+            self.fixed, self.ruled = dict(FIXED_DEFAULTS), dict(RULED_DEFAULTS)
         elif op == "set" and args[0] in self.fixed:
             self.fixed[args[0]] = args[1]
+        elif op == "set" and args[0] in self.ruled:
+            self.ruled[args[0]] = args[1]
         elif op == "setup":
             self.time = args[0]
         elif op == "enter":
@@ -101,11 +109,12 @@ class FmiModel:
         elif op == "terminate":
             self.phase = "terminated"
         elif op == "reset":
-            self.phase, self.time, self.fixed = "instantiated", 0.0, dict(FIXED_DEFAULTS)
+            self.phase, self.time, self.fixed, self.ruled = "instantiated", 0.0, dict(FIXED_DEFAULTS), dict(RULED_DEFAULTS)
         elif op == "get_state":
-            self.states.append((self.phase, self.time, dict(self.fixed)))
+            self.states.append((self.phase, self.time, dict(self.fixed), dict(self.ruled)))
         elif op == "set_state":
-            self.phase, self.time, _ = self.states[args[0]]
+            self.phase, self.time, _, ruled = self.states[args[0]]
+            self.ruled = dict(ruled)
         elif op == "serialize":
             self.blobs.append(self.states[args[0]])
         elif op == "deserialize":

@@ -85,7 +85,7 @@ def test_model_description_is_the_variable_table(regulator_fmu):
     assert [v.name for v in variables] == [s.name for s in SPECS]  # every declared variable, in declaration order
     assert [v.valueReference for v in variables] == list(range(len(SPECS)))  # the same in every regulator FMU
     for v, spec in zip(variables, SPECS):
-        assert (v.causality, v.variability, v.description) == (spec.causality, spec.variability, spec.description)
+        assert (v.causality, v.variability, v.description) == (spec.causality, spec.variability, spec.fmi_description)
         assert (v.min is None) == (spec.min is None) and (v.max is None) == (spec.max is None)
         if spec.min is not None:
             assert float(v.min) == spec.min and float(v.max) == spec.max

@@ -97,3 +97,39 @@ def test_decode_names_every_problem_of_a_well_formed_but_invalid_table(learned):
     for expected in ("lacks seed", "Kp_x = 99.0: out of range [-5.0, 5.0]", "vx = inf: must be a finite number",
                      "n_neurons = True: must be an Integer"):
         assert expected in message, message
+
+
+def test_a_format_2_blob_is_refused_naming_its_version(learned):
+    """Format 2 blobs hold the retired error_deadzone_mps, weight_norm_max and overspeed_unlearn."""
+    old = bytearray(learned)
+    struct.pack_into("<I", old, 4, 2)
+    old[-4:] = struct.pack("<I", zlib.crc32(bytes(old[:-4])))
+    refused = AdaptiveVelocityRegulator._fmu_state_from_bytes(bytes(old))
+    assert refused.startswith(REFUSED_STATE)
+    assert b"state of format version 2: this FMU reads version 3" in refused
+
+
+def test_a_ramp_limit_without_settled_steps_is_refused_at_initialization_and_while_stepping():
+    """learn_ramp_max_mps2 > 0 requires learn_settled_steps > 0: the end of initialization is
+    refused (logged as an error, the guard's fmi2Error; the slave stays in initialization mode),
+    and while stepping the set that breaks it is refused."""
+    s = AdaptiveVelocityRegulator(instance_name="rule")
+    logged = []
+    s.log = lambda message, status=None, *args, **kwargs: logged.append(message)
+    s._set("learn_ramp_max_mps2", 0.25)
+    s.setup_experiment(0.0)
+    s.enter_initialization_mode()
+    s.exit_initialization_mode()
+    assert s._phase == "initializationMode" and s._params is None
+    assert logged == ["fmi2ExitInitializationMode refused: learn_ramp_max_mps2 = 0.25 requires "
+                      "learn_settled_steps > 0 (it is 0)"]
+    s._set("learn_settled_steps", 3)
+    s.exit_initialization_mode()
+    assert s._phase == "stepComplete"
+    logged.clear()
+    s._set("learn_settled_steps", 0)  # logged, not raised (the guard answers fmi2Error); nothing changes
+    assert logged == ["learn_ramp_max_mps2 = 0.25 requires learn_settled_steps > 0 (it is 0)"]
+    assert s._values["learn_settled_steps"] == 3 and s._params.learn_settled_steps == 3
+    s._set("learn_ramp_max_mps2", 0.0)  # in the other order both are legal
+    s._set("learn_settled_steps", 0)
+    assert s._params.learn_settled_steps == 0

@@ -24,13 +24,13 @@ from support.native_support import AARCH64_CC, CC, c_host_script, compile_host, 
 
 PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_knee": 0.0,
           "learn_from_step": 1, "leakage_per_s": 0.0}  # learning from the first step; the plain rule
-#: The same with every remedy against drift on, each acting on this sequence: the leak, a
-#: dead-zone the synthetic errors exceed, a bound below the x row's plain norm (7.6e-5 rad/Hz).
-REMEDIES = {**PARAMS, "leakage_per_s": 0.5, "error_deadzone_mps": 0.05, "weight_norm_max": 3e-5}
-#: The leak of the part orthogonal to the current rates (leakage_mode 1) with the dead-zone
-#: and the rate-limited command reference.
-KEEP_OUTPUT = {**PARAMS, "leakage_per_s": 0.5, "leakage_mode": 1, "error_deadzone_mps": 0.05,
-               "command_accel_limit_mps2": 0.5}
+#: The same with the remedy against drift on, acting on this sequence: the leak of every weight,
+#: with learning on settled commands (slow ramps counting) and the rate-limited command reference.
+REMEDIES = {**PARAMS, "leakage_per_s": 0.5, "leakage_mode": 0, "command_accel_limit_mps2": 0.5,
+            "learn_settled_steps": 2, "learn_ramp_max_mps2": 0.25}
+#: The leak of the part orthogonal to the current rates (leakage_mode 1) with the rate-limited
+#: command reference.
+KEEP_OUTPUT = {**PARAMS, "leakage_per_s": 0.5, "leakage_mode": 1, "command_accel_limit_mps2": 0.5}
 RUNS = {"plain": PARAMS, "remedies": REMEDIES, "keep_output": KEEP_OUTPUT}
 N_STEPS = 400
 LIBRARY = "AdaptiveVelocityRegulatorNative.so"

@@ -28,7 +28,7 @@ def _corruptions(blob: bytes, other_blob: bytes):
         struct.pack_into(fmt, body, offset, value)
         return with_crc(body)
 
-    values = 248  # header (format version 4: stride accumulators and reference at 144..239, settled_steps at 240)
+    values = 248  # header (format version 5: stride accumulators and reference at 144..239, settled_steps at 240)
     weights = values + 8 * n_vars
     yield "truncated", blob[:-1]
     yield "extended", blob + b"\0"
@@ -86,4 +86,61 @@ def test_fmi3_time_is_the_independent_variable(native_fmus):
     with pytest.raises(FMICallException):
         s.fmu.setFloat64([time_vr], [1.0])
     assert s.fmu.getFloat64([time_vr]) == [3 * 0.005]
+    s.close()
+
+
+@FMI
+def test_a_version_4_state_is_refused_naming_the_version(native_fmus, fmi):
+    """Version 4 states hold error_deadzone_mps, weight_norm_max and overspeed_unlearn (retired):
+    refused with a message naming the version, even with a valid checksum."""
+    messages = []
+    s = AnySlave(native_fmus[fmi], messages=messages).init(n_neurons=30)
+    blob = bytearray(s.serialize(s.get_state()))
+    assert struct.unpack_from("<I", blob, 8) == (5,)
+    struct.pack_into("<I", blob, 8, 4)
+    blob[-4:] = struct.pack("<I", zlib.crc32(bytes(blob[:-4])))
+    with pytest.raises(FMICallException):
+        s.deserialize(bytes(blob))
+    assert any("version 4" in m and "error_deadzone_mps, weight_norm_max and overspeed_unlearn" in m
+               for m in messages), messages
+    s.close()
+
+
+@pytest.mark.parametrize("fmi", [2, 3, "python"])
+def test_a_ramp_limit_without_settled_steps_is_refused_naming_both(native_fmus, built_fmu, fmi):
+    """learn_ramp_max_mps2 > 0 requires learn_settled_steps > 0 (avr_specs.PARAM_REQUIRES): refused
+    with Error when initialization ends (the instance stays in it and takes the missing value),
+    and while stepping on the set that would break it; a forged native state that breaks it is
+    refused.  The same in the pythonfmu FMU (its guard answers Error for the slave's logged refusal)."""
+    messages = []
+    s = AnySlave(built_fmu if fmi == "python" else native_fmus[fmi], messages=messages)
+    s.set("learn_ramp_max_mps2", 0.25)
+    if s.fmi3:
+        s.fmu.enterInitializationMode(startTime=0.0)
+    else:
+        s.fmu.setupExperiment(startTime=0.0)
+        s.fmu.enterInitializationMode()
+    with pytest.raises(FMICallException):
+        s.fmu.exitInitializationMode()
+    assert any("learn_ramp_max_mps2 = 0.25 requires learn_settled_steps > 0 (it is 0)" in m for m in messages)
+    s.set("learn_settled_steps", 2)
+    s.fmu.exitInitializationMode()  # now legal
+    s.step(0, {"vx": 0.1})
+    messages.clear()
+    with pytest.raises(FMICallException):
+        s.set("learn_settled_steps", 0)
+    assert any("learn_ramp_max_mps2 = 0.25 requires learn_settled_steps > 0 (it is 0)" in m for m in messages)
+    assert np.all(np.isfinite(s.step(1, {"vx": 0.1})))  # refused, not fatal: the instance steps on
+    if fmi == "python":
+        s.close()
+        return
+    blob = bytearray(s.serialize(s.get_state()))
+    vr = s.vars["learn_settled_steps"].valueReference
+    struct.pack_into("<d", blob, 248 + 8 * vr, 0.0)
+    blob[-4:] = struct.pack("<I", zlib.crc32(bytes(blob[:-4])))
+    with pytest.raises(FMICallException):
+        s.deserialize(bytes(blob))
+    assert any("state has parameters no instance can have" in m for m in messages)
+    s.set("learn_ramp_max_mps2", 0.0)  # in the other order both are legal
+    s.set("learn_settled_steps", 0)
     s.close()

@@ -249,31 +249,11 @@ static double sparse_dot(const AvrCore *core, int k, const double *restrict w) {
     return sum;
 }
 
-/* The error moved toward 0 by zone, 0 inside [-zone, zone] (avr_regulator._dead_zone). */
-static double dead_zone(double e, double zone) {
-    return e > zone ? e - zone : (e < -zone ? e + zone : 0.0);
-}
-
 /* The factor every weight is scaled by before a call's PES step (avr_regulator._leak_factor). */
 static double leak_factor(double leakage, double dt) {
     if (leakage == 0.0) return 1.0;
     double amount = leakage * dt;
     return amount < 1.0 ? 1.0 - amount : 0.0;
-}
-
-/* Every weight row whose Euclidean norm exceeds bound scaled back to it (avr_regulator._project):
- * the squared norm summed in neuron order, sqrt correctly rounded. */
-VECTOR_CLONES static void project(double *restrict weights, int n, double bound) {
-    for (int r = 0; r < AVR_N_ROWS; ++r) {
-        double *restrict w = weights + (size_t)r * n;
-        double norm2 = 0.0;
-        for (int i = 0; i < n; ++i) norm2 += w[i] * w[i];
-        double norm = sqrt(norm2);
-        if (norm > bound) {
-            double scale = bound / norm;
-            for (int i = 0; i < n; ++i) w[i] = w[i] * scale + 0.0;
-        }
-    }
 }
 
 /* w[i] * keep + 0.0 for every weight of a row (+ 0.0: an underflow gives +0.0, as the numpy core). */
@@ -290,9 +270,8 @@ static double rates_squared(const AvrCore *core, int k) {
 }
 
 /* Learning with anti-windup (avr_regulator._adapt, _pes_update): raw = unsaturated outputs.
- * A silent neuron's weight would change by coef * 0: it is left as it is.  The remedies
- * against drift (each off at 0): the dead-zone on the velocity errors, the leak before the
- * PES step, the norm projection after it. */
+ * A silent neuron's weight would change by coef * 0: it is left as it is.  The remedy
+ * against drift (off at 0): the leak before the PES step. */
 static void learn(AvrCore *core, const double *values, double dt, const double dots[AVR_N_ROWS],
                   const double raw[AVR_N_ROWS]) {
     int n = core->n;
@@ -302,13 +281,8 @@ static void learn(AvrCore *core, const double *values, double dt, const double d
     int ready = core->stride_boundaries >= AVR_STRIDE_READY;
     double e_y = ready ? V(vy_des) - 0.5 * (core->vy_mean_prev + core->vy_mean_last) : 0.0;
     double e_roll = ready ? V(roll_des) - 0.5 * (core->roll_mean_prev + core->roll_mean_last) : 0.0;
-    double e_x = V(vx_des) - V(vx), zone = V(error_deadzone_mps);
-    if (zone != 0.0) e_x = dead_zone(e_x, zone), e_y = dead_zone(e_y, zone);
-    if ((double)core->settled_steps < V(learn_settled_steps)) { /* avr_regulator._unsettled_errors */
-        int unlearn = V(overspeed_unlearn) != 0.0; /* vx_des, vy_des: the reference when it is on */
-        if (!unlearn || raw[0] * e_x <= 0.0 || e_x * V(vx_des) >= 0.0) e_x = 0.0;
-        if (!unlearn || raw[1] * e_y <= 0.0 || e_y * V(vy_des) >= 0.0) e_y = 0.0;
-    }
+    double e_x = V(vx_des) - V(vx);
+    if ((double)core->settled_steps < V(learn_settled_steps)) e_x = e_y = 0.0; /* waiting for a settled command */
     double err[AVR_N_ROWS] = {e_x, e_y, V(pitch_des) - V(pitch), e_roll};
     double keep = leak_factor(V(leakage_per_s), dt);
     /* leakage_mode 1 (avr_regulator._keep_current_output): coef + amount (w . h) / |h|^2 for a row
@@ -330,7 +304,6 @@ static void learn(AvrCore *core, const double *values, double dt, const double d
         const int *restrict active = core->active + (size_t)k * n;
         for (int i = 0; i < core->n_active[k]; ++i) w[active[i]] = coef * rates[i] + w[active[i]];
     }
-    if (V(weight_norm_max) != 0.0) project(core->weights, n, V(weight_norm_max));
 }
 
 /* Saturated network outputs psi (x, y, pitch, roll) from the weights before this call's update. */

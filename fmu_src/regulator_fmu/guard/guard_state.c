@@ -91,8 +91,12 @@ static GuardState *live_state(Guard *g, const char *call, fmi2FMUstate state) {
 
 /* fmi2OK if the n bytes are a slave blob the slave will parse (header and lengths). */
 static fmi2Status check_slave_blob(Guard *g, const char *call, const fmi2Byte *blob, uint64_t n) {
+    if (n >= AVR_SLAVE_HEAD_BYTES && memcmp(blob, AVR_SLAVE_MAGIC, AVR_SLAVE_MAGIC_BYTES) == 0 &&
+        get_u32(blob + SLAVE_VERSION_AT) != AVR_SLAVE_VERSION)
+        return refuse(g, call, "the state's inner blob is of format version %u; this FMU reads version %u (older "
+                      "states hold parameters this FMU no longer has)", (unsigned)get_u32(blob + SLAVE_VERSION_AT),
+                      (unsigned)AVR_SLAVE_VERSION);
     if (n < AVR_SLAVE_HEAD_BYTES + AVR_SLAVE_CRC_BYTES || memcmp(blob, AVR_SLAVE_MAGIC, AVR_SLAVE_MAGIC_BYTES) != 0 ||
-        get_u32(blob + SLAVE_VERSION_AT) != AVR_SLAVE_VERSION ||
         (uint64_t)AVR_SLAVE_HEAD_BYTES + get_u32(blob + SLAVE_JSON_BYTES_AT) + get_u32(blob + SLAVE_CORE_BYTES_AT) +
                 AVR_SLAVE_CRC_BYTES != n)
         return refuse(g, call, "the state's inner blob has a bad header (this FMU's serializer never writes that)");

@@ -155,6 +155,8 @@ AvrStatus avr_exit_init(AvrInstance *inst, const char *call) {
     AvrCore core;
     int n = (int)inst->values[AVR_VR_n_neurons];
     uint32_t seed = (uint32_t)inst->values[AVR_VR_seed];
+    char why[400];
+    if (avr_requires_problem(inst->values, AVR_N_VARS, 0.0, why, sizeof why)) return avr_refuse(inst, call, "%s", why);
     if (avr_prepare_networks(inst, call, n, seed, &net, &core) != AVR_OK) return AVR_ERROR;
     avr_adopt(inst, net, &core);
     inst->phase = AVR_STEP_MODE;
@@ -202,6 +204,23 @@ int avr_value_problem(const AvrVar *v, double x, char *out, size_t size) {
     return 1;
 }
 
+int avr_requires_problem(const double *values, uint32_t vr, double x, char *out, size_t size) {
+    size_t used = 0;
+    out[0] = '\0';
+    for (int i = 0; i < AVR_N_REQUIRES; ++i) {
+        int a = AVR_REQUIRES[i][0], b = AVR_REQUIRES[i][1];
+        double va = (uint32_t)a == vr ? x : values[a], vb = (uint32_t)b == vr ? x : values[b];
+        if (va == 0.0 || vb != 0.0) continue;
+        char text_a[40], text_b[40];
+        avr_fmt_double(text_a, sizeof text_a, va);
+        avr_fmt_double(text_b, sizeof text_b, vb);
+        int k = snprintf(out + used, size - used, "%s%s = %s requires %s > 0 (it is %s)", used ? "; " : "",
+                         AVR_VARS[a].name, text_a, AVR_VARS[b].name, text_b);
+        if (k > 0) used = used + (size_t)k < size ? used + (size_t)k : size - 1;
+    }
+    return used > 0;
+}
+
 static const AvrVar *lookup(const AvrInstance *inst, const char *call, uint32_t vr, AvrType type) {
     if (vr >= AVR_N_VARS) {
         avr_refuse(inst, call, "valueReference %u does not exist (0..%u)", (unsigned)vr, (unsigned)AVR_N_VARS - 1);
@@ -230,6 +249,9 @@ AvrStatus avr_check_set(const AvrInstance *inst, const char *call, uint32_t vr, 
         return avr_refuse(inst, call, "%s is a fixed parameter: set it before ExitInitializationMode", v->name);
     char problem[400];
     if (avr_value_problem(v, value, problem, sizeof problem)) return avr_refuse(inst, call, "%s", problem);
+    if (inst->phase == AVR_STEP_MODE && v->causality == AVR_PARAMETER &&
+        avr_requires_problem(inst->values, vr, value, problem, sizeof problem)) /* in initialization: at its end */
+        return avr_refuse(inst, call, "%s", problem);
     return AVR_OK;
 }
 

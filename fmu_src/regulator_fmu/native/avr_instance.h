@@ -89,6 +89,9 @@ AvrStatus avr_check_categories(const AvrInstance *inst, const char *call, size_t
 /* Shared by avr_instance.c and avr_state.c. */
 void avr_fmt_double(char *out, size_t size, double x);
 int avr_value_problem(const AvrVar *v, double x, char *out, size_t size);
+/* Why the parameter values values[] (with x in place of values[vr]; vr = AVR_N_VARS: none) break
+ * AVR_REQUIRES (writes every broken rule, returns 1), or 0 (avr_specs.requires_problems). */
+int avr_requires_problem(const double *values, uint32_t vr, double x, char *out, size_t size);
 AvrStatus avr_prepare_networks(AvrInstance *inst, const char *call, int n, uint32_t seed, AvrNetworks **net,
                                AvrCore *core);
 void avr_adopt(AvrInstance *inst, AvrNetworks *net, AvrCore *core);

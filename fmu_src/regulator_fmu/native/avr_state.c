@@ -1,9 +1,10 @@
 /*
  * The FMU state of an instance as one self-checking blob (see avr_instance.h).
  *
- * FMU state blob, little-endian, format version 4 (offsets in bytes; versions 1, without
- * the stride accumulators, 2, without the command reference, and 3, without settled_steps,
- * are refused naming them):
+ * FMU state blob, little-endian, format version 5 (offsets in bytes; versions 1, without
+ * the stride accumulators, 2, without the command reference, 3, without settled_steps, and 4,
+ * with the retired error_deadzone_mps, weight_norm_max and overspeed_unlearn, are refused
+ * naming them):
  *     0  "AVRNATIV"            magic
  *     8  u32 version           12  u32 total size in bytes
  *    16  GUID, NUL-padded to 48 bytes (a state of another FMU build is refused)
@@ -34,7 +35,7 @@
 #include "fmi_blob.h"
 
 #define BLOB_MAGIC "AVRNATIV"
-#define BLOB_VERSION 4u
+#define BLOB_VERSION 5u
 #define BLOB_GUID_BYTES 48
 #define BLOB_HEADER 248
 #define SETTLED_OFFSET 240
@@ -132,7 +133,7 @@ static int finite_doubles(const unsigned char *p, size_t count) {
 static AvrStatus check_frame(const AvrInstance *inst, const char *call, const unsigned char *p, size_t size) {
     static const FmiBlobFormat format = {
         .magic = BLOB_MAGIC, .magic_bytes = 8, .version_at = 8, .version = BLOB_VERSION,
-        .version_note = "(older states predate the stride-averaged lateral/roll learning (version 1), the command reference (version 2) or the settled-step count (version 3) and cannot be continued)",
+        .version_note = "(older states predate the stride-averaged lateral/roll learning (version 1), the command reference (version 2), the settled-step count (version 3) or the retirement of error_deadzone_mps, weight_norm_max and overspeed_unlearn (version 4) and cannot be continued)",
         .size_at = 12, .size_field_bytes = 4, .size_add = 0, .crc_bytes = 4,
         .guid_at = 16, .guid_bytes = BLOB_GUID_BYTES, .guid = AVR_GUID,
         .min_bytes = BLOB_HEADER + 8u * AVR_N_VARS + 4u}; /* blob_size(0) */
@@ -154,13 +155,16 @@ static AvrStatus check_contents(const AvrInstance *inst, const char *call, const
         return avr_refuse(inst, call, "state with %u neurons does not fit its phase or size", (unsigned)n);
     if (!isfinite(get_f64(p + 72))) return avr_refuse(inst, call, "state has a non-finite time");
     const unsigned char *values = p + BLOB_HEADER;
+    double saved[AVR_N_VARS];
+    char problem[400];
     for (int vr = 0; vr < AVR_N_VARS; ++vr) {
-        char problem[400];
-        double x = get_f64(values + 8 * vr);
+        double x = saved[vr] = get_f64(values + 8 * vr);
         if (AVR_VARS[vr].causality == AVR_OUTPUT ? !isfinite(x)
                                                  : avr_value_problem(&AVR_VARS[vr], x, problem, sizeof problem))
             return avr_refuse(inst, call, "state has an invalid value of %s", AVR_VARS[vr].name);
     }
+    if (avr_requires_problem(saved, AVR_N_VARS, 0.0, problem, sizeof problem))
+        return avr_refuse(inst, call, "state has parameters no instance can have: %s", problem);
     if (n == 0) return AVR_OK;
     if (n != (uint32_t)get_f64(values + 8 * AVR_VR_n_neurons) || get_u32(p + 84) != (uint32_t)get_f64(values + 8 * AVR_VR_seed))
         return avr_refuse(inst, call, "state's networks do not match its n_neurons and seed");

@@ -14,6 +14,7 @@ import xml.etree.ElementTree as ET
 
 from fmu_src.packing.describe import xml_value
 from fmu_src.packing.method_page import method_html
+from fmu_src.packing.parameters import parameters_html
 from fmu_src.regulator_fmu.native.header import LOG_CATEGORIES, all_specs
 
 AUTHOR = "cassie-avr project"
@@ -50,7 +51,7 @@ def _typed_attributes(spec, units: dict) -> dict:
 
 
 def _variable_attributes(spec, vr: int) -> dict:
-    attrs = {"name": spec.name, "valueReference": str(vr), "description": spec.description,
+    attrs = {"name": spec.name, "valueReference": str(vr), "description": spec.fmi_description,
              "causality": spec.causality, "variability": spec.variability}
     if spec.causality != "input":  # FMI: `initial` is not allowed on inputs
         attrs["initial"] = "exact"
@@ -135,8 +136,8 @@ def documentation(fmi_version: int, model_identifier: str, platforms) -> str:
                     "carries that binary) or build this one from its sources." if fmi_version == 2 else "")
     rows = "\n".join(
         "<tr>" + "".join(f"<td>{html.escape(str(cell))}</td>" for cell in (
-            vr, s.name, s.causality, s.type, s.variability, s.unit, xml_value(s.default),
-            "" if s.min is None else xml_value(s.min), "" if s.max is None else xml_value(s.max), s.description)) + "</tr>"
+            vr, s.name, s.causality, s.tier or "", s.type, s.variability, s.unit, xml_value(s.default),
+            "" if s.min is None else xml_value(s.min), "" if s.max is None else xml_value(s.max), s.fmi_description)) + "</tr>"
         for vr, s in enumerate(specs))
     return f"""<!DOCTYPE html>
 <html><head><meta charset="utf-8"><title>{model_identifier} (FMI {fmi_version}.0)</title></head><body>
@@ -161,8 +162,8 @@ FMU state can be saved, restored and serialized (all variables, weights and memo
 the GUID and a CRC-32 and is refused if corrupt or from another FMU, and so is one whose contents no run can
 reach: a value out of range, counters beyond what a run counts). Outputs change only in doStep (no direct
 feedthrough). Same value references, variables and numerics as the pythonfmu FMU AdaptiveVelocityRegulator.</p>
-{method_html()}<h2>Variables</h2>
-<table border="1"><tr><th>valueReference</th><th>name</th><th>causality</th><th>type</th><th>variability</th>
+{method_html()}{parameters_html()}<h2>Variables</h2>
+<table border="1"><tr><th>valueReference</th><th>name</th><th>causality</th><th>tier</th><th>type</th><th>variability</th>
 <th>unit</th><th>start</th><th>min</th><th>max</th><th>description</th></tr>
 {rows}
 </table></body></html>

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from fmu_src.core.avr_network import INTERCEPT_RANGE, LN2, MAX_RATE_RANGE_HZ, SQRT2, TAU_RC, TAU_REF
 from fmu_src.core.avr_regulator import MAX_CALLS, SETTLED_TOLERANCE_MPS
-from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS, SETTLED_STEPS_MAX
+from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_REQUIRES, PARAM_SPECS, SETTLED_STEPS_MAX
 
 _TYPES = {"Real": "AVR_REAL", "Integer": "AVR_INTEGER", "Boolean": "AVR_BOOLEAN"}
 _CAUSALITY = {"parameter": "AVR_PARAMETER", "input": "AVR_INPUT", "output": "AVR_OUTPUT"}
@@ -93,6 +93,10 @@ def vars_header() -> str:
         *[f"    AVR_VR_{spec.name} = {vr}," for vr, spec in enumerate(specs)], "};", "",
         "/* name, type, causality, variability, start, has_min, min, has_max, max */",
         "static const AvrVar AVR_VARS[AVR_N_VARS] = {", *[_row(spec) for spec in specs], "};", "",
+        "/* Parameters that act only together (avr_specs.PARAM_REQUIRES): a nonzero first requires a nonzero second */",
+        f"#define AVR_N_REQUIRES {len(PARAM_REQUIRES)}",
+        "static const int AVR_REQUIRES[AVR_N_REQUIRES][2] = {"
+        + ", ".join(f"{{AVR_VR_{a}, AVR_VR_{b}}}" for a, b in PARAM_REQUIRES) + "};", "",
         "#endif", ""]
     return "\n".join(lines)
 
