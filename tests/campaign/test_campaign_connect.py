@@ -111,7 +111,7 @@ def test_scheduler_file_with_two_worker_processes(tmp_path, built_fmu):
                            capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path)
         assert r.returncode == 0, r.stderr
         _complete(out)
-        # both workers ran samples: the runs' folders name no worker, the scheduler's log of tasks does
+        # the scheduler the file names is the one with both workers
         from distributed import Client
 
         with Client(scheduler_file=str(sched_file), timeout="10s") as client:
@@ -144,7 +144,7 @@ def _self_signed(folder: Path) -> tuple[Path, Path]:
     return key_file, cert_file
 
 
-def test_tls_scheduler_with_daskss_security_configuration(tmp_path, built_fmu):
+def test_tls_scheduler_with_dasks_security_configuration(tmp_path, built_fmu):
     key, cert = _self_signed(tmp_path)
     tls = ["--tls-ca-file", cert, "--tls-cert", cert, "--tls-key", key]
     env = _env(tmp_path)
