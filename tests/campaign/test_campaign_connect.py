@@ -17,6 +17,7 @@ from __future__ import annotations
 import datetime
 import ipaddress
 import json
+import shutil
 import subprocess
 import threading
 import time
@@ -105,12 +106,15 @@ def test_scheduler_file_with_two_worker_processes(tmp_path, built_fmu):
         sched, sched_file, address = _scheduler(tmp_path, env)
         procs.append(sched)
         procs += [_worker(tmp_path, env, address, f"worker{k}") for k in range(2)]
-        out = tmp_path / "out"
-        r = subprocess.run(CLI + [str(a) for a in (campaign_file(tmp_path, 1), "--out", out, "--scheduler-file",
-                                                   "scheduler.json", "--fmu", built_fmu)],
+        campaign_file(tmp_path, 1)
+        (tmp_path / "fmus").mkdir()
+        shutil.copy(built_fmu, tmp_path / "fmus" / Path(built_fmu).name)
+        # every path relative to the working folder: the campaign file, --out, the scheduler file, --fmu
+        r = subprocess.run(CLI + ["smoke1.toml", "--out", "out", "--scheduler-file", "scheduler.json",
+                                  "--fmu", f"fmus/{Path(built_fmu).name}"],
                            capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path)
         assert r.returncode == 0, r.stderr
-        _complete(out)
+        _complete(tmp_path / "out")
         # the scheduler the file names is the one with both workers
         from distributed import Client
 
