@@ -35,7 +35,6 @@ pages, the pythonfmu library fix, the plant's vendored modules),
 """
 from __future__ import annotations
 
-import argparse
 import hashlib
 import io
 import json
@@ -303,7 +302,9 @@ def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Pa
 
 
 def main(argv=None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    from scenarios.lang.cmdline import Parser
+
+    parser = Parser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=DEFAULT_OUT, help="output folder (default: dist/)")
     parser.add_argument("--sanitize", action="store_true",
                         help="compile the FMI guard with AddressSanitizer + UndefinedBehaviorSanitizer (for testing; "

@@ -143,7 +143,7 @@ def report(label: str, runs: list[dict], duration: float) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     ap.add_argument("--duration", type=float, default=10.0, help="simulated seconds per arm (default 10)")
     ap.add_argument("--fmu", default=None, help="the FMU (default: dist/, built if missing or stale)")
     ap.add_argument("--repeat", type=int, default=1, help="campaigns per worker count; the fastest counts")

@@ -293,7 +293,7 @@ def print_system_loop(res: dict[str, Any]) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     ap.add_argument("--duration", type=float, default=10.0, help="simulated seconds per closed-loop run")
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--fmu", default=None, help="FMU file (default: build one into a temp folder)")

@@ -201,7 +201,7 @@ def plot(runs: list[dict], path: Path) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--variant", default="plain", help=f"one of {', '.join(VARIANTS)}, or all")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1, 2, 3], help="network seeds")
     ap.add_argument("--duration", type=float, default=600.0, help="walk length, s")

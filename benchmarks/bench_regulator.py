@@ -281,7 +281,7 @@ def format_table(results: dict[str, tuple[float, float]], n_neurons: int,
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.splitlines()[0])
     ap.add_argument("--steps", type=int, default=3000, help="timed steps per path")
     ap.add_argument("--neurons", type=int, default=1000, help="neurons per network")
     ap.add_argument("--rounds", type=int, default=10, help="interleaving rounds")

@@ -237,7 +237,7 @@ def print_summary(res: dict[str, Any], jobs: int) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     ap.add_argument("targets", nargs="*", default=["all"], help="what `run` takes (default: all)")
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--duration", type=float, default=None, help="override every scenario's duration (quick run)")

@@ -13,3 +13,7 @@ class ModelError(PlantError):
 
 class PerturbationError(PlantError, ValueError):
     """A plant perturbation (mass, COM offset, damping, push, terrain) is invalid."""
+
+
+class GaitLibraryError(PlantError):
+    """The gait library file is missing, unreadable or malformed (the message names the file)."""

@@ -6,17 +6,24 @@ lateral offset, step width, torso pitch) found by ``python -m scenarios.gaits.ma
 on the nominal Menagerie model; the Bezier shapes are shared by all points.
 :meth:`GaitLibrary.lookup` interpolates bilinearly in (vx, vy) and clamps to the
 grid's range (commands outside it get the edge gait).
+
+The committed library is read once, when this module is imported (:meth:`GaitLibrary.default`
+hands out that copy): nothing reads the file at run time, because inside the pythonfmu
+CassiePlant FMU this module's folder is a host's extraction folder, which the host may delete
+while later instances still run (libcosim does when an execution ends).  A missing or
+unreadable library is an error naming the file (:class:`plant.errors.GaitLibraryError`), never
+a fallback to another gait.
 """
 from __future__ import annotations
 
 import bisect
 import json
-import logging
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
-log = logging.getLogger(__name__)
+from plant.errors import GaitLibraryError
 
+#: The committed library's file (read once, with the module: :data:`_DEFAULT`).
 DEFAULT_LIBRARY_PATH = Path(__file__).resolve().parent / "data" / "gait_library.json"
 #: GaitParams fields interpolated over the grid (the rest are shared shapes).
 NUMERIC_FIELDS = ("step_time_s", "leg_angle_offset_rad", "lateral_offset_rad",
@@ -72,11 +79,11 @@ class GaitLibrary:
 
     @classmethod
     def default(cls) -> "GaitLibrary":
-        """The committed library if present, else a single uncalibrated gait."""
-        if DEFAULT_LIBRARY_PATH.exists():
-            return cls.load(DEFAULT_LIBRARY_PATH)
-        log.warning("no gait library at %s; using the uncalibrated default gait", DEFAULT_LIBRARY_PATH)
-        return cls.uniform(GaitParams())
+        """The committed library as read when this module was imported; GaitLibraryError
+        naming the file if it could not be read then."""
+        if isinstance(_DEFAULT, GaitLibraryError):
+            raise GaitLibraryError(str(_DEFAULT))
+        return _DEFAULT
 
     @classmethod
     def uniform(cls, gait: GaitParams) -> "GaitLibrary":
@@ -84,7 +91,19 @@ class GaitLibrary:
 
     @classmethod
     def load(cls, path) -> "GaitLibrary":
-        raw = json.loads(Path(path).read_text())
+        """The library in the JSON file ``path``; GaitLibraryError naming the file if it is
+        missing, unreadable or malformed."""
+        try:
+            return cls._parse(json.loads(Path(path).read_text(encoding="utf-8")), path)
+        except GaitLibraryError:
+            raise
+        except OSError as exc:
+            raise GaitLibraryError(f"gait library {path}: cannot be read: {exc.strerror or exc}") from exc
+        except (ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise GaitLibraryError(f"gait library {path}: not a gait library ({type(exc).__name__}: {exc})") from exc
+
+    @classmethod
+    def _parse(cls, raw: dict, path) -> "GaitLibrary":
         base = GaitParams(**{k: tuple(v) if isinstance(v, list) else v for k, v in raw["base"].items()})
         vx, vy = tuple(raw["vx_grid"]), tuple(raw["vy_grid"])
         pts = {}
@@ -93,7 +112,7 @@ class GaitLibrary:
             pts[(i, j)] = replace(base, **{k: float(p[k]) for k in NUMERIC_FIELDS if k in p})
         missing = [(a, b) for a in range(len(vx)) for b in range(len(vy)) if (a, b) not in pts]
         if missing:
-            raise ValueError(f"gait library {path} misses grid points {missing}")
+            raise GaitLibraryError(f"gait library {path}: misses grid points {missing}")
         return cls(vx, vy, pts, base, raw.get("meta"))
 
     def save(self, path) -> None:
@@ -118,3 +137,14 @@ class GaitLibrary:
             vals[k] = ((1 - wx) * ((1 - wy) * f(i0, j0) + wy * f(i0, j1))
                        + wx * ((1 - wy) * f(i1, j0) + wy * f(i1, j1)))
         return replace(self.points[(i0, j0)], **vals)
+
+
+def _read_default() -> GaitLibrary | GaitLibraryError:
+    try:
+        return GaitLibrary.load(DEFAULT_LIBRARY_PATH)
+    except GaitLibraryError as exc:
+        return exc
+
+
+#: The committed library, read with the module (or why it could not be: raised by :meth:`GaitLibrary.default`).
+_DEFAULT = _read_default()

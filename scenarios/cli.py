@@ -33,6 +33,8 @@ invalid scenarios, arguments or results folder (nothing simulated), 3 with
 from __future__ import annotations
 
 import argparse
+
+from scenarios.lang.cmdline import Parser
 import logging
 import sys
 from pathlib import Path
@@ -73,7 +75,7 @@ def cmd_validate(args) -> int:
     loaded, problems = [], []
     for f in args.files:
         try:
-            loaded.append(spec.load_scenario(f))
+            loaded.append((f, spec.load_scenario(f)))
         except ScenarioError as exc:
             problems.append(str(exc))
     unique, clashes = spec.distinct(loaded)
@@ -104,7 +106,7 @@ def cmd_report(args) -> int:
 
 # --------------------------------------------------------------------------- parser
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="python -m scenarios",
+    p = Parser(prog="python -m scenarios",
                                 description="Closed-loop co-simulation scenarios: Cassie (MuJoCo) + the "
                                             "AdaptiveVelocityRegulator FMU.")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv: debug)")

@@ -5,7 +5,11 @@ Inside the FMU this module, the core and the plant package travel in
 ``resources/cassie_plant_lib/`` (``build.py`` copies them with package-relative imports) and
 are imported under a name private to the build (``fmu_src/packing/pack.py``): the host's
 own ``plant`` package, the regulator FMU's modules and other builds of this FMU never mix with
-them (pythonfmu issue #228).  The models are read from each instance's own resources folder.
+them (pythonfmu issue #228).  The models are read from each instance's own resources folder; the
+gait library was read into memory with the plant package, and an instance checks it has one
+when it is created (without one, fmi2Instantiate fails with the error naming the file): nothing
+is read later from a folder the host may have deleted since (libcosim deletes an execution's
+extraction when the execution ends, while the package loaded from it serves the next one).
 
 Statuses: the FMU's linux64 library is the FMI guard (``fmu_src/regulator_fmu/guard/``, built with this
 FMU's variable table and ``AVR_STEP_QUANTUM`` = 0.5 ms): calls the state machine forbids,
@@ -41,6 +45,7 @@ from fmu_src.core.avr_errors import StateError
 from fmu_src.fmi import avr_fmustate
 from fmu_src.fmi.avr_slavebase import STEP_COMPLETE, SpecSlave
 from fmu_src.plant_fmu import fmu_core
+from plant.gaits import GaitLibrary
 
 #: The folder in ``resources/`` that holds the plant package and the model files.
 LIB_DIR = "cassie_plant_lib"
@@ -60,6 +65,7 @@ class CassiePlant(SpecSlave):
         super().__init__(**kwargs)
         self._core = fmu_core
         self._walker = None
+        self._gaits = GaitLibrary.default()  # GaitLibraryError (instantiation fails) naming the file
         self._init_variables(self._core.SPECS)
 
     def _value_problem(self, spec, value) -> str | None:
@@ -84,7 +90,7 @@ class CassiePlant(SpecSlave):
 
     def _start_walker(self):
         params = {spec.name: self._values[spec.name] for spec in self._core.PARAM_SPECS}
-        return self._core.start(params, Path(self.resources) / LIB_DIR / "models")
+        return self._core.start(params, Path(self.resources) / LIB_DIR / "models", self._gaits)
 
     def do_step(self, current_time, step_size):
         problem = self._step_problem(current_time, step_size) or self._core.step_problem(step_size)

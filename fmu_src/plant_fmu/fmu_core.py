@@ -32,6 +32,7 @@ from fmu_src.core.avr_specs import VarSpec
 from fmu_src.core.avr_errors import StateError
 from plant.constants import NOMINAL_TORSO_MASS_KG, OFFSET_NAMES, SIDES
 from plant.errors import PerturbationError
+from plant.gaits import GaitLibrary
 from plant.model import load_model
 from plant.perturbation import (MAX_COM_OFFSET_M, MAX_DAMPING_SCALE, MAX_FLOOR_FRICTION, MAX_FLOOR_SLOPE_DEG,
                                 MAX_LINK_MASS_SCALE, MAX_TORSO_MASS_KG, Perturbation)
@@ -221,8 +222,9 @@ def problems(values: Mapping) -> list[str]:
 
 
 # ------------------------------------------------------------------------------ stepping
-def start(values: Mapping, models_dir: str | Path | None = None) -> CassieWalker:
-    """A walker at rest in the ``home`` pose for the parameter values.
+def start(values: Mapping, models_dir: str | Path | None = None, gaits: GaitLibrary | None = None) -> CassieWalker:
+    """A walker at rest in the ``home`` pose for the parameter values, walking on ``gaits``
+    (None: the committed library, :meth:`plant.gaits.GaitLibrary.default`).
 
     ``models_dir`` holds the :data:`MODEL_FILES` (the FMU's resources); None loads the
     models by name (``plant.model.load_model``).  PerturbationError lists every problem
@@ -235,7 +237,7 @@ def start(values: Mapping, models_dir: str | Path | None = None) -> CassieWalker
         raise err
     model = values["cassie_model"]
     source = model if models_dir is None else str(Path(models_dir) / MODEL_FILES[model])
-    walker = CassieWalker(load_model(source, perturbation_from_values(values)))
+    walker = CassieWalker(load_model(source, perturbation_from_values(values)), gaits=gaits)
     if walker.SIM_DT_S != PLANT_STEP_S:
         raise PerturbationError(f"model {model!r} has a {walker.SIM_DT_S} s step, the FMU needs {PLANT_STEP_S} s")
     return walker

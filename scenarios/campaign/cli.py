@@ -1,4 +1,5 @@
-"""``python -m scenarios campaign NAME|FILE --out DIR [--workers N | --scheduler ADDRESS] [--resume]``.
+"""``python -m scenarios campaign NAME|FILE --out DIR [--workers N [--dashboard-address HOST:PORT] |
+--scheduler ADDRESS | --scheduler-file FILE] [--resume]``.
 
 Validates the campaign and every sample before anything runs (exit 2 with every
 problem), claims DIR (exit 2 if it holds another campaign, or this one without
@@ -6,7 +7,8 @@ problem), claims DIR (exit 2 if it holds another campaign, or this one without
 ``DIR/campaign.csv``, then (with ``confirm_runs``) runs the confirmation stage in
 ``DIR/confirm``, writes ``DIR/campaign.md`` and prints the table per arm.
 Exit status: 0 every row complete (the stage's too); 1 some failed (they are in the CSV with the reason;
-``--resume`` runs them again); 2 invalid campaign, arguments or DIR; 130 interrupted.
+``--resume`` runs them again); 2 invalid campaign, arguments or DIR, or a scheduler that cannot be used
+(unreachable, not Dask, no worker; one line); 130 interrupted.
 """
 from __future__ import annotations
 
@@ -16,7 +18,7 @@ import sys
 from pathlib import Path
 
 from scenarios.errors import ScenarioError
-from scenarios.cosim.fmus import REGULATOR_FMUS
+from scenarios.cosim.fmus import REGULATOR_FMUS, fmu_file_problem
 from scenarios.run.options import CONTROLLERS, DEFAULT_CONTROLLER, DEFAULT_REGULATOR, resolve_regulator
 
 log = logging.getLogger("scenarios.campaign")
@@ -31,7 +33,14 @@ def add_parser(sub) -> None:
     where.add_argument("--workers", type=int, default=None,
                        help="local Dask worker processes, one thread each (default: the CPU count)")
     where.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                       help="an existing Dask scheduler (e.g. tcp://host:8786); workers need a shared file system")
+                       help="an existing Dask scheduler (tcp://host:8786, or tls://host:8786 with Dask's TLS "
+                            "configuration, distributed.comm.tls.*); workers need a shared file system")
+    where.add_argument("--scheduler-file", metavar="FILE", default=None,
+                       help="an existing Dask scheduler by its scheduler file (dask scheduler --scheduler-file, "
+                            "dask-jobqueue, dask-mpi)")
+    sp.add_argument("--dashboard-address", metavar="HOST:PORT", default=None,
+                    help="where the local cluster's Dask dashboard listens (default 127.0.0.1 and a free port: "
+                         "this machine only; e.g. 0.0.0.0:8787 exposes it to the network)")
     sp.add_argument("--resume", action="store_true", help="continue the campaign in --out (skips complete samples)")
     sp.add_argument("--regulator", choices=(*REGULATOR_FMUS, "inprocess"), default=None,
                     help=f"as for run (default: the kind of the --fmu file, else {DEFAULT_REGULATOR}; every path "
@@ -62,6 +71,12 @@ def _check_args(args) -> list[str]:
         problems.append(f"--task-timeout {args.task_timeout:g}: must be within (0, {MAX_TASK_TIMEOUT_S:g}] s")
     if args.retries is not None and not 0 <= args.retries <= 10:
         problems.append(f"--retries {args.retries}: must be within [0, 10]")
+    if args.scheduler_file is not None:
+        from scenarios.campaign.execute import scheduler_file_problem
+
+        problems += filter(None, [scheduler_file_problem(args.scheduler_file)])
+    if args.dashboard_address is not None:
+        problems += filter(None, [_dashboard_problem(args)])
     if args.seed is not None and not 0 <= args.seed <= 2**63 - 1:
         problems.append(f"--seed {args.seed}: must be within [0, {2**63 - 1}]")
     if args.controller == "native":
@@ -69,13 +84,23 @@ def _check_args(args) -> list[str]:
 
         problems += filter(None, [controller_problem()])
     if args.fmu is not None and not Path(args.fmu).is_file():
-        problems.append(f"--fmu {args.fmu}: no such file")
+        problems.append(fmu_file_problem("--fmu", args.fmu))
     elif args.fmu is not None and args.regulator in REGULATOR_FMUS:
         from scenarios.cosim.fmus import fmu_role_problem, fmu_version_problem
 
         problems += filter(None, [fmu_version_problem(args.regulator, Path(args.fmu))
                                   or fmu_role_problem("--fmu", Path(args.fmu), "regulator")])
     return problems
+
+
+def _dashboard_problem(args) -> str | None:
+    flag = f"--dashboard-address {args.dashboard_address}"
+    if args.scheduler or args.scheduler_file:
+        return f"{flag}: only for the local cluster (an existing scheduler has its own dashboard)"
+    host, sep, port = args.dashboard_address.rpartition(":")
+    if not sep or not port.isdigit() or not 0 <= int(port) <= 65535:
+        return f"{flag}: must be HOST:PORT with a port in [0, 65535] (0: a free port), e.g. 127.0.0.1:8787"
+    return None
 
 
 def _print_samples(samples, factor_names) -> None:
@@ -114,6 +139,17 @@ def cmd_campaign(args) -> int:
     if args.dry_run:
         _print_samples(samples, names)
         return 0
+    where = {"scheduler": args.scheduler, "scheduler_file": args.scheduler_file}
+    if args.dashboard_address is not None:
+        where["dashboard_address"] = args.dashboard_address
+    opts = execute.RunOptions(workers=args.workers, **where, regulator=args.regulator, controller=args.controller,
+                              fmu=None, timeout_s=args.task_timeout, retries=args.retries, fork_runs=args.fork_runs)
+    if args.scheduler or args.scheduler_file:
+        try:  # before the folder is claimed: a wrong address leaves nothing behind
+            execute.check_scheduler(opts)
+        except execute.ConnectionFailed as exc:
+            print(f"campaign {campaign.name}: {exc}", file=sys.stderr)
+            return 2
     out = Path(args.out) if args.out else Path("runs") / campaign.name
     cdir = CampaignDir(out, campaign.name, texts, campaign.arm_names(), names, campaign.analysis_settings())
     try:
@@ -132,10 +168,7 @@ def cmd_campaign(args) -> int:
             return 1
         if not _controller_ready(args):
             return 1
-        opts = execute.RunOptions(workers=args.workers, scheduler=args.scheduler, regulator=args.regulator,
-                                  controller=args.controller,
-                                  fmu=fmu, timeout_s=args.task_timeout, retries=args.retries,
-                                  fork_runs=args.fork_runs)
+        opts = dataclasses.replace(opts, fmu=fmu)
         execute.run(campaign, cdir, values, opts, fmu)
         cdir.finish()
         stage_ok = not campaign.confirm_runs or _run_confirmation(campaign, out, opts, fmu)
@@ -145,7 +178,10 @@ def cmd_campaign(args) -> int:
               f"{getattr(exc, 'csv_path', cdir.csv_path)}, {exc.remaining} not run; continue with: "
               f"python -m scenarios campaign {args.campaign} --out {out}{seed} --resume", file=sys.stderr)
         return 130
-    except OSError as exc:  # e.g. the scheduler address cannot be reached
+    except execute.ConnectionFailed as exc:
+        print(f"campaign {campaign.name}: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
         print(f"campaign {campaign.name}: {type(exc).__name__}: {exc}", file=sys.stderr)
         return 1
     finally:

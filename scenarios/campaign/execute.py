@@ -9,9 +9,20 @@ cluster; an existing scheduler keeps its own setting) and a task whose run proce
 killed likewise (Dask's ``retries=``); after that it is recorded as failed with the
 reason.
 
-With ``--scheduler`` the workers must see the campaign folder, the repository and the
-FMU at the same paths as the client (a shared file system) and run the same
-environment.
+The local cluster binds everything it opens (scheduler, nannies, workers, dashboard) to
+127.0.0.1 (:data:`LOCAL_HOST`): nothing of a local campaign is reachable from the network;
+``dashboard_address`` (``--dashboard-address``) exposes the dashboard on purpose.  The
+dashboard's URL is printed when the cluster is up.
+
+An existing scheduler is given by address (``--scheduler tcp://HOST:PORT`` or
+``tls://HOST:PORT``) or by Dask's scheduler file (``--scheduler-file FILE``, as written by
+``dask scheduler --scheduler-file``, dask-jobqueue or dask-mpi).  The connection uses Dask's own
+configuration: TLS credentials from ``distributed.comm.tls.*`` (e.g.
+``DASK_DISTRIBUTED__COMM__TLS__CA_FILE``, ``..._CLIENT__CERT``, ``..._CLIENT__KEY``), the connect
+timeout from ``distributed.comm.timeouts.connect``.  A scheduler that cannot be reached, is not
+a Dask scheduler or has no worker is :class:`ConnectionFailed` (one line).  The workers must see
+the campaign folder, the repository and the FMU at the same paths as the client (a shared file
+system) and run the same environment.
 """
 from __future__ import annotations
 
@@ -35,6 +46,15 @@ from scenarios.run.options import DEFAULT_CONTROLLER, DEFAULT_REGULATOR
 log = logging.getLogger(__name__)
 
 WORKER_WAIT_S = 60.0  # an existing scheduler must have a worker within this time
+#: Where the local cluster listens: this machine only.
+LOCAL_HOST = "127.0.0.1"
+#: The local cluster's dashboard: this machine, a free port (``--dashboard-address`` exposes it).
+DEFAULT_DASHBOARD = f"{LOCAL_HOST}:0"
+
+
+class ConnectionFailed(Exception):
+    """The scheduler given cannot be used (unreachable, not a Dask scheduler, no worker); one line
+    naming the option and the address."""
 
 
 class CampaignInterrupted(Exception):
@@ -49,6 +69,8 @@ class CampaignInterrupted(Exception):
 class RunOptions:
     workers: int | None = None  # LocalCluster size (default: CPU count)
     scheduler: str | None = None  # or an existing scheduler's address
+    scheduler_file: str | None = None  # or Dask's scheduler file of one
+    dashboard_address: str = DEFAULT_DASHBOARD  # the local cluster's dashboard
     regulator: str = DEFAULT_REGULATOR
     controller: str = DEFAULT_CONTROLLER
     fmu: str | None = None
@@ -106,21 +128,114 @@ def _quiet_dask() -> Iterator[None]:
         dlog.setLevel(old)
 
 
+def scheduler_file_problem(path: str | Path) -> str | None:
+    """What is wrong with ``--scheduler-file path`` (Dask's JSON file with the scheduler's
+    ``address``), or None."""
+    import json
+
+    flag = f"--scheduler-file {path}"
+    if Path(path).is_dir():
+        return f"{flag}: is a folder, not a Dask scheduler file"
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except OSError as exc:
+        return f"{flag}: cannot read: {exc.strerror or exc}"
+    except ValueError as exc:
+        return f"{flag}: not a Dask scheduler file (JSON with the scheduler's address): {exc}"
+    if not isinstance(doc, dict) or not isinstance(doc.get("address"), str):
+        return f"{flag}: not a Dask scheduler file: no \"address\""
+    return None
+
+
+def _one_line(exc: BaseException) -> str:
+    text = str(exc).strip()
+    return f"{type(exc).__name__}: {text.splitlines()[0]}" if text else type(exc).__name__
+
+
+def _where(opts: RunOptions) -> str:
+    return f"--scheduler-file {opts.scheduler_file}" if opts.scheduler_file else f"--scheduler {opts.scheduler}"
+
+
+async def _identity(address: str, timeout_s: float) -> Any:
+    """What the server at ``address`` says it is (Dask's ``identity`` call), with Dask's security
+    configuration (``distributed.comm.tls.*``)."""
+    import asyncio
+
+    from distributed.comm import connect
+    from distributed.security import Security
+
+    comm = await connect(address, timeout=timeout_s, **Security().get_connection_args("client"))
+    try:
+        await comm.write({"op": "identity", "reply": True})
+        return await asyncio.wait_for(comm.read(), timeout_s)
+    finally:
+        comm.abort()
+
+
+def check_scheduler(opts: RunOptions) -> None:
+    """ConnectionFailed (one line) unless the scheduler of ``opts`` (``scheduler`` or
+    ``scheduler_file``) answers as a Dask scheduler within Dask's connect timeout
+    (``distributed.comm.timeouts.connect``).  A ``distributed.Client`` waits forever on a server
+    that accepts the connection but never answers as Dask does (e.g. an HTTP server)."""
+    import asyncio
+    import json
+
+    import dask
+    from dask.utils import parse_timedelta
+
+    timeout_s = parse_timedelta(dask.config.get("distributed.comm.timeouts.connect"), "s")
+    address = opts.scheduler
+    if opts.scheduler_file:
+        problem = scheduler_file_problem(opts.scheduler_file)
+        if problem:
+            raise ConnectionFailed(problem)
+        address = json.loads(Path(opts.scheduler_file).read_text(encoding="utf-8"))["address"]
+    try:
+        reply = asyncio.run(asyncio.wait_for(_identity(address, timeout_s), 2 * timeout_s))
+    except asyncio.TimeoutError:
+        raise ConnectionFailed(f"{_where(opts)}: {address} gave no Dask answer within {2 * timeout_s:g} s "
+                               "(not a Dask scheduler?)") from None
+    except Exception as exc:  # noqa: BLE001 - unreachable, refused, not Dask, TLS: all one line
+        raise ConnectionFailed(f"{_where(opts)}: cannot connect to a Dask scheduler at {address}: "
+                               f"{_one_line(exc)}") from None
+    kind = reply.get("type") if isinstance(reply, dict) else type(reply).__name__
+    if kind != "Scheduler":
+        raise ConnectionFailed(f"{_where(opts)}: {address} is not a Dask scheduler (it answers as {kind})")
+
+
+def _connect(opts: RunOptions) -> Any:
+    """A Client on the existing scheduler with a worker; ConnectionFailed (one line) otherwise."""
+    from distributed import Client
+
+    check_scheduler(opts)
+    where = _where(opts)
+    try:  # security and the connect timeout: Dask's configuration (distributed.comm.*)
+        client = Client(opts.scheduler, scheduler_file=opts.scheduler_file)
+    except Exception as exc:  # noqa: BLE001
+        raise ConnectionFailed(f"{where}: cannot connect to a Dask scheduler: {_one_line(exc)}") from None
+    try:
+        client.wait_for_workers(1, timeout=WORKER_WAIT_S)
+    except Exception as exc:  # noqa: BLE001
+        client.close(timeout=10)
+        raise ConnectionFailed(f"{where}: no worker joined the scheduler within {WORKER_WAIT_S:g} s "
+                               f"({_one_line(exc)})") from None
+    return client
+
+
 @contextlib.contextmanager
 def open_client(opts: RunOptions, cdir: CampaignDir, retries: int) -> Iterator[Any]:
-    """A ``distributed.Client`` on a new LocalCluster or on ``opts.scheduler``; closed on exit."""
+    """A ``distributed.Client`` on a new LocalCluster or on the scheduler of ``opts``; closed on exit."""
     import dask
     from distributed import Client, LocalCluster
 
-    settings = {"temporary-directory": str(cdir.dask_dir), "distributed.scheduler.allowed-failures": retries,
+    settings = {"temporary-directory": str(cdir.dask_dir.resolve()), "distributed.scheduler.allowed-failures": retries,
                 "distributed.scheduler.worker-saturation": 1.0}  # queued tasks: see submit_and_collect
-    with dask.config.set(settings), _scratch_env(cdir.tmp_dir), _quiet_dask():
-        if opts.scheduler:
-            client = Client(opts.scheduler, timeout="30s")
+    with dask.config.set(settings), _scratch_env(cdir.tmp_dir.resolve()), _quiet_dask():
+        if opts.scheduler or opts.scheduler_file:
+            client = _connect(opts)
             try:
-                client.wait_for_workers(1, timeout=WORKER_WAIT_S)
                 log.info("scheduler %s: %d worker(s); its own allowed-failures applies to worker deaths",
-                         opts.scheduler, len(client.scheduler_info()["workers"]))
+                         client.scheduler.address, len(client.scheduler_info()["workers"]))
                 yield client
             finally:
                 client.close(timeout=10)
@@ -129,10 +244,12 @@ def open_client(opts: RunOptions, cdir: CampaignDir, retries: int) -> Iterator[A
         # the worker processes inherit an ignored SIGINT: a Ctrl-C on the terminal reaches the
         # whole process group, but only this process acts on it (and closes the cluster)
         with _signal(signal.SIGINT, signal.SIG_IGN):
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                   local_directory=str(cdir.dask_dir), silence_logs=logging.ERROR)
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=LOCAL_HOST,
+                                   dashboard_address=opts.dashboard_address,
+                                   local_directory=str(cdir.dask_dir.resolve()), silence_logs=logging.ERROR)
         try:
             client = Client(cluster)
+            print(f"Dask dashboard: {client.dashboard_link}", file=sys.stderr)
             try:
                 yield client
             finally:

@@ -115,6 +115,26 @@ def _role_variables(role: str) -> tuple[str, dict[str, tuple[str, ...]]]:
                                                            "output": tuple(OFFSET_NAMES)}
 
 
+def fmu_file_problem(flag: str, fmu: Path | None, role: str | None = None) -> str | None:
+    """What is wrong with the FMU file given as ``flag`` (None: not given, nothing): missing, a
+    folder, unreadable, or (with ``role``) not a model for that role (:func:`fmu_role_problem`)."""
+    if fmu is None:
+        return None
+    if Path(fmu).is_dir():
+        return f"{flag} {fmu}: is a folder, not an FMU file"
+    if not Path(fmu).is_file():
+        return f"{flag} {fmu}: no such file"
+    if role is not None:
+        return fmu_role_problem(flag, Path(fmu), role)
+    from fmpy import read_model_description
+
+    try:
+        read_model_description(str(fmu))
+    except Exception as exc:
+        return f"{flag} {fmu}: not a readable FMU ({type(exc).__name__}: {exc})"
+    return None
+
+
 def fmu_role_problem(flag: str, fmu: Path, role: str) -> str | None:
     """What is wrong with running ``fmu`` (given as ``flag``) as the ``role`` (``regulator``
     or ``plant``): an unreadable file, or a model without the inputs and outputs the

@@ -27,6 +27,8 @@ Writes ``plant/data/gait_library.json`` (or ``--out``).  Options: ``--source``
 from __future__ import annotations
 
 import argparse
+
+from scenarios.lang.cmdline import Parser
 import logging
 import math
 import time
@@ -257,7 +259,7 @@ def verify(model_fn, lib: GaitLibrary, duration_s: float) -> list[dict]:
 
 
 def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = Parser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--source", default="menagerie")
     ap.add_argument("--iterations", type=int, default=6)
     ap.add_argument("--duration", type=float, default=16.0)

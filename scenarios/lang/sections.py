@@ -93,8 +93,9 @@ class Grid:
             probs.add(field, t, f"must be < duration_s = {self.duration:g}")
 
 
-def resolve_model(model: str, base_dir: Path | None, probs: Problems | None = None) -> str:
-    """``menagerie``/``osu`` as they are; a path resolved against the scenario's folder."""
+def resolve_model(model: str, base_dir: Path | None, probs: Problems | None = None, field: str = "model") -> str:
+    """``menagerie``/``osu`` as they are; a path resolved against the scenario's folder (problems
+    noted under ``field``)."""
     if model in BUILTIN_MODELS:
         return model
     path = Path(model).expanduser()
@@ -102,11 +103,11 @@ def resolve_model(model: str, base_dir: Path | None, probs: Problems | None = No
         path = base_dir / path
     if not path.exists():
         if probs is not None:
-            probs.add("model", model, f"must be one of {', '.join(BUILTIN_MODELS)} or an existing MJCF (.xml) path")
+            probs.add(field, model, f"must be one of {', '.join(BUILTIN_MODELS)} or an existing MJCF (.xml) path")
         return model
     if path.suffix.lower() != ".xml":
         if probs is not None:
-            probs.add("model", model, "a model path must be an MJCF .xml file")
+            probs.add(field, model, "a model path must be an MJCF .xml file")
     return str(path.resolve())
 
 

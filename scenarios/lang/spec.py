@@ -141,12 +141,29 @@ def _check_plant(scenario: Scenario, probs: Problems) -> None:
         probs.note(field, problem)
 
 
+def override_problems(*, model: str | None = None, duration_s: float | None = None,
+                      base_dir: Path | None = None) -> list[str]:
+    """The problems of the command-line values ``--model`` and ``--duration`` themselves, named by
+    their flags: whatever the scenario, so a command reports them once, not under each file."""
+    probs = Problems()
+    if model is not None:
+        resolve_model(model, base_dir or Path.cwd(), probs, field="--model")
+    if duration_s is not None:
+        number({"duration_s": duration_s}, "duration_s", "--duration", probs, gt=0.0, le=sections.MAX_DURATION_S)
+    return probs.items
+
+
 def override(scenario: Scenario, *, model: str | None = None, duration_s: float | None = None,
              profile: str | None = None, base_dir: Path | None = None, check_plant: bool = True) -> Scenario:
     """The scenario with another model, duration and/or regulator profile (CLI flags), re-checked
     (a new model is compiled and checked as in :func:`parse_scenario` unless ``check_plant`` is
     false).  ``profile``: every regulator arm starts from that profile's values
-    (``fmu_src.core.avr_profiles``) instead of the FMU's defaults; the file's own values stay on top."""
+    (``fmu_src.core.avr_profiles``) instead of the FMU's defaults; the file's own values stay on top.
+    ScenarioError without a source for a bad value (:func:`override_problems`), with the
+    scenario's source for what the value does to this scenario (its grid, its plant)."""
+    found = override_problems(model=model, duration_s=duration_s, base_dir=base_dir)
+    if found:
+        raise ScenarioError(found)
     probs = Problems()
     changes: dict[str, Any] = {}
     if profile is not None:
@@ -154,12 +171,10 @@ def override(scenario: Scenario, *, model: str | None = None, duration_s: float 
         if arms is not None:
             changes["arms"] = arms
     if model is not None:
-        changes["model"] = resolve_model(model, base_dir or Path.cwd(), probs)
+        changes["model"] = resolve_model(model, base_dir or Path.cwd())
     if duration_s is not None:
-        d = number({"duration_s": duration_s}, "duration_s", "--duration", probs, gt=0.0,
-                   le=sections.MAX_DURATION_S)
-        sections.Grid(scenario.comm_step_s, True, d).check_span(d, "--duration", probs)
-        changes["duration_s"] = d
+        sections.Grid(scenario.comm_step_s, True, float(duration_s)).check_span(float(duration_s), "--duration", probs)
+        changes["duration_s"] = float(duration_s)
     if not probs.items and changes:
         scenario = dataclasses.replace(scenario, **changes)
         if check_plant and model is not None:
@@ -192,23 +207,26 @@ def load_suite(*, check_plant: bool = True) -> list[Scenario]:
         stem = Path(s.source).stem
         if s.name != stem:
             problems.append(f"{Path(s.source).name}: name = {s.name!r}: must equal the file name ({stem!r})")
-    scenarios, clashes = distinct(scenarios)
+    scenarios, clashes = distinct([(s.source, s) for s in scenarios])
     if problems or clashes:
         raise ScenarioError(problems + clashes, source=str(SUITE_DIR))
     return scenarios
 
 
-def distinct(scenarios: list[Scenario]) -> tuple[list[Scenario], list[str]]:
-    """Each scenario once (one file named twice runs once), and a problem for every name
-    that two different files share (the name is the output folder: one would be lost)."""
-    first: dict[str, Scenario] = {}
+def distinct(named: list[tuple[str, Scenario]]) -> tuple[list[Scenario], list[str]]:
+    """The scenarios of ``named`` ((target as given, scenario) pairs) and a problem for every
+    scenario named twice (the same file, suite name, or one inside ``all``/``paper`` and named
+    again: it would run twice into one output folder) and for every name two different files
+    share (the name is the output folder: one would be lost)."""
+    first: dict[str, tuple[int, str, Scenario]] = {}
     unique, problems = [], []
-    for s in scenarios:
-        other = first.setdefault(s.name, s)
-        if other is s:
+    for i, (target, s) in enumerate(named):
+        j, other_target, other = first.setdefault(s.name, (i, target, s))
+        if j == i:
             unique.append(s)
-        elif _same_file(other.source, s.source):
-            continue
+        elif other is s or _same_file(other.source, s.source):
+            by = f"{other_target!r} and {target!r}" if other_target != target else f"{target!r} twice"
+            problems.append(f"{s.name!r}: named twice on the command line (by {by}); name each scenario once")
         else:
             problems.append(f"name = {s.name!r}: in both {other.source} and {s.source}; scenario names must be "
                             "unique (each names its output folder)")
@@ -224,16 +242,16 @@ def _same_file(a: str | None, b: str | None) -> bool:
 
 def resolve_targets(targets: list[str], *, check_plant: bool = True) -> list[Scenario]:
     """``all``, ``paper``, a suite scenario name, or a path to a scenario file; every
-    scenario once. ScenarioError lists every problem (invalid files, unknown names, two
-    files with one name)."""
-    out: list[Scenario] = []
+    scenario once. ScenarioError lists every problem (invalid files, unknown names, a
+    scenario named twice, two files with one name)."""
+    out: list[tuple[str, Scenario]] = []
     problems: list[str] = []
     suite: list[Scenario] | None = None
     for t in targets:
         p = Path(t)
         if t.endswith(".toml") or p.exists():
             try:
-                out.append(load_scenario(p, check_plant=check_plant))
+                out.append((t, load_scenario(p, check_plant=check_plant)))
             except ScenarioError as exc:
                 problems.extend(f"{t}: {q}" for q in exc.problems)
             continue
@@ -244,13 +262,13 @@ def resolve_targets(targets: list[str], *, check_plant: bool = True) -> list[Sce
                 problems.extend(f"suite: {q}" for q in exc.problems)
                 suite = []
         if t == "all":
-            out.extend(suite)
+            out.extend((t, s) for s in suite)
         elif t == "paper":
-            out.extend(s for s in suite if "paper" in s.tags)
+            out.extend((t, s) for s in suite if "paper" in s.tags)
         else:
             match = [s for s in suite if s.name == t]
             if match:
-                out.extend(match)
+                out.extend((t, s) for s in match)
             elif suite or not problems:
                 names = [s.name for s in suite] + ["all", "paper"]
                 hint = did_you_mean(t, names, "", cutoff=TARGET_HINT_CUTOFF)

@@ -17,7 +17,6 @@ settings, curve, wall time) and a training-curve plot beside it (``--plot``).
 """
 from __future__ import annotations
 
-import argparse
 import logging
 import math
 import multiprocessing
@@ -27,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from scenarios.lang.cmdline import Parser
 from scenarios.rl_hzd.policy import DEFAULT_POLICY, FEATURE_NAMES, HzdPolicy, save_policy
 from plant.constants import OFFSET_NAMES
 
@@ -160,7 +160,7 @@ def plot_curve(curve: list[dict], path: Path) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m scenarios.rl_hzd.train", description=__doc__.split("\n")[0])
+    ap = Parser(prog="python -m scenarios.rl_hzd.train", description=__doc__.split("\n")[0])
     for f in ArsSettings.__dataclass_fields__.values():
         ap.add_argument("--" + f.name.replace("_", "-"), type=type(f.default), default=f.default)
     ap.add_argument("--workers", type=int, default=2)

@@ -9,6 +9,8 @@ and the results folder before anything is simulated, every problem named at once
 from __future__ import annotations
 
 import argparse
+
+from scenarios.lang.cmdline import Parser
 import logging
 import sys
 from pathlib import Path
@@ -75,7 +77,7 @@ def add_parser(sub) -> None:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """``run`` alone: ``argv`` holds its arguments (``-v`` for more log output), not the word ``run``."""
-    p = argparse.ArgumentParser(prog="python -m scenarios run")
+    p = Parser(prog="python -m scenarios run")
     p.add_argument("-v", "--verbose", action="count", default=0, help="more log output (-vv: debug)")
     add_arguments(p)
     args = p.parse_args(argv)
@@ -129,7 +131,10 @@ def _targets(options: RunOptions) -> tuple[list, list[str]]:
         return [], [str(exc)]
     if options.model is None and options.duration_s is None and options.profile is None:
         return scenarios, []
-    out, problems = [], []
+    problems = spec.override_problems(model=options.model, duration_s=options.duration_s)
+    if problems:  # the values themselves: once, as command-line errors
+        return scenarios, problems
+    out = []
     for s in scenarios:
         try:
             out.append(spec.override(s, model=options.model, duration_s=options.duration_s, profile=options.profile))

@@ -10,7 +10,8 @@ from pathlib import Path
 
 from fmu_src.packing.archive import sha256_of
 from plant.constants import CONTROLLERS
-from scenarios.cosim.fmus import REGULATOR_FMUS, fmu_role_problem, fmu_version_problem, regulator_kind
+from scenarios.cosim.fmus import (REGULATOR_FMUS, fmu_file_problem, fmu_role_problem, fmu_version_problem,
+                                  regulator_kind)
 
 #: ``--regulator``: an FMU kind (:data:`scenarios.cosim.fmus.REGULATOR_FMUS`) or the core in-process.
 REGULATORS = (*REGULATOR_FMUS, "inprocess")
@@ -94,15 +95,12 @@ class RunOptions:
         elif self.controller == "native":
             found += filter(None, [controller_problem()])
         if self.fmu is not None and not Path(self.fmu).is_file():
-            found.append(f"--fmu {self.fmu}: no such file")
+            found.append(fmu_file_problem("--fmu", self.fmu))
         elif self.fmu is not None and self.regulator in REGULATOR_FMUS:
             found += filter(None, [fmu_version_problem(self.regulator, Path(self.fmu))
                                    or fmu_role_problem("--fmu", Path(self.fmu), "regulator")])
         if self.plant == "fmu":
-            if self.plant_fmu is not None and not Path(self.plant_fmu).is_file():
-                found.append(f"--plant-fmu {self.plant_fmu}: no such file")
-            elif self.plant_fmu is not None:
-                found += filter(None, [fmu_role_problem("--plant-fmu", Path(self.plant_fmu), "plant")])
+            found += filter(None, [fmu_file_problem("--plant-fmu", self.plant_fmu, "plant")])
         return found
 
     def with_fmus(self, fmu: Path | None, plant_fmu: Path | None) -> "RunOptions":

@@ -129,14 +129,20 @@ def cmd_export_ssp(args) -> int:
 
     from scenarios.lang import spec
     from scenarios.errors import ScenarioError
-    from scenarios.cosim.fmus import ensure_fmu, ensure_plant_fmu
+    from scenarios.cosim.fmus import ensure_fmu, ensure_plant_fmu, fmu_file_problem
 
+    given = [p for p in (fmu_file_problem("--fmu", args.fmu, "regulator"),
+                         fmu_file_problem("--plant-fmu", args.plant_fmu, "plant"),
+                         fmu_file_problem("--command-fmu", args.command_fmu)) if p]
     try:
         (scenario,) = spec.resolve_targets([args.scenario])
         if args.profile is not None:
             scenario = spec.override(scenario, profile=args.profile)
     except ScenarioError as exc:
-        print(str(exc), file=sys.stderr)
+        print("\n".join([str(exc), *given]), file=sys.stderr)
+        return 2
+    if given:
+        print("\n".join(given), file=sys.stderr)
         return 2
     arm = args.arm or scenario.arms[0].name
     found = problems(scenario, arm)

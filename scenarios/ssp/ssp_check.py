@@ -413,14 +413,27 @@ def check_ssp(path: str | Path) -> list[Problem]:
 
 
 def main(argv=None) -> int:
-    args = sys.argv[1:] if argv is None else argv
-    if len(args) != 1:
-        print("usage: python -m scenarios.ssp.ssp_check FILE.ssp", file=sys.stderr)
+    """Exit 0 without problems, 1 with problems (one line each), 2 when FILE is not a readable SSP archive."""
+    from scenarios.lang.cmdline import Parser
+
+    parser = Parser(prog="python -m scenarios.ssp.ssp_check",
+                    description="Check an SSP 1.0 archive against the SSP schemas and rules")
+    parser.add_argument("file", metavar="FILE.ssp")
+    path = parser.parse_args(argv).file
+    try:
+        problems = check_ssp(path)
+    except IsADirectoryError:
+        print(f"{path}: is a folder, not an SSP archive", file=sys.stderr)
         return 2
-    problems = check_ssp(args[0])
+    except OSError as exc:
+        print(f"{path}: cannot read: {exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except zipfile.BadZipFile as exc:
+        print(f"{path}: not an SSP archive (a zip file): {exc}", file=sys.stderr)
+        return 2
     for problem in problems:
         print(problem)
-    print(f"{args[0]}: {len(problems)} problem(s)")
+    print(f"{path}: {len(problems)} problem(s)")
     return 1 if problems else 0
 
 

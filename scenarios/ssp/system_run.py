@@ -353,7 +353,7 @@ def build_container(ssp: str | Path, out: str | Path, *, sequential: bool = Fals
     import subprocess
     import tempfile
 
-    out = Path(out)
+    out = Path(out).resolve()  # fmucontainer runs in the temporary folder: every path it gets is absolute
     description, blobs = container_description(ssp, sequential=sequential, name=out.name)
     with tempfile.TemporaryDirectory(prefix="container_", dir=out.parent) as tmp:
         folder = Path(tmp)

@@ -97,8 +97,8 @@ def test_two_files_with_one_name_refused_naming_both(tmp_path, capsys):
     assert not out.exists()
     rc, _, err = cli(capsys, "validate", a, b)
     assert rc == 2 and str(a) in err and str(b) in err, err
-    rc, _, err = cli(capsys, "run", a, a, "--out", out, "--regulator", "inprocess")  # one file twice: runs once
-    assert rc == 0, err
+    rc, _, err = cli(capsys, "run", a, a, "--out", out, "--regulator", "inprocess")  # one file twice: refused
+    assert rc == 2 and "'same': named twice on the command line" in err and not out.exists(), err
 
 
 def test_scenario_folder_taken_by_a_file_refused_before_simulating(tmp_path, capsys):
