@@ -1,7 +1,10 @@
 """Robustness campaigns: many sampled scenarios x arms, run on Dask, one CSV of results.
 
 - :mod:`scenarios.campaign.spec`: campaign files (TOML) -> a validated :class:`Campaign`
-  (base scenario, factors with their distributions, sample count, seed);
+  (base scenario, factors with their distributions, sample count, seed; ``extends`` and
+  ``[variants]`` resolved);
+- :mod:`scenarios.campaign.catalog`: the built-in campaign files and their variants (tomllib
+  only: the command line's help lists them);
 - :mod:`scenarios.campaign.sampling`: the seeded draws (uniform, randint, choice, grid,
   Latin hypercube) and the concrete scenario document of each sample;
 - :mod:`scenarios.campaign.tomlw`: the small TOML writer for those documents;

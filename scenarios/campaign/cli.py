@@ -1,4 +1,4 @@
-"""``python -m scenarios campaign NAME|FILE --out DIR [--workers N [--dashboard-address HOST:PORT] |
+"""``python -m scenarios campaign NAME|FILE [--variant V] --out DIR [--workers N [--dashboard-address HOST:PORT] |
 --scheduler ADDRESS | --scheduler-file FILE] [--resume]``.
 
 Validates the campaign and every sample before anything runs (exit 2 with every
@@ -26,8 +26,13 @@ log = logging.getLogger("scenarios.campaign")
 
 def add_parser(sub) -> None:
     """Register the ``campaign`` subcommand on the ``python -m scenarios`` parser."""
+    from scenarios.campaign.catalog import listing
+
     sp = sub.add_parser("campaign", help="run a robustness campaign (sampled scenarios x arms) on Dask")
-    sp.add_argument("campaign", metavar="NAME|FILE", help="a built-in campaign (robustness, smoke) or a file")
+    sp.add_argument("campaign", metavar="NAME|FILE", help=f"a built-in campaign ({listing()}) or a campaign file")
+    sp.add_argument("--variant", metavar="NAME", default=None,
+                    help="one of the campaign's [variants] (listed above for the built-in ones; default: the file's "
+                         "default_variant); the campaign is then named <campaign>_<variant>")
     sp.add_argument("--out", default=None, help="campaign folder (default: runs/<campaign name>)")
     where = sp.add_mutually_exclusive_group()
     where.add_argument("--workers", type=int, default=None,
@@ -125,7 +130,7 @@ def cmd_campaign(args) -> int:
                         "(or pip install 'dask[distributed]')")
     try:
         path = spec.resolve_campaign(args.campaign)
-        campaign = spec.load_campaign(path)
+        campaign = spec.load_campaign(path, variant=args.variant)
         if args.seed is not None and not problems:
             campaign = dataclasses.replace(campaign, seed=args.seed)
         samples = sampling.draw(campaign)
@@ -173,10 +178,11 @@ def cmd_campaign(args) -> int:
         cdir.finish()
         stage_ok = not campaign.confirm_runs or _run_confirmation(campaign, out, opts, fmu)
     except execute.CampaignInterrupted as exc:
+        variant = "" if args.variant is None else f" --variant {args.variant}"
         seed = "" if args.seed is None else f" --seed {args.seed}"
         print(f"interrupted: {exc.done} sample(s) finished in this run and are in "
               f"{getattr(exc, 'csv_path', cdir.csv_path)}, {exc.remaining} not run; continue with: "
-              f"python -m scenarios campaign {args.campaign} --out {out}{seed} --resume", file=sys.stderr)
+              f"python -m scenarios campaign {args.campaign}{variant} --out {out}{seed} --resume", file=sys.stderr)
         return 130
     except execute.ConnectionFailed as exc:
         print(f"campaign {campaign.name}: {exc}", file=sys.stderr)

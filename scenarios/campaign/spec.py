@@ -4,13 +4,14 @@ Layout (every key below is known; anything else is an error)::
 
     name = "robustness"             # [a-z0-9][a-z0-9_-]*
     description = "..."
-    extends = "robustness_random"   # optional: a built-in campaign or a campaign file
+    extends = "robustness"          # optional: a built-in campaign or a campaign file
                                     # (relative to this file) this one is laid over: its
                                     # tables merge key by key (a factor's table, one with
                                     # dist, replaces the parent's whole), any other value
                                     # and every array replace; name is then required
     drop = ["replicas", "base.arm"] # optional, with extends: the parent's keys (dotted
                                     # paths) removed before this file is laid over
+    default_variant = "ramp"        # with [variants]: the variant run without --variant
     base = "nominal"                # a suite scenario name, a scenario file (relative to
                                     # this file), or an inline [base] table (a scenario)
     duration_s = 30.0               # optional: replaces the base's duration_s
@@ -42,6 +43,12 @@ Layout (every key below is known; anything else is an error)::
                                     # draw's fresh runs show the first arm falling more
                                     # (see scenarios.campaign.analysis.confirmation)
 
+    [variants.ramp]                 # optional: named variants of one study, each a table
+    seed = 2032                     # of overrides laid over the rest of the file (as
+    [variants.default_rule]         # extends lays a file over its parent; drop as there)
+    seed = 2036                     # and chosen by --variant NAME (default_variant without
+    drop = ["base.regulator"]       # it); the effective campaign is named NAME_VARIANT
+
     [factors.torso_mass_kg]         # see scenarios.campaign.factors for the names
     dist = "uniform"                # uniform | lhs: low, high (+ step); randint: low, high
     low = 10.33                     # (integers, inclusive); choice: values (+ weights);
@@ -65,16 +72,20 @@ from scenarios.errors import ScenarioError
 from scenarios.lang import spec as scenario_spec
 from scenarios.campaign import factors as fx
 from scenarios.campaign import tomlw
-from scenarios.lang.fields import Problems, as_finite, did_you_mean, integer, name as name_field, number, string, unknown_keys
+from scenarios.campaign.catalog import CAMPAIGN_DIR, builtin_campaigns, variant_names
+from scenarios.lang.fields import (NAME_PATTERN, NAME_RE, Problems, as_finite, did_you_mean, integer, name as name_field,
+                                   number, string, unknown_keys)
 from scenarios.lang.formatting import show
 from scenarios.lang.scenario import BUILTIN_MODELS, DEFAULT_COMM_STEP_S
 from scenarios.lang.sections import resolve_model
 from scenarios.lang.tomlfile import depth_problem, read_toml
 
-CAMPAIGN_DIR = Path(__file__).resolve().parents[1] / "campaigns"
-TOP_KEYS = ("name", "description", "extends", "drop", "base", "duration_s", "compare", "samples", "seed",
-            "task_timeout_s", "retries", "factors", "metric", "replicas", "replicate_over", "redraw",
-            "confirm_runs")
+TOP_KEYS = ("name", "description", "extends", "drop", "default_variant", "variants", "base", "duration_s",
+            "compare", "samples", "seed", "task_timeout_s", "retries", "factors", "metric", "replicas",
+            "replicate_over", "redraw", "confirm_runs")
+#: What a ``[variants.NAME]`` table may give: the campaign's own keys (its name is the file's
+#: with ``_NAME``), and ``drop``.
+VARIANT_KEYS = tuple(k for k in TOP_KEYS if k not in ("name", "extends", "default_variant", "variants"))
 #: The errors the paired verdicts may compare (columns of campaign.csv), the default first.
 VERDICT_METRICS = ("steady_state_error_vx", "settled_error_vx")
 DISTS = ("uniform", "lhs", "randint", "choice", "grid")
@@ -129,8 +140,9 @@ class Campaign:
     replicas: tuple[tuple[str, tuple[str, ...]], ...] = ()  # (arm, its replica arms) for the verdicts
     replicate_over: str | None = None  # a grid factor whose cells are the verdicts' replicas
     redraw: tuple[str, ...] = ()  # random factors drawn anew on each value of replicate_over
-    resolved_text: str | None = None  # with extends: the whole campaign as one file (the run folder's copy)
+    resolved_text: str | None = None  # with extends or variants: the whole campaign as one file (the run folder's copy)
     confirm_runs: int = 0  # fresh runs of each draw the "never" reading lists (0: no confirmation stage)
+    variant: str | None = None  # the [variants.NAME] table applied (None: the file has none)
 
     def analysis_settings(self) -> dict[str, Any]:
         """What the campaign's report needs beyond the rows (written into campaign.json)."""
@@ -451,21 +463,27 @@ def _replicas(doc: Mapping[str, Any], arms: Sequence[str] | None,
     return tuple(out)
 
 
-def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_dir: Path | None = None) -> Campaign:
-    """Validate a parsed campaign document; raise ScenarioError listing every problem."""
+def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_dir: Path | None = None,
+                   variant: str | None = None) -> Campaign:
+    """Validate a parsed campaign document (with ``variant``: that one of its
+    ``[variants]``, else its ``default_variant``); raise ScenarioError listing every problem."""
     base_dir = base_dir or Path.cwd()
     too_deep = depth_problem(doc)  # before any reader walks or copies the values
     if too_deep:
         raise ScenarioError([too_deep], source=source)
     probs = Problems()
-    resolved_text = None
+    resolved = []  # what was resolved into the one document
     if "extends" in doc or "drop" in doc:
-        parent = doc.get("extends")
+        resolved.append(f"extends = {doc.get('extends')!r}")
         doc, base_dir = extended(doc, base_dir, probs)
-        if probs.items:
-            raise ScenarioError(probs.items, source=source)
-        resolved_text = (f"# {source or 'a campaign'} (extends = {parent!r}), its extends resolved into one file\n"
-                         + tomlw.dumps(doc))
+    if not probs.items and ("variants" in doc or "default_variant" in doc or variant is not None):
+        doc, variant = with_variant(doc, variant, probs)
+        resolved.append(f"variant {variant!r}")
+    if probs.items:
+        raise ScenarioError(probs.items, source=source)
+    resolved_text = None
+    if resolved:
+        resolved_text = f"# {source or 'a campaign'} ({', '.join(resolved)}), resolved into one file\n" + tomlw.dumps(doc)
     unknown_keys(doc, TOP_KEYS, "", probs)
     name = name_field(doc, "name", "name", probs, " (it names samples)")
     description = string(doc, "description", "description", probs)
@@ -514,7 +532,7 @@ def parse_campaign(doc: Mapping[str, Any], source: str | None = None, *, base_di
     factors.sort(key=lambda f: order.index(f.name))
     return Campaign(name, description, ref, base, base_dir, samples, seed, tuple(factors), retries, timeout,
                     source, float(base["comm_step_s"]), metric, replicas, replicate_over, redraw, resolved_text,
-                    confirm_runs)
+                    confirm_runs, variant)
 
 
 def _lay_over(parent: Mapping[str, Any], child: Mapping[str, Any], under_factors: bool = False) -> dict[str, Any]:
@@ -567,11 +585,53 @@ def extended(doc: Mapping[str, Any], base_dir: Path, probs: Problems,
     return _lay_over(parent, own), (base_dir if "base" in own else parent_dir)
 
 
-def _drop(parent: dict[str, Any], paths: Any, parent_name: str, probs: Problems) -> None:
+def with_variant(doc: Mapping[str, Any], variant: str | None, probs: Problems) -> tuple[dict[str, Any], str | None]:
+    """The campaign ``doc`` with one of its ``[variants.NAME]`` tables applied: ``variant``,
+    or the file's ``default_variant`` when None. The variant's ``drop`` keys are removed from
+    the rest of the file, then its other keys laid over it (as ``extends`` lays a file over
+    its parent); the result is named ``<name>_<variant>`` (its run folder, its samples' tag)
+    and has no variants. Returns (that document, the variant's name); problems go to ``probs``."""
+    own = {k: copy.deepcopy(v) for k, v in doc.items() if k not in ("variants", "default_variant")}
+    raw, default = doc.get("variants"), doc.get("default_variant")
+    label = repr(doc["name"]) if isinstance(doc.get("name"), str) else "this campaign"
+    if raw is None:
+        if "default_variant" in doc:
+            probs.add("default_variant", default, "names one of the [variants.NAME] tables: give them too")
+        if variant is not None:
+            probs.add("variant", variant, f"{label} has no variants (no [variants.NAME] tables)")
+        return own, None
+    if not isinstance(raw, dict) or not raw or not all(isinstance(t, dict) for t in raw.values()):
+        probs.add("variants", raw, "must be a table of [variants.NAME] tables, each the overrides of one variant")
+        return own, None
+    for name in raw:
+        if not NAME_RE.match(name):
+            probs.add(f"variants.{name}", name, f"the name must match {NAME_PATTERN} (it names the campaign)")
+    listed = ", ".join(variant_names(doc))
+    if "default_variant" not in doc:
+        probs.note("default_variant", f"required with [variants]: the variant run without one named ({listed})")
+    elif default not in raw:
+        probs.add("default_variant", default, f"must name one of the variants: {listed}")
+    if variant is not None and variant not in raw:
+        probs.add("variant", variant, f"no such variant of {label}{did_you_mean(variant, raw, '')}; variants: {listed}")
+        return own, None
+    chosen = default if variant is None else variant
+    if chosen not in raw:
+        return own, None
+    table = raw[chosen]
+    unknown_keys(table, VARIANT_KEYS, f"variants.{chosen}.", probs)
+    if "drop" in table:
+        _drop(own, table["drop"], label, probs, field=f"variants.{chosen}.drop")
+    out = _lay_over(own, {k: v for k, v in table.items() if k != "drop"})
+    if isinstance(out.get("name"), str):
+        out["name"] = f"{out['name']}_{chosen}"
+    return out, chosen
+
+
+def _drop(parent: dict[str, Any], paths: Any, parent_name: str, probs: Problems, field: str = "drop") -> None:
     """Remove each dotted key of ``paths`` from ``parent`` (in place); a path that is not a
-    key of it is a problem."""
+    key of it is a problem (named ``field``)."""
     if not isinstance(paths, list) or not all(isinstance(p, str) and p for p in paths):
-        probs.add("drop", paths, "must be a list of the extended campaign's keys (dotted, e.g. \"base.arm\")")
+        probs.add(field, paths, f"must be a list of {parent_name}'s keys (dotted, e.g. \"base.arm\")")
         return
     for dotted in paths:
         *outer, last = dotted.split(".")
@@ -579,19 +639,15 @@ def _drop(parent: dict[str, Any], paths: Any, parent_name: str, probs: Problems)
         for k in outer:
             table = table.get(k) if isinstance(table, dict) else None
         if not isinstance(table, dict) or last not in table:
-            probs.add("drop", dotted, f"is not a key of {parent_name}")
+            probs.add(field, dotted, f"is not a key of {parent_name}")
             continue
         del table[last]
 
 
-def load_campaign(path: str | Path) -> Campaign:
+def load_campaign(path: str | Path, variant: str | None = None) -> Campaign:
     path = Path(path)
     doc = _read_toml(path, "campaign file")
-    return parse_campaign(doc, source=str(path), base_dir=path.parent)
-
-
-def builtin_campaigns() -> list[str]:
-    return sorted(p.stem for p in CAMPAIGN_DIR.glob("*.toml"))
+    return parse_campaign(doc, source=str(path), base_dir=path.parent, variant=variant)
 
 
 def _campaign_path(target: str, base_dir: Path | None = None) -> tuple[Path | None, str]:

@@ -1,16 +1,21 @@
 """Campaign factors for what robustness studies randomize: the model, floor friction and
 shape, link masses, seeded command profiles and several seeded random pushes; and the
-built-in robustness_random campaign built on them."""
+built-in robustness_random study built on them, one file with its variants (ramp, control,
+default_rule), each equal to the campaign it replaces (frozen from git commit e24b83a)."""
 from __future__ import annotations
 
+import functools
+import hashlib
+import json
 import tomllib
+from pathlib import Path
 
 import pytest
 
 from fmu_src.core.avr_specs import PARAM_BY_NAME, PARAM_SPECS
-from scenarios.campaign import analysis, sampling, spec
+from scenarios.campaign import analysis, sampling, spec, store
+from scenarios.cli import main as cli_main
 from scenarios.errors import ScenarioError
-from scenarios.lang.fields import Problems
 from scenarios.lang import spec as scenario_spec
 from support.paths import REPO_ROOT
 
@@ -125,81 +130,94 @@ high = 1.2
     assert any("factors.link_mass_scale.left-wing" in p and "no such body" in p for p in found)
 
 
-def test_robustness_random_campaign_is_what_the_issue_asks():
-    c = spec.load_campaign(spec.resolve_campaign("robustness_random"))
-    assert c.n_samples >= 100
-    gains = ("095", "105", "090", "110")
-    assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd", *(f"adaptive_kpx_{g}" for g in gains),
-                             *(f"pd_kpx_{g}" for g in gains)]
-    # the verdicts: five paired replicas per sample, on the settled error
-    assert c.metric == "settled_error_vx"
-    assert dict(c.replicas) == {"adaptive": tuple(f"adaptive_kpx_{g}" for g in gains),
-                                "pd_only": tuple(f"pd_kpx_{g}" for g in gains)}
-    names = {f.name for f in c.factors}
-    for needed in ("model", "floor_friction", "torso_mass_kg", "torso_com_offset_x_m", "torso_com_offset_y_m",
-                   "joint_damping_scale", "floor", "command_profile", "random_pushes", "random_pushes_count",
-                   "link_mass_scale.left-hip-pitch", "seed"):
-        assert needed in names
-    samples = sampling.draw(c)
-    texts = sampling.build_samples(c, samples[:10])
-    s = scenario_spec.parse_scenario(tomllib.loads(texts[samples[0].id]), check_plant=False)
-    assert s.duration_s == 25.0 and s.random_pushes is not None and s.command_profile is not None
-    # replica i of adaptive and of PD-only: the same Kp_x, the same command reference and
-    # network seed (the sample's), and nothing else changed
-    arms = {a.name: dict(a.overrides) for a in s.arms}
-    base = arms["adaptive"]
-    assert base["command_accel_limit_mps2"] == 0.5 and "Kp_x" not in base
-    assert arms["pd_only"] == {**base, "adaptation_enabled": False}
-    for g in gains:
-        kp = int(g) / 1000
-        assert arms[f"adaptive_kpx_{g}"] == {**base, "Kp_x": pytest.approx(kp)}
-        assert arms[f"pd_kpx_{g}"] == {**base, "adaptation_enabled": False, "Kp_x": pytest.approx(kp)}
+STUDY = "robustness_random"
+#: The shipped variants, the default first.
+SHIPPED = ("ramp", "control", "default_rule")
+#: Today's chain frozen at e24b83a (how: its "_about"): the variants that replace a file there.
+FROZEN = json.loads((Path(__file__).parent / "robustness_random_e24b83a.json").read_text())
+#: The seeds of every set the study's designs and settings were chosen or run on (2021-2035).
+USED_SEEDS = range(2021, 2036)
 
 
-def resolved(name: str) -> dict:
-    """A built-in campaign's document with its extends resolved."""
-    probs = Problems()
-    doc, _ = spec.extended(tomllib.loads(spec.resolve_campaign(name).read_text()), spec.CAMPAIGN_DIR, probs)
-    assert not probs.items, probs.items
-    return doc
+@functools.cache
+def study(variant: str) -> spec.Campaign:
+    """A shipped variant of the study, loaded once per test process (each load probes every
+    factor's extremes on the base: seconds)."""
+    return spec.load_campaign(spec.resolve_campaign(STUDY), variant=variant)
 
 
-def _first_sample_regulator_overrides(name: str) -> list[dict]:
-    """The regulator settings of the regulated arms (all but RL-HZD) of campaign ``name``'s
-    first sample, as its parsed scenario carries them."""
-    c = spec.load_campaign(spec.resolve_campaign(name))
-    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, sampling.draw(c)[:1]).popitem()[1]),
-                                     check_plant=False)
-    return [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+def document(variant: str) -> dict:
+    """A variant's effective campaign document (its run folder's campaign.toml)."""
+    text = study(variant).resolved_text
+    assert text.startswith(f"# {spec.CAMPAIGN_DIR / (STUDY + '.toml')} (variant {variant!r}), resolved into one file\n")
+    return tomllib.loads(text)
 
 
-# Each variant campaign: (its file, the file it varies, the regulator setting it adds, as
-# its description spells it, the settings its regulator arms then carry).
-VARIANTS = [
-    ("robustness_random_settled", "robustness_random", ("learn_settled_steps", 3, "learn_settled_steps = 3"),
-     {"learn_settled_steps": 3, "learning_rate": None}),
-    ("robustness_random_settled_lr2", "robustness_random_settled", ("learning_rate", 2e-6, "learning_rate = 2e-6"),
-     {"learn_settled_steps": 3, "learning_rate": 2e-6}),
-]
+def without_prose(doc: dict) -> dict:
+    """``doc`` without its descriptions and its base's name: prose that no sample carries (the
+    sample texts name the campaign and the sample, not the base), rewritten because today's
+    named the retired files."""
+    out = {k: v for k, v in doc.items() if k != "description"}
+    out["base"] = {k: v for k, v in doc["base"].items() if k not in ("name", "description")}
+    return out
 
 
-@pytest.mark.parametrize("variant, parent, added, carried", VARIANTS, ids=[v[0] for v in VARIANTS])
-def test_variant_campaigns_differ_from_their_parent_by_one_regulator_setting(variant, parent, added, carried):
-    """A variant differs from the file it varies only by its name, description and one
-    setting on every regulator arm: the same samples, so their PD-only and RL-HZD rows are
-    the same runs (learning settings do not act with adaptation off)."""
-    key, value, spelled = added
-    raw = tomllib.loads(spec.resolve_campaign(variant).read_text())
-    assert raw["extends"] == parent and set(raw) == {"extends", "name", "description", "base"}
-    base, var = resolved(parent), resolved(variant)
-    assert var.pop("name") == variant and base.pop("name") == parent
-    assert spelled in var.pop("description")
-    base.pop("description")
-    assert var["base"]["regulator"].pop(key) == value
-    assert var == base
-    regulated = _first_sample_regulator_overrides(variant)
-    for name, expected in carried.items():
-        assert {o.get(name) for o in regulated} == {expected}, name
+def draws_sha256(c: spec.Campaign) -> str:
+    return hashlib.sha256(json.dumps([[s.id, s.values] for s in sampling.draw(c)], sort_keys=True).encode()).hexdigest()
+
+
+@pytest.mark.parametrize("variant", sorted(set(FROZEN) - {"_about"}))
+def test_each_variant_is_the_campaign_it_replaces_field_for_field(variant):
+    """ramp and control resolve to today's robustness_random_ramp / _control (their extends
+    chain at e24b83a) in every field but the prose, draw the same samples and write the same
+    scenario texts (so the same runs, and --resume of a folder run from the old file)."""
+    then = FROZEN[variant]
+    now = document(variant)
+    assert now["name"] == then["document"]["name"] == f"{STUDY}_{variant}"
+    assert without_prose(now) == without_prose(then["document"])
+    c = study(variant)
+    assert c.variant == variant and c.n_samples == then["n_samples"]
+    assert draws_sha256(c) == then["draws_sha256"]
+    assert store.fingerprint(sampling.build_samples(c, sampling.draw(c)[:10])) == then["first_10_samples_fingerprint"]
+
+
+def test_the_study_ships_its_variants_and_runs_ramp_by_default():
+    raw = tomllib.loads(spec.resolve_campaign(STUDY).read_text())
+    assert tuple(raw["variants"]) == SHIPPED and raw["default_variant"] == "ramp"
+    assert spec.load_campaign(spec.resolve_campaign(STUDY)).resolved_text == study("ramp").resolved_text
+    # the regulator settings of the design in one table of the file, which default_rule drops
+    assert raw["base"]["regulator"] == {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 8,
+                                        "learning_rate": 2e-6, "learn_ramp_max_mps2": 0.25}
+    assert all("regulator" not in t.get("base", {}) for t in raw["variants"].values())
+    # each variant on a set of its own, none of the sets anything was chosen on
+    seeds = {v: study(v).seed for v in SHIPPED}
+    assert seeds == {"ramp": 2032, "control": 2033, "default_rule": 2036}
+    assert seeds["default_rule"] not in USED_SEEDS
+    # the retired files are gone: the study is one file
+    assert [n for n in spec.builtin_campaigns() if n.startswith(STUDY)] == [STUDY]
+
+
+def test_default_rule_is_the_ramp_design_with_the_regulators_defaults():
+    """The same design as ramp (factors, arms, replicas, confirmation stage), without the four
+    regulator settings: the parsed arms carry no regulator override but PD-only's switch."""
+    ramp, rule = document("ramp"), document("default_rule")
+    assert rule.pop("name") == f"{STUDY}_default_rule" and rule.pop("seed") == 2036
+    assert "regulator" in ramp["base"] and "regulator" not in rule["base"]
+    ramp["base"].pop("regulator")
+    ramp.pop("name"), ramp.pop("seed")
+    assert without_prose(rule) == without_prose(ramp)
+    adaptive, pd_only = _first_sample_regulator_overrides(study("default_rule"))
+    assert adaptive == {} and pd_only == {"adaptation_enabled": False}
+
+
+def _first_sample_regulator_overrides(c: spec.Campaign) -> list[dict]:
+    """The regulator settings of the regulated arms (all but RL-HZD) of ``c``'s first sample,
+    as its parsed scenario carries them, but the network seed (the sample's own draw)."""
+    first = sampling.draw(c)[0]
+    s = scenario_spec.parse_scenario(tomllib.loads(sampling.build_samples(c, [first])[first.id]), check_plant=False)
+    arms = [dict(a.overrides) for a in s.arms if a.name != "rl_hzd"]
+    assert all(o.pop("seed") == first.values["seed"] for o in arms)
+    return arms
 
 
 def samples_by_draw(c: spec.Campaign) -> dict[str, list]:
@@ -213,151 +231,104 @@ def samples_by_draw(c: spec.Campaign) -> dict[str, list]:
     return draws
 
 
-def test_robustness_random_grounds_walks_each_robot_of_the_lr2_campaign_on_five_grounds():
-    """The same factors and regulator settings as robustness_random_settled_lr2 (another
-    seed), the terrain seed a grid of five the verdicts replicate over; three arms."""
-    raw = tomllib.loads(spec.resolve_campaign("robustness_random_grounds").read_text())
-    assert raw["extends"] == "robustness_random_settled_lr2" and raw["drop"] == ["replicas", "base.arm"]
-    grounds, lr2 = resolved("robustness_random_grounds"), resolved("robustness_random_settled_lr2")
-    assert "replicas" not in grounds and "arm" not in grounds["base"] and "arm" in lr2["base"]
-    assert grounds["factors"].pop("floor_terrain_seed") == {"dist": "grid", "values": [1, 2, 3, 4, 5]}
-    lr2["factors"].pop("floor_terrain_seed")
-    assert grounds["factors"] == lr2["factors"]
-    assert grounds["base"]["regulator"] == lr2["base"]["regulator"]
-    assert grounds["seed"] not in (2021, 2022, 2023, 2024)  # a set no setting was chosen on
-    c = spec.load_campaign(spec.resolve_campaign("robustness_random_grounds"))
+def test_the_study_walks_each_robot_five_times_each_run_its_own_ground_pushes_and_start():
+    """100 random draws, each on floor_terrain_seed 1..5 (the verdicts' replicas) with its
+    random pushes and its start nuisance (a push of at most 3 N per axis at 1 s on the pelvis)
+    drawn anew per run; everything else is the draw's. A flat or sloped floor (no field) thus
+    still gives five different walks; adaptive and PD-only of a run get the same nuisance."""
+    c = study("ramp")
     assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd"] and c.replicas == ()
     assert c.replicate_over == "floor_terrain_seed" and c.samples == 100 and c.n_samples == 500
-    draws = samples_by_draw(c)
-    assert len(draws) == 100
-    for samples in draws.values():
-        members = [m.values for m in samples]
-        assert sorted(v["floor_terrain_seed"] for v in members) == [1, 2, 3, 4, 5]
-        rest = [{k: x for k, x in v.items() if k != "floor_terrain_seed"} for v in members]
-        assert all(x == rest[0] for x in rest)
-
-
-def test_robustness_random_nuisance_gives_each_of_a_robots_five_runs_its_own_ground_and_pushes():
-    """robustness_random_grounds with random_pushes_seed redrawn per ground, learning 8
-    settled steps after a command change (another seed): every run of a draw is the same
-    robot on another ground under other pushes, so a flat or sloped floor no longer
-    repeats one walk five times."""
-    raw = tomllib.loads(spec.resolve_campaign("robustness_random_nuisance").read_text())
-    assert raw["extends"] == "robustness_random_grounds" and raw["redraw"] == ["random_pushes_seed"]
-    nuisance, grounds = resolved("robustness_random_nuisance"), resolved("robustness_random_grounds")
-    assert nuisance["factors"] == grounds["factors"]
-    assert nuisance["base"]["regulator"].pop("learn_settled_steps") == 8  # 3 in grounds
-    grounds["base"]["regulator"].pop("learn_settled_steps")
-    assert nuisance["base"] == grounds["base"]
-    assert nuisance["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026)  # a set no setting was chosen on
-    c = spec.load_campaign(spec.resolve_campaign("robustness_random_nuisance"))
-    assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd"] and c.replicate_over == "floor_terrain_seed"
-    assert c.redraw == ("random_pushes_seed",) and c.n_samples == 500
-    draws = samples_by_draw(c)
-    assert len(draws) == 100
-    flat = 0
-    for members in draws.values():
-        values = [m.values for m in members]
-        assert sorted(v["floor_terrain_seed"] for v in values) == [1, 2, 3, 4, 5]
-        assert len({v["random_pushes_seed"] for v in values}) == 5
-        nuisance_keys = ("floor_terrain_seed", "random_pushes_seed")
-        rest = [{k: x for k, x in v.items() if k not in nuisance_keys} for v in values]
-        assert all(x == rest[0] for x in rest)
-        if "terrain" not in values[0]["floor"]:
-            flat += 1
-            # the five scenarios differ in their pushes (the walks differ, though the floor is one)
-            pushes = [tuple(scenario_spec.parse_scenario(sampling.sample_document(c, m), source=m.id,
-                                                         base_dir=c.base_dir).pushes) for m in members]
-            assert len(set(pushes)) == 5
-    assert 40 <= flat <= 75  # flat or sloped floors: weights 6 of 10 in lr2's floor factor
-
-
-def test_robustness_random_start_gives_each_run_its_own_start_nuisance():
-    """robustness_random_nuisance with a push of at most 3 N per axis at 1 s on the pelvis,
-    drawn anew on every run with the pushes (another seed): each of a robot's five runs is
-    its own walk from the start, and adaptive and PD-only of a run get the same one."""
-    raw = tomllib.loads(spec.resolve_campaign("robustness_random_start").read_text())
-    assert raw["extends"] == "robustness_random_nuisance"
-    assert raw["redraw"] == ["random_pushes_seed", "push_force_x_n", "push_force_y_n"]
-    start, nuisance = resolved("robustness_random_start"), resolved("robustness_random_nuisance")
-    added = {k: start["factors"].pop(k) for k in ("push_force_x_n", "push_force_y_n")}
-    assert added == {k: {"dist": "uniform", "low": -3.0, "high": 3.0} for k in added}
-    assert start["factors"] == nuisance["factors"]
-    assert start["base"].pop("push") == [{"t_s": 1.0, "force_n": [0.0, 0.0, 0.0], "duration_s": 0.1}]
-    assert start["base"] == nuisance["base"]  # the regulator settings too
-    assert start["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026, 2027)  # no setting or design chosen on it
-    c = spec.load_campaign(spec.resolve_campaign("robustness_random_start"))
-    assert c.arm_names() == ["adaptive", "pd_only", "rl_hzd"] and c.n_samples == 500
+    assert c.redraw == ("random_pushes_seed", "push_force_x_n", "push_force_y_n") and c.metric == "settled_error_vx"
+    names = {f.name for f in c.factors}
+    for needed in ("model", "floor_friction", "torso_mass_kg", "torso_com_offset_x_m", "torso_com_offset_y_m",
+                   "joint_damping_scale", "floor", "command_profile", "random_pushes", "random_pushes_count",
+                   "link_mass_scale.left-hip-pitch", "seed"):
+        assert needed in names
     draws = samples_by_draw(c)
     assert len(draws) == 100
     redrawn = ("floor_terrain_seed", "random_pushes_seed", "push_force_x_n", "push_force_y_n")
+    flat = 0
     for i, members in enumerate(draws.values()):
         values = [m.values for m in members]
+        assert sorted(v["floor_terrain_seed"] for v in values) == [1, 2, 3, 4, 5]
+        assert len({v["random_pushes_seed"] for v in values}) == 5
         forces = [(v["push_force_x_n"], v["push_force_y_n"]) for v in values]
         assert len(set(forces)) == 5 and all(-3.0 <= f <= 3.0 for xy in forces for f in xy)
         rest = [{k: x for k, x in v.items() if k not in redrawn} for v in values]
         assert all(x == rest[0] for x in rest)
+        flat += "terrain" not in values[0]["floor"]
         if i < 3:  # the parsed scenarios carry it: one pelvis push at 1 s, before the random ones
             for m, (fx_n, fy_n) in zip(members, forces):
                 sc = scenario_spec.parse_scenario(sampling.sample_document(c, m), source=m.id, base_dir=c.base_dir)
                 first = [p for p in sc.pushes if p.t_s == 1.0]
                 assert [(p.force_n, p.duration_s, p.body) for p in first] == [((fx_n, fy_n, 0.0), 0.1, "cassie-pelvis")]
                 assert all(p.t_s >= 3.0 for p in sc.pushes if p is not first[0])
+    assert 40 <= flat <= 75  # flat or sloped floors: weights 6 of 10 in the floor factor
 
 
-def _start_plus_one_setting(name: str, key: str) -> tuple[dict, object]:
-    """Campaign ``name`` resolved, and the value of its regulator setting ``key``, checking
-    that without that setting it is robustness_random_start but for its name, description
-    and seed (its own set)."""
-    variant, start = resolved(name), resolved("robustness_random_start")
-    variant.pop("confirm_runs", None)  # how the verdict is decided, not what runs (test below)
-    value = variant["base"]["regulator"].pop(key)
-    assert {k: v for k, v in variant.items() if k not in ("name", "description", "seed")} == \
-        {k: v for k, v in start.items() if k not in ("name", "description", "seed")}
-    return variant, value
-
-
-def test_robustness_random_ramp_is_the_start_campaign_learning_on_slow_ramps():
-    """robustness_random_start with learn_ramp_max_mps2 = 0.25 on the regulator arms and
-    nothing else changed, on a seed no setting or design was chosen on; its limit is above the
-    ramps of the command profiles it draws (at most the vx range over one hold) and below the
-    command reference's rate limit (so a step still waits); the parsed arms carry it."""
-    ramp, limit = _start_plus_one_setting("robustness_random_ramp", "learn_ramp_max_mps2")
-    assert ramp["seed"] not in (2021, 2022, 2023, 2024, 2025, 2026, 2027, 2028, 2029, 2030, 2031)
+def test_the_ramp_settings_reach_the_regulated_arms_and_the_ramp_limit_sits_between_the_ramps_and_the_reference():
+    """Its learn_ramp_max_mps2 is above the ramps of the command profiles it draws (at most
+    the vx range over one hold) and below the command reference's rate limit (so a step still
+    waits); adaptive and PD-only carry the four settings."""
+    ramp = document("ramp")
+    limit = ramp["base"]["regulator"]["learn_ramp_max_mps2"]
     profiles = ramp["factors"]["command_profile"]["values"]
     steepest = max((p["vx_des"][1] - p["vx_des"][0]) / p["hold_s"] for p in profiles if p["shape"] == "ramped")
     assert steepest < limit < ramp["base"]["regulator"]["command_accel_limit_mps2"]
-    regulated = _first_sample_regulator_overrides("robustness_random_ramp")
-    assert len(regulated) == 2 and all(o["learn_ramp_max_mps2"] == 0.25 and o["learn_settled_steps"] == 8
-                                       for o in regulated)
+    adaptive, pd_only = _first_sample_regulator_overrides(study("ramp"))
+    settings = {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 8, "learning_rate": 2e-6,
+                "learn_ramp_max_mps2": 0.25}
+    assert adaptive == settings and pd_only == {**settings, "adaptation_enabled": False}
 
 
-def test_robustness_random_ramp_decides_never_by_a_40_run_confirmation_stage():
+@pytest.mark.parametrize("variant", SHIPPED)
+def test_every_variant_decides_never_by_a_40_run_confirmation_stage(variant):
     """Its listed draws run again on 40 fresh grounds, numbered on from the five of every
-    draw (floor_terrain_seed 6..45); the control campaign inherits the stage."""
-    for name in ("robustness_random_ramp", "robustness_random_control"):
-        c = spec.load_campaign(spec.resolve_campaign(name))
-        assert c.confirm_runs == 40 and c.replicate_over == "floor_terrain_seed"
-        assert c.analysis_settings()["confirm_runs"] == 40
-    c = spec.load_campaign(spec.resolve_campaign("robustness_random_ramp"))
+    draw (floor_terrain_seed 6..45)."""
+    c = study(variant)
+    assert c.confirm_runs == 40 and c.replicate_over == "floor_terrain_seed"
+    assert c.analysis_settings()["confirm_runs"] == 40
     first = next(s for s in sampling.draw(c) if s.values["floor_terrain_seed"] == 1)
     _, fresh, _ = sampling.confirmation(c, [first.id])
     assert [s.values["floor_terrain_seed"] for s in fresh] == list(range(6, 46))
 
 
-def test_robustness_random_control_runs_a_nudged_pd_only_in_place_of_rl_hzd():
-    """robustness_random_ramp with one change of arms on its own set: RL-HZD is replaced by
-    PD-only with Kp_x 5 % up, and nothing else differs, so the control arm meets the same
-    samples as adaptive and PD-only; parsed, it is PD-only's settings with that one gain."""
-    control, ramp = resolved("robustness_random_control"), resolved("robustness_random_ramp")
+def test_control_runs_a_nudged_pd_only_in_place_of_rl_hzd():
+    """ramp with one change of arms on its own set: RL-HZD is replaced by PD-only with Kp_x
+    5 % up, and nothing else differs, so the control arm meets the same samples as adaptive
+    and PD-only; parsed, it is PD-only's settings with that one gain."""
+    control, ramp = document("control"), document("ramp")
     assert control.pop("compare") == ["adaptive", "pd_only", "pd_kpx_105"] and ramp.pop("compare")[2] == "rl_hzd"
     assert control["base"].pop("arm") == [{"name": "pd_kpx_105", "regulator": {"adaptation_enabled": False, "Kp_x": 0.105},
                                            "description": "PD-only with Kp_x = 0.105 (5 % above the default 0.1)"}]
     assert "arm" not in ramp["base"]
     assert {k: v for k, v in control.items() if k not in ("name", "description", "seed")} == \
         {k: v for k, v in ramp.items() if k not in ("name", "description", "seed")}
-    assert control["seed"] not in range(2021, 2033)
-    adaptive, pd_only, nudged = _first_sample_regulator_overrides("robustness_random_control")
+    adaptive, pd_only, nudged = _first_sample_regulator_overrides(study("control"))
     assert pd_only["adaptation_enabled"] is False and "Kp_x" not in pd_only  # the FMU's default:
     assert PARAM_BY_NAME["Kp_x"].default == 0.1  # 0.105 is 5 % above it
     assert nudged == {**pd_only, "Kp_x": 0.105} and "adaptation_enabled" not in adaptive  # on by default
+
+
+def test_the_campaign_command_takes_a_variant_and_lists_them(capsys):
+    """--variant picks a variant (dry run: its samples), an unknown one is refused before
+    anything runs (exit 2) with the allowed ones listed, and --help lists every built-in
+    campaign and the study's variants."""
+    def cli(*args):
+        rc = cli_main(["campaign", *args])
+        return rc, *capsys.readouterr()
+    rc, out, err = cli(STUDY, "--variant", "contrl", "--workers", "0", "--dry-run")
+    assert rc == 2 and out == ""
+    assert "variant = 'contrl': no such variant of 'robustness_random'; did you mean 'control'?; variants: " \
+           "ramp (default), control, default_rule" in err
+    assert "--workers 0: must be >= 1" in err  # every problem at once
+    rc, out, err = cli(STUDY, "--variant", "default_rule", "--dry-run")
+    assert rc == 0, err
+    assert [line.split()[0] for line in out.splitlines()[1:]] == [s.id for s in sampling.draw(study("default_rule"))]
+    with pytest.raises(SystemExit):
+        cli("--help")
+    usage = " ".join(capsys.readouterr().out.split())
+    for name in spec.builtin_campaigns():
+        assert name in usage
+    assert "robustness_random (variants: ramp (default), control, default_rule)" in usage

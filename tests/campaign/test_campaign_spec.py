@@ -448,6 +448,72 @@ def test_extends_problems_are_named(tmp_path):
                                                    where=spec.CAMPAIGN_DIR))
 
 
+STUDY = BASE + 'default_variant = "one"\n' + PARENT[len(BASE):] + """
+[variants.one]
+seed = 21
+[variants.two]
+seed = 22
+compare = ["adaptive"]
+drop = ["factors.joint_damping_scale"]
+[variants.two.factors.torso_mass_kg]  # a factor's table replaces the file's whole
+dist = "choice"
+values = [12.0, 14.0]
+"""
+
+
+def test_variants_are_the_file_with_one_variant_laid_over_it(tmp_path):
+    (tmp_path / "study.toml").write_text(STUDY)
+    one, default = spec.load_campaign(tmp_path / "study.toml", "one"), spec.load_campaign(tmp_path / "study.toml")
+    assert default == one  # default_variant
+    assert (one.name, one.variant, one.seed, one.samples, one.arm_names()) == ("c_one", "one", 21, 8, ["adaptive", "pd_only"])
+    assert {f.name for f in one.factors} == {"torso_mass_kg", "joint_damping_scale", "link_mass_scale.left-shin"}
+    two = spec.load_campaign(tmp_path / "study.toml", "two")
+    assert (two.name, two.variant, two.seed, two.arm_names()) == ("c_two", "two", 22, ["adaptive"])
+    f = {x.name: x for x in two.factors}
+    assert set(f) == {"torso_mass_kg", "link_mass_scale.left-shin"}
+    assert (f["torso_mass_kg"].dist, f["torso_mass_kg"].values, f["torso_mass_kg"].low) == ("choice", (12.0, 14.0), None)
+    # the run folder keeps the variant as one file (no variants left), which loads to the same campaign
+    assert two.resolved_text.startswith(f"# {tmp_path / 'study.toml'} (variant 'two'), resolved into one file\n")
+    doc = tomllib.loads(two.resolved_text)
+    assert "variants" not in doc and "default_variant" not in doc and doc["name"] == "c_two"
+    (tmp_path / "one.toml").write_text(two.resolved_text)
+    again = spec.load_campaign(tmp_path / "one.toml")
+    assert (again.name, again.factors, again.base_doc, again.seed, again.variant) == \
+        (two.name, two.factors, two.base_doc, two.seed, None)
+    assert sampling.build_samples(again) == sampling.build_samples(two)
+    # a campaign laid over a study (extends) keeps its variants
+    (tmp_path / "child.toml").write_text('extends = "study.toml"\nname = "kid"\n[variants.two]\nseed = 23\n')
+    kid = spec.load_campaign(tmp_path / "child.toml", "two")
+    assert (kid.name, kid.seed, kid.arm_names()) == ("kid_two", 23, ["adaptive"])
+    assert kid.resolved_text.startswith(f"# {tmp_path / 'child.toml'} (extends = 'study.toml', variant 'two')")
+
+
+def test_variant_problems_are_named_and_listed_at_once():
+    def found(text, variant=None):
+        with pytest.raises(ScenarioError) as info:
+            spec.parse_campaign(tomllib.loads(text), source="t.toml", base_dir=REPO_ROOT, variant=variant)
+        return info.value.problems
+    assert found(STUDY, "tow") == ["variant = 'tow': no such variant of 'c'; did you mean 'two'?; variants: one (default), two"]
+    assert found(STUDY, "xyz") == ["variant = 'xyz': no such variant of 'c'; variants: one (default), two"]
+    assert found(BASE + FACTORS, "one") == ["variant = 'one': 'c' has no variants (no [variants.NAME] tables)"]
+    assert found(STUDY.replace('default_variant = "one"', 'default_variant = "three"'), "two") == [
+        "default_variant = 'three': must name one of the variants: one, two"]
+    assert found(STUDY.replace('default_variant = "one"\n', '')) == [
+        "default_variant: required with [variants]: the variant run without one named (one, two)"]
+    assert found(BASE + 'default_variant = "one"\n' + FACTORS) == [
+        "default_variant = 'one': names one of the [variants.NAME] tables: give them too"]
+    assert any("variants = 3" in p and "must be a table of [variants.NAME] tables" in p
+               for p in found(BASE.replace('name = "c"', 'name = "c"\nvariants = 3') + FACTORS))
+    bad = found(STUDY + '[variants.Two]\nseed = 1\n[variants.one.bogus]\n', "one")
+    assert "variants.Two = 'Two': the name must match [a-z0-9][a-z0-9_-]* (it names the campaign)" in bad
+    assert any(p.startswith("variants.one.bogus: unknown key") for p in bad)
+    named = found(STUDY.replace("seed = 21", 'seed = 21\nname = "x"\ndrop = ["factors.nope"]'), "one")
+    assert any(p.startswith("variants.one.name: unknown key") for p in named)
+    assert "variants.one.drop = 'factors.nope': is not a key of 'c'" in named
+    # a problem of the laid-over whole names its field
+    assert any("samples = 0" in p for p in found(STUDY.replace("seed = 22", "seed = 22\nsamples = 0"), "two"))
+
+
 # --------------------------------------------------------------------------- statistics
 def test_wilson_interval_and_quantile():
     lo, hi = analysis.wilson(0, 10)

@@ -40,14 +40,10 @@ def fmi(request):
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    """Both versions, built once (build.py's function) with :data:`ROWS` as their schedule."""
-    from scenarios.cosim.fmus import load_build_module
-
+def built(tmp_path_factory, command_sources):
+    """Both versions as build.py builds them (conftest.py), with :data:`ROWS` as their schedule."""
     out = tmp_path_factory.mktemp("command_source")
-    build = load_build_module()
-    return {v: cs.with_schedule(build.build_command_source(v, out), _schedule(), out / f"scheduled_fmi{v}.fmu")
-            for v in (2, 3)}
+    return {v: cs.with_schedule(command_sources[v], _schedule(), out / f"scheduled_fmi{v}.fmu") for v in (2, 3)}
 
 
 @pytest.fixture

@@ -112,8 +112,8 @@ def test_the_three_regulators_share_one_reference(dist):
     assert len(refs) == 3 and len(set(refs.values())) == 1, sorted(refs)
 
 
-def test_an_fmu_built_alone_is_build_alls(dist, built_fmu, native_fmus, native_plant_fmus, tmp_path_factory,
-                                         build_module):
+def test_an_fmu_built_alone_is_build_alls(dist, built_fmu, native_fmus, native_plant_fmus, command_sources,
+                                         tmp_path_factory, build_module):
     """The FMUs each build function writes (the session's, as a run builds ``dist/`` on demand)
     carry the same reference and are the same files as build_all's."""
     if os.environ.get("AVR_TEST_FMU"):
@@ -121,8 +121,7 @@ def test_an_fmu_built_alone_is_build_alls(dist, built_fmu, native_fmus, native_p
     alone = {"AdaptiveVelocityRegulator.fmu": built_fmu, "AdaptiveVelocityRegulatorNative_fmi2.fmu": native_fmus[2],
              "AdaptiveVelocityRegulatorNative_fmi3.fmu": native_fmus[3],
              "CassiePlant.fmu": built_plant_fmu(tmp_path_factory, build_module),
-             **{f"CommandSource_fmi{v}.fmu": build_module.build_command_source(v, tmp_path_factory.mktemp("command"))
-                for v in (2, 3)},
+             **{f"CommandSource_fmi{v}.fmu": command_sources[v] for v in (2, 3)},
              **{f"CassiePlantNative_fmi{v}.fmu": native_plant_fmus[v] for v in (2, 3)}}
     assert sorted(alone) == sorted(fmu.name for fmu in fmus_of(dist))
     for name, fmu in alone.items():

@@ -228,7 +228,7 @@ def _not_provided(fmu_dir, fmi: int) -> set:
 
 
 @pytest.fixture(scope="module", params=[*REGULATOR_FMUS, *COMMAND_SOURCES, *NATIVE_PLANTS])
-def any_fmu(request, tmp_path_factory, build_module, unzip):
+def any_fmu(request, tmp_path_factory, unzip):
     """(FMI version, extracted folder) of each FMU build.py builds with a C FMI layer: the
     pythonfmu regulator (behind its C guard), the native regulators, the CommandSource FMUs and
     the native CassiePlant FMUs."""
@@ -238,12 +238,9 @@ def any_fmu(request, tmp_path_factory, build_module, unzip):
         return fmi, request.getfixturevalue("fmu_dir")
     if os.environ.get("AVR_TEST_FMU"):
         pytest.skip("AVR_TEST_FMU names the one FMU this run tests")
-    out = tmp_path_factory.mktemp(request.param)
-    if kind == "command-source":
-        fmu = build_module.build_command_source(fmi, out)
-    else:
-        fmu = request.getfixturevalue("native_plant_fmus" if kind == "native-plant" else "native_fmus")[fmi]
-    return fmi, unzip(fmu, out / "unzipped")
+    kinds = {"command-source": "command_sources", "native-plant": "native_plant_fmus"}
+    fmu = request.getfixturevalue(kinds.get(kind, "native_fmus"))[fmi]
+    return fmi, unzip(fmu, tmp_path_factory.mktemp(request.param) / "unzipped")
 
 
 def test_every_function_in_every_state_follows_the_phase_rules(any_fmu):

@@ -73,7 +73,7 @@ def test_no_fmi_layer_writes_its_own_phase_masks(source):
     assert not own, f"{source} defines {own}: take the allowed states from fmi_phase_rules.h (phase_rules.py)"
 
 
-def test_the_native_fmus_ship_the_generated_phase_rules(native_fmus, native_plant_fmus, build_module, tmp_path):
+def test_the_native_fmus_ship_the_generated_phase_rules(native_fmus, native_plant_fmus, command_sources):
     """Each native FMU's sources/ carries fmi_phase_rules.h exactly as phase_rules.c_header() writes it
     (its libraries are compiled from those sources; the guard's only copy is the one its build writes
     beside the generated variable table, and the guard finds no other)."""
@@ -81,8 +81,7 @@ def test_the_native_fmus_ship_the_generated_phase_rules(native_fmus, native_plan
 
     from fmu_src.fmi import phase_rules
 
-    fmus = [*native_fmus.values(), *native_plant_fmus.values(),
-            *(build_module.build_command_source(v, tmp_path) for v in (2, 3))]
+    fmus = [*native_fmus.values(), *native_plant_fmus.values(), *command_sources.values()]
     for fmu in fmus:
         with zipfile.ZipFile(fmu) as z:
             assert z.read("sources/fmi_phase_rules.h").decode() == phase_rules.c_header(), fmu.name

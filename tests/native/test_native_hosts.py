@@ -24,7 +24,8 @@ import pytest
 from fmpy import read_model_description
 
 from support.native_support import (C_HOST, CC, DRIVERS, FMI2_INCLUDE, MINGW_CC, NATIVE_DIR, WINE, AnySlave, c_host_outputs,
-                            c_host_script, compile_c, core_outputs, input_sequence, require, unzipped)
+                            c_host_script, compile_c, core_outputs, input_sequence, require, unzipped,
+                            wine_env)
 
 PARAMS = {"n_neurons": 500, "seed": 3, "learning_rate": 1e-4, "psi_gain_stance_knee": 0.0}
 N_STEPS = 400
@@ -76,15 +77,14 @@ def test_sources_in_the_fmu_compile_with_cc_alone_and_match(native_fmus, sequenc
 
 
 @pytest.mark.wine
-def test_win64_binary_under_wine_matches_the_core(native_fmus, sequence, reference, tmp_path):
+def test_win64_binary_under_wine_matches_the_core(native_fmus, sequence, reference, tmp_path, tmp_path_factory):
     host = compile_c(require(MINGW_CC), [C_HOST], tmp_path / "fmi2_host.exe", "-std=c99", "-O2",
                      f"-I{FMI2_INCLUDE}", "-static")
     unzipped = _unzip(native_fmus[2], tmp_path / "fmu")
     script = tmp_path / "script.txt"
     script.write_text(c_host_script(native_fmus[2], PARAMS, sequence))
     dll = unzipped / "binaries" / "win64" / "AdaptiveVelocityRegulatorNative.dll"
-    env = {"WINEPREFIX": str(tmp_path / "wineprefix"), "WINEDEBUG": "-all", "HOME": str(tmp_path),
-           "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin"}
+    env = wine_env(tmp_path_factory)
     guid = read_model_description(str(native_fmus[2])).guid
     proc = subprocess.run([str(require(WINE)), str(host), str(dll), guid, str(script)], env=env, capture_output=True,
                           text=True, timeout=900)

@@ -27,7 +27,7 @@ from fmpy.logging import addLoggerProxy
 from fmu_src.plant_fmu import fmu_core
 from plant.constants import OFFSET_NAMES
 from plant.terrain import GroundHeight
-from support.native_support import CC, FMI2_INCLUDE, MINGW_CC, NATIVE_DIR, WINE, compile_c, require
+from support.native_support import CC, FMI2_INCLUDE, MINGW_CC, NATIVE_DIR, WINE, compile_c, require, wine_env
 
 #: Communication step of the loops (s): the suite's regulator period.
 H = 0.01
@@ -269,9 +269,9 @@ def _run_loop(host: Path, script: str, folder: Path, env_prefix=("env", "-i"), e
 
 
 @pytest.fixture(scope="module")
-def regulator_fmus(tmp_path_factory, build_module):
-    out = tmp_path_factory.mktemp("native_regulators")
-    return {v: build_module.build_native_fmu(v, out) for v in (2, 3)}
+def regulator_fmus(native_fmus):
+    """{2: path, 3: path}: both native regulator FMUs as build.py builds them (conftest.py)."""
+    return native_fmus
 
 
 def test_loop_walks_in_a_c_host_with_an_empty_environment(plant_fmus, plant_dir, regulator_fmus, tmp_path):
@@ -321,13 +321,12 @@ def test_loop_walks_in_a_c_host_with_an_empty_environment(plant_fmus, plant_dir,
 
 
 @pytest.mark.wine
-def test_win64_loop_walks_under_wine(plant_fmus, regulator_fmus, tmp_path):
+def test_win64_loop_walks_under_wine(plant_fmus, regulator_fmus, tmp_path, tmp_path_factory):
     """The Windows pair (native regulator, native plant with its mujoco.dll), FMI 2.0 and 3.0, in the
     C host built with MinGW-w64, under Wine with nothing in the environment but Wine's own: 10 s at
     0.5 m/s.  (Not the Linux bits: Windows' libm and the MSVC-built mujoco.dll round differently
     in the last place.)"""
-    env = {"WINEPREFIX": str(tmp_path / "wineprefix"), "WINEDEBUG": "-all", "HOME": str(tmp_path),
-           "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin"}
+    env = wine_env(tmp_path_factory)
     for fmi in (2, 3):
         host = _loop_host(require(MINGW_CC), fmi, tmp_path / f"fmi{fmi}_loop_host.exe")
         reg_dir = Path(extract(str(regulator_fmus[fmi]), unzipdir=str(tmp_path / f"regulator{fmi}")))
@@ -342,13 +341,13 @@ def test_win64_loop_walks_under_wine(plant_fmus, regulator_fmus, tmp_path):
 
 
 @pytest.mark.wine
-def test_win64_plant_walks_on_the_handed_over_terrain_under_wine(plant_fmus, regulator_fmus, terrain_field, tmp_path):
+def test_win64_plant_walks_on_the_handed_over_terrain_under_wine(plant_fmus, regulator_fmus, terrain_field, tmp_path,
+                                                                 tmp_path_factory):
     """The Windows plant reads the height field too (its MuJoCo model editing goes through the
     mujoco.dll it loads): 3 s of the terrain_mass_com ground in the FMI 2.0 loop under Wine walk
     as the Linux loop does, to 1e-6 m (Windows rounds differently in the last place; on the flat
     floor, not reading the field, the pelvis would be centimetres off)."""
-    env = {"WINEPREFIX": str(tmp_path / "wineprefix"), "WINEDEBUG": "-all", "HOME": str(tmp_path),
-           "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin"}
+    env = wine_env(tmp_path_factory)
     reg_dir = Path(extract(str(regulator_fmus[2]), unzipdir=str(tmp_path / "regulator")))
     plant_dir = Path(extract(str(plant_fmus[2]), unzipdir=str(tmp_path / "plant")))
     rows = {}

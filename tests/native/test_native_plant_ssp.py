@@ -21,16 +21,16 @@ MASTERS_S = 4.0
 
 
 @pytest.fixture(scope="module")
-def systems(tmp_path_factory, build_module, built_fmu):
-    """(CassieAVR.ssp, CassieAVRNative.ssp, the native plant FMI 2.0 and 3.0 FMUs, the native regulator)."""
+def systems(tmp_path_factory, build_module, built_fmu, native_plant_fmus, native_fmus):
+    """(CassieAVR.ssp, CassieAVRNative.ssp, the native plant FMI 2.0 and 3.0 FMUs, the native regulator):
+    the session's FMUs (conftest.py), the native system made of them by build.py's function."""
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
 
     log_output_level(CosimLogLevel.ERROR)
     python_dir = built_system(tmp_path_factory, build_module, built_fmu)
-    out = tmp_path_factory.mktemp("native_system")
-    plants = [build_module.build_native_plant_fmu(v, out) for v in (2, 3)]
-    regulator = build_module.build_native_fmu(2, out)
-    native = build_module.build_native_ssp(out, plants[0], regulator, python_dir / "CommandSource_fmi2.fmu")
+    plants, regulator = [native_plant_fmus[v] for v in (2, 3)], native_fmus[2]
+    native = build_module.build_native_ssp(tmp_path_factory.mktemp("native_system"), plants[0], regulator,
+                                           python_dir / "CommandSource_fmi2.fmu")
     return python_dir / f"{system.SYSTEM_NAME}.ssp", native, plants, regulator
 
 

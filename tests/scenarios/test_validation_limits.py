@@ -19,6 +19,7 @@ from scenarios.campaign import spec as campaign_spec
 from scenarios.cli import main as cli_main
 from scenarios.errors import ScenarioError
 from support.paths import REPO_ROOT
+from support.plant_fmu_support import built_plant_fmu
 
 GOOD = """name = "tiny"
 duration_s = 2.0
@@ -231,9 +232,9 @@ def test_task_timeout_beyond_what_the_waits_take_is_refused(tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------- FMUs of the wrong kind
-def test_the_plant_fmu_as_regulator_and_the_regulator_as_plant_refused_up_front(tmp_path, capsys, built_fmu,
-                                                                                 build_module):
-    plant_fmu = Path(build_module.build_plant_fmu(tmp_path / "plant"))
+def test_the_plant_fmu_as_regulator_and_the_regulator_as_plant_refused_up_front(tmp_path, tmp_path_factory, capsys,
+                                                                                 built_fmu, build_module):
+    plant_fmu = built_plant_fmu(tmp_path_factory, build_module)
     f = tmp_path / "tiny.toml"
     f.write_text(GOOD)
     rc, err = cli(capsys, "run", f, "--fmu", plant_fmu, "--out", tmp_path / "o")

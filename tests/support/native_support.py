@@ -21,6 +21,7 @@ from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS
 from fmu_src.core.avr_core import Regulator
 from fmu_src.core.avr_params import RegulatorInputs, RegulatorParams
 from support.paths import REPO_ROOT
+from support.shared import made_once
 H = 0.005  # communication step, s
 OUTPUT_NAMES = [s.name for s in OUTPUT_SPECS]
 NATIVE_DIR = Path(__file__).parent / "native"
@@ -55,6 +56,21 @@ def require(tool: Path) -> Path:
     if not tool.is_file():
         pytest.skip(f"{tool} is not installed (.ci/run installs it)")
     return tool
+
+
+def wine_env(tmp_path_factory) -> dict[str, str]:
+    """The whole environment a Windows program runs in under Wine: Wine's own variables only, and a
+    Wine prefix (with its HOME) initialised once per test session (``wineboot``, about 10 s) for
+    every Wine test; they run their programs in it, each from its own tmp_path."""
+    wine = require(WINE)
+
+    def make(folder: Path) -> dict[str, str]:
+        env = {"WINEPREFIX": str(folder / "wineprefix"), "WINEDEBUG": "-all", "HOME": str(folder),
+               "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin"}
+        proc = subprocess.run([str(wine), "wineboot", "--init"], env=env, capture_output=True, text=True, timeout=900)
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        return env
+    return made_once(tmp_path_factory, "wine", make)
 
 
 def input_sequence(n, seed):
