@@ -199,6 +199,59 @@ def test_walker_with_the_c_controller_walks_the_python_walker_s_bits(native):
         walker.get_state()
 
 
+def _walk_until_fall(model, **walker_kwargs):
+    """Walk at 0.5 m/s, pushed forward by 300 N from 1 s on, until the walker falls (4 s at most):
+    the telemetry and regulator inputs of every 10 ms, packed as doubles, and the fall."""
+    walker = CassieWalker(model, **walker_kwargs)
+    walker.set_command(0.5, 0.0)
+    out = []
+    while not walker.fell() and walker.time_s < WALK_S:
+        if abs(walker.time_s - 1.0) < 1e-9:
+            walker.set_pelvis_force([300.0, 0.0, 0.0])
+        walker.advance(REGULATOR_STEPS)
+        signals = [*walker.telemetry().values(), *walker.regulator_inputs().values()]
+        out.append(struct.pack(f"<{len(signals)}d", *signals))
+    return out, walker.time_s, walker.fall_reason
+
+
+def test_the_c_walker_falls_where_the_python_walker_falls(native):
+    """The C stepping, fall test and sensing (cc_advance, cc_fallen, cc_sense) end a falling walk at
+    the Python walker's time, for its reason, with its signals bit for bit on the way."""
+    model = load_model("menagerie")
+    python = _walk_until_fall(model)
+    c = _walk_until_fall(model, controller="native", native_library=native)
+    assert python[2] is not None and python[1] < WALK_S, "the push must make the walker fall"
+    assert c[1:] == python[1:]
+    first = next((i for i, (a, b) in enumerate(zip(python[0], c[0])) if a != b), None)
+    assert first is None and len(c[0]) == len(python[0]), f"signals differ from step {first}"
+
+
+@pytest.mark.parametrize("state", ["standing", "pelvis_at_the_height_limit", "pelvis_just_below_it", "tilted",
+                                   "non_finite_velocity"])
+def test_the_c_fall_test_is_the_python_one(native, state):
+    """cc_fallen answers what CassiePhysics.fall_reason says, on each side of each limit."""
+    import mujoco
+
+    from plant.cassie import FALL_HEIGHT_M, FALL_TILT_RAD
+
+    walker = CassieWalker(load_model("menagerie"), controller="native", native_library=native)
+    ph = walker.physics
+    m, d, qa = ph.model, ph.data, ph.free_qadr
+    if state == "pelvis_at_the_height_limit":  # the flat floor is at 0: not lower than the limit
+        d.qpos[qa + 2] = FALL_HEIGHT_M
+    elif state == "pelvis_just_below_it":
+        d.qpos[qa + 2] = math.nextafter(FALL_HEIGHT_M, 0.0)
+    elif state == "tilted":  # about x, just past the limit
+        half = (FALL_TILT_RAD + 1e-6) / 2
+        d.qpos[qa + 3:qa + 7] = [math.cos(half), math.sin(half), 0.0, 0.0]
+    elif state == "non_finite_velocity":
+        d.qvel[0] = math.nan
+    mujoco.mj_kinematics(m, d)
+    expected = state != "standing" and state != "pelvis_at_the_height_limit"
+    assert (ph.fall_reason() is not None) == expected
+    assert walker.controller.fallen(FALL_HEIGHT_M, FALL_TILT_RAD) == expected
+
+
 def test_walker_refuses_an_unknown_controller():
     with pytest.raises(ValueError, match="controller = 'c': must be one of python, native"):
         CassieWalker(load_model("menagerie"), controller="c")
