@@ -186,15 +186,16 @@ def find_compiler() -> str | None:
     return shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
 
 
-def build_library(out_dir: Path) -> Path:
-    """``libcassie_ctrl.so`` in ``out_dir``, linked against the wheel's libmujoco (rpath to it)."""
+def build_library(out_dir: Path, extra_flags: tuple[str, ...] = ()) -> Path:
+    """``libcassie_ctrl.so`` in ``out_dir``, linked against the wheel's libmujoco (rpath to it);
+    ``extra_flags``: more compiler options (the sanitizers, for the tests)."""
     src = write_sources(Path(out_dir) / "src")
     out = Path(out_dir) / "libcassie_ctrl.so"
     lib = mujoco_library()
     cc = find_compiler()
     if cc is None:
         raise CompilerMissing("building the C controller needs a C compiler (cc or gcc; set CC)")
-    cmd = [cc, *CFLAGS, "-shared", "-fPIC", f"-I{mujoco_dir() / 'include'}", f"-I{src[0].parent}",
+    cmd = [cc, *CFLAGS, *extra_flags, "-shared", "-fPIC", f"-I{mujoco_dir() / 'include'}", f"-I{src[0].parent}",
            *map(str, src), "-o", str(out), str(lib), f"-Wl,-rpath,{lib.parent}", "-lm"]
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode:
