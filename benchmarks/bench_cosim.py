@@ -34,6 +34,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import subprocess
 import sys
 import tempfile
@@ -45,6 +46,7 @@ REPO_ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO_ROOT))
 
 from scenarios.cosim import master  # noqa: E402
+from scenarios.docs import BENCH_TARGETS  # noqa: E402
 from scenarios.lang import spec  # noqa: E402
 from ctypes import c_double as c_double_t  # noqa: E402
 from scenarios.cosim.regulators import FmuRegulator, InProcessRegulator, RegulatorPath
@@ -73,6 +75,14 @@ class ZeroRegulator(RegulatorPath):
 
     def close(self) -> None:
         pass
+
+
+def measured() -> dict[str, Any]:
+    """Where and when a benchmark ran (for docs/data/benchmarks/): the commit, the date, the
+    machine, and the load averages over 1, 5 and 15 minutes at the end of the run."""
+    from scenarios.docs import measured_here
+
+    return {**measured_here(), "cpu_count": os.cpu_count(), "load_average": [round(x, 2) for x in os.getloadavg()]}
 
 
 def bare_mj_step(seconds: float, model=None) -> dict[str, float]:
@@ -221,10 +231,11 @@ def lean_loop(makers: dict[str, Any], seconds: float, repeat: int) -> dict[str, 
     return best
 
 
-def ensure_fmu(path: str | None, native: bool = False) -> Path:
+def ensure_fmu(path: str | None, folder: Path, native: bool = False) -> Path:
+    """``path``, or the FMU (the pythonfmu one, or the native FMI 2.0 one) built into ``folder``."""
     if path:
         return Path(path)
-    out = Path(tempfile.mkdtemp(prefix="bench_fmu_"))
+    out = Path(folder)
     from scenarios.cosim.fmus import load_build_module
 
     build = load_build_module()
@@ -279,6 +290,58 @@ def system_loop(scenario: Scenario, fmu: Path, plant_fmu: Path, ssp: Path, repea
     return best
 
 
+def master_vs_c_host(scenario: Scenario, folder: Path, repeat: int) -> dict[str, dict[str, float]]:
+    """Our master against the plain C host on the same two FMUs (the native CassiePlant and the
+    native regulator, FMI 2.0), the same communication step, the same command, best of ``repeat``
+    (interleaved):
+
+    - ``c_host``: ``tests/support/native/fmi2_loop_host.c`` (the loop in C: set, doStep, get, each
+      step's outputs printed), CPU time of its loop as it measures it (initialization excluded);
+    - ``master``: :func:`scenarios.cosim.master.run_arm` with ``--plant fmu`` on the native plant FMU
+      and the native regulator FMU (fmpy), CPU time of the whole arm (FMU extraction and
+      initialization included: the ratio is a lower bound).
+    """
+    import re
+
+    import build
+    from fmpy import extract
+
+    from scenarios.cosim.plant_fmu import plant_factory
+    from scenarios.lang.plantio import load_plant_model
+
+    sys.path.insert(0, str(REPO_ROOT / "tests"))
+    from native.test_native_plant import H, _loop_script
+    from support.native_support import CC, FMI2_INCLUDE, NATIVE_DIR, compile_c
+
+    plant_fmu, reg_fmu = Path(build.build_native_plant_fmu(2, folder)), Path(build.build_native_fmu(2, folder))
+    plant_dir = Path(extract(str(plant_fmu), unzipdir=str(folder / "plant")))
+    reg_dir = Path(extract(str(reg_fmu), unzipdir=str(folder / "regulator")))
+    host = compile_c(CC, [NATIVE_DIR / "fmi2_loop_host.c"], folder / "host", "-std=c99", "-O2", f"-I{FMI2_INCLUDE}",
+                     "-ldl")
+    n, h = scenario.n_comm_steps, scenario.comm_step_s
+    vx_des = scenario.command_at_step(0)[0]
+    script, _ = _loop_script(plant_fmu, plant_dir, reg_fmu, reg_dir, n, vx_des)
+    steps_line = f"T {H!r} {n}\n"
+    if steps_line not in script:
+        raise SystemExit(f"the C host's script has no line {steps_line!r}: tests/native/test_native_plant.py changed")
+    (folder / "loop.txt").write_text(script.replace(steps_line, f"T {h!r} {n}\n"))
+    model, summary = load_plant_model(scenario)
+    best: dict[str, dict[str, float]] = {}
+    for _ in range(repeat):
+        proc = subprocess.run(["env", "-i", str(host), str(folder / "loop.txt")], capture_output=True, text=True,
+                              check=True)
+        runs = {"c_host": {"sim_s": n * h, "cpu_s": float(re.search(r"cpu time ([0-9.]+) s", proc.stderr).group(1))}}
+        c0 = time.process_time()
+        r = master.run_arm(scenario, "adaptive", FmuRegulator(reg_fmu), model=model, model_summary=summary,
+                           plant=plant_factory(plant_fmu, unpack_dir=folder))
+        runs["master"] = {"sim_s": r.sim_s, "cpu_s": time.process_time() - c0}
+        for key, m in runs.items():
+            m["rtf_cpu"] = m["sim_s"] / m["cpu_s"]
+            if key not in best or m["rtf_cpu"] > best[key]["rtf_cpu"]:
+                best[key] = m
+    return best
+
+
 def print_system_loop(res: dict[str, Any]) -> None:
     bare = res["bare_mj_step"]
     print("closed loop with the plant as an FMU (CassiePlant + AdaptiveVelocityRegulator)")
@@ -303,8 +366,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-system", action="store_true", help="skip the plant-FMU rows (libcosim SSP, --plant fmu)")
     args = ap.parse_args(argv)
 
-    fmu = ensure_fmu(args.fmu)
-    native_fmu = ensure_fmu(args.native_fmu, native=True)
+    built = tempfile.TemporaryDirectory(prefix="bench_cosim_")
+    fmu = ensure_fmu(args.fmu, Path(built.name))
+    native_fmu = ensure_fmu(args.native_fmu, Path(built.name), native=True)
     system_dir = None if args.no_system else tempfile.TemporaryDirectory(prefix="bench_system_")
     system_files = None if system_dir is None else build_system(fmu, Path(system_dir.name))
     scenario = spec.override(spec.resolve_targets(["nominal"])[0], duration_s=args.duration)
@@ -349,6 +413,8 @@ def main(argv=None) -> int:
     if system_dir is not None:
         with system_dir:
             res["system"] = system_loop(scenario, fmu, *system_files, args.repeat)
+        with tempfile.TemporaryDirectory(prefix="bench_c_host_") as tmp:
+            res["c_host"] = master_vs_c_host(scenario, Path(tmp), args.repeat)
     if args.suite:
         with tempfile.TemporaryDirectory(prefix="bench_suite_") as out:
             t0 = time.perf_counter()
@@ -392,9 +458,18 @@ def main(argv=None) -> int:
           f"in-process / plant-only CPU per simulated s {r['inprocess_over_plant_only']:.3f}")
     if "system" in res:
         print_system_loop(res)
+    if "c_host" in res:
+        host, ours = res["c_host"]["c_host"], res["c_host"]["master"]
+        r["master_over_c_host"] = ours["rtf_cpu"] / host["rtf_cpu"]
+        target = BENCH_TARGETS["master_over_c_host"]
+        print(f"the native plant FMU + native regulator FMU: the plain C host {host['rtf_cpu']:.2f}, our master "
+              f"{ours['rtf_cpu']:.2f} sim s / CPU s: master / C host {r['master_over_c_host']:.3f} (target >= {target}: "
+              f"{'met' if r['master_over_c_host'] >= target else 'MISSED'})")
     if "suite_jobs2_wall_s" in res:
         print(f"suite `run all --jobs 2`: {res['suite_jobs2_wall_s']:.1f} s wall (exit {res['suite_returncode']})")
+    built.cleanup()
     if args.json:
+        res["measured"] = measured()
         Path(args.json).write_text(json.dumps(res, indent=2) + "\n")
     return 0
 

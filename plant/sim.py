@@ -23,6 +23,7 @@ plant benchmark use it; the scenario suite has its own data flow in ``scenarios/
 """
 from __future__ import annotations
 
+import ctypes
 import logging
 import math
 from pathlib import Path
@@ -30,7 +31,7 @@ from typing import Mapping
 
 import mujoco
 
-from plant.cassie import CassiePhysics
+from plant.cassie import FALL_HEIGHT_M, FALL_TILT_RAD, CassiePhysics
 from plant.constants import CONTROLLERS
 from plant.controller_params import ControllerParams
 from plant.controller import NominalController
@@ -85,13 +86,16 @@ class CassieWalker:
             self.controller = NativeController(native_library, self.physics, self.params)
         else:
             self.controller = NominalController(self.physics, self.params)
-        c_sense = controller == "native"
-        #: The sensing the walker reports, from the C controller when it runs (its own, the same bits).
-        self._heading_state = self.controller.heading_state if c_sense else self.physics.heading_state
-        self._foot_forces = self.controller.foot_normal_forces_n if c_sense else self.physics.foot_normal_forces_n
+        c_loop = controller == "native"
+        #: The stepping, the fall test and the sensing, in C when the C controller runs (the same
+        #: bits: tests/plant/test_native_controller.py): one call each per communication step.
+        self._step = self._step_c if c_loop else self._step_python
+        self._fallen = self._fallen_c if c_loop else self.physics.fell
+        self._signals = self.controller.sense if c_loop else self._signals_python
         #: Simulated time of the state whose fall check :meth:`advance` made (None: not checked).
         self._fall_checked_t = None
-        self._substep = 0
+        #: Plant steps since the controller's last update, counted across :meth:`advance` calls.
+        self._substep = ctypes.c_int(0) if c_loop else 0
         self._fall_reason = None
         self.vx_des = 0.0
         self.vy_des = 0.0
@@ -126,17 +130,34 @@ class CassieWalker:
 
     def regulator_inputs(self) -> dict:
         """Signals for the regulator (see ``plant/controller.py`` for definitions)."""
-        c = self.controller
-        _, pitch, roll, _, _, roll_rate, pitch_rate, _ = self._heading_state()
-        return {"vx": float(c.vx_step_avg), "vy": float(c.vy_filt), "pitch": pitch,
-                "roll": roll, "pitch_rate": pitch_rate, "roll_rate": roll_rate,
-                "step_index": int(c.step_index)}
+        _, pitch, roll, _, _, roll_rate, pitch_rate, _, _, _, _, _, _, _, vx, vy, step_index, _, _ = self._signals()
+        return {"vx": vx, "vy": vy, "pitch": pitch, "roll": roll, "pitch_rate": pitch_rate, "roll_rate": roll_rate,
+                "step_index": int(step_index)}
+
+    def _signals_python(self) -> tuple:
+        """What the C controller's ``sense`` gives (``plant.native.native_ctrl.SENSE_NAMES``), from
+        the Python controller and the physics."""
+        ph, c = self.physics, self.controller
+        p = ph.pelvis_position()
+        fl, fr = ph.foot_normal_forces_n()
+        return (*ph.heading_state(), float(fl), float(fr), float(p[0]), float(p[1]), float(p[2]), self.time_s,
+                float(c.vx_step_avg), float(c.vy_filt), float(c.step_index), 0.0 if c.stance == "left" else 1.0,
+                float(c.tau))
 
     def advance(self, n_steps: int) -> None:
         """Advance ``n_steps`` plant steps of ``SIM_DT_S`` with the controller running."""
         n = int(n_steps)
         if n < 0:
             raise ValueError(f"n_steps must be >= 0, got {n_steps}")
+        self._step(n)
+        ph = self.physics
+        if self._fall_reason is None:
+            self._fall_reason = ph.fall_reason() if self._fallen() else None
+            self._fall_checked_t = ph.data.time
+            if self._fall_reason:
+                log.info("fall at t=%.3f s: %s", self.time_s, self._fall_reason)
+
+    def _step_python(self, n: int) -> None:
         sub = self.params.control_substeps
         ph, c = self.physics, self.controller
         while n > 0:
@@ -147,11 +168,12 @@ class CassieWalker:
             if self._substep >= sub:
                 self._substep = 0
                 c.update()
-        if self._fall_reason is None:
-            self._fall_reason = ph.fall_reason()
-            self._fall_checked_t = ph.data.time
-            if self._fall_reason:
-                log.info("fall at t=%.3f s: %s", self.time_s, self._fall_reason)
+
+    def _step_c(self, n: int) -> None:
+        self.controller.advance(n, self._substep)
+
+    def _fallen_c(self) -> bool:
+        return self.controller.fallen(FALL_HEIGHT_M, FALL_TILT_RAD)
 
     def _python_controller_only(self, what: str) -> None:
         if self.controller_kind != "python":
@@ -271,19 +293,12 @@ class CassieWalker:
 
     def telemetry(self) -> dict:
         """Named floats for logging (SI units; stance 0 = left, 1 = right)."""
-        ph, c = self.physics, self.controller
-        p = ph.pelvis_position()
-        yaw, pitch, roll, vx, vy, _, _, yaw_rate = self._heading_state()
-        fl, fr = self._foot_forces()
+        yaw, pitch, roll, vx, vy, _, _, yaw_rate, fl, fr, x, y, z, t, vx_avg, vy_filt, step, stance, tau = self._signals()
         return {
-            "t": self.time_s,
-            "pelvis_x": float(p[0]), "pelvis_y": float(p[1]), "pelvis_z": float(p[2]),
-            "vx": vx, "vy": vy,
-            "vx_step_avg": float(c.vx_step_avg), "vy_signal": float(c.vy_filt),
-            "pitch": pitch, "roll": roll,
-            "stance": 0.0 if c.stance == "left" else 1.0,
-            "tau": float(c.tau), "step_index": float(c.step_index),
-            "left_foot_force": float(fl), "right_foot_force": float(fr),
+            "t": t, "pelvis_x": x, "pelvis_y": y, "pelvis_z": z, "vx": vx, "vy": vy,
+            "vx_step_avg": vx_avg, "vy_signal": vy_filt, "pitch": pitch, "roll": roll,
+            "stance": stance, "tau": tau, "step_index": step,
+            "left_foot_force": fl, "right_foot_force": fr,
             "vx_des": self.vx_des, "vy_des": self.vy_des,
             "yaw": yaw, "yaw_rate": yaw_rate, "yaw_rate_des": self.yaw_rate_des,
         }

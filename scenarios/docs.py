@@ -33,8 +33,15 @@ DATA_DIR = REPO_ROOT / DATA_REL
 SUITE_DATA = DATA_DIR / "suite.json"
 STUDY_DATA = DATA_DIR / "robustness_study.csv"
 CONFIRM_DATA = DATA_DIR / "robustness_confirm.csv"
+#: The benchmarks' numbers: ``<name>.json`` written by ``benchmarks/bench_<name>.py --json``.
+BENCH_REL = DATA_REL / "benchmarks"
+BENCHMARKS = ("suite", "cosim", "campaign")
+#: The benchmarks' targets (issue 45), which the scripts print and the tables show: the main job's
+#: fraction of the physics limit; our master's rate over the plain C host's on the same FMUs; a
+#: campaign worker's rate over bare ``mj_step``, and the campaign's scaling from 1 to 2 workers.
+BENCH_TARGETS = {"suite": 0.85, "master_over_c_host": 0.9, "campaign_rate": 0.8, "campaign_scaling": 1.8}
 #: Every page that may hold generated tables.
-PAGES = ("README.md", "docs/results.md")
+PAGES = ("README.md", "docs/results.md", "docs/benchmarks.md")
 #: The arm metrics recorded per suite arm (times of the run itself, ``wall_s`` and the like, are not results).
 SUITE_METRICS = ("fell", "t_fall_s", "steady_state_error_vx", "steady_state_error_vy",
                  "steady_state_error_vy_stride", "steady_state_error_yaw_rate", "run_error_vx",
@@ -112,9 +119,13 @@ def suite_data(run_dir: Path) -> dict[str, Any]:
         }
     if problems:
         raise DocsError("cannot record the suite:\n  " + "\n  ".join(problems))
-    return {"measured": {"commit": _git_commit(), "date": datetime.date.today().isoformat(),
-                         "machine": f"{_cpu_name()}, {platform.system()} {platform.machine()}"},
-            "scenarios": scenarios}
+    return {"measured": measured_here(), "scenarios": scenarios}
+
+
+def measured_here() -> dict[str, str]:
+    """The commit, today's date and this machine, as the data files record them."""
+    return {"commit": _git_commit(), "date": datetime.date.today().isoformat(),
+            "machine": f"{_cpu_name()}, {platform.system()} {platform.machine()}"}
 
 
 def record_suite(run_dir: Path, dest: Path | None = None) -> Path:
@@ -134,6 +145,13 @@ def load_suite(path: Path = SUITE_DATA) -> dict[str, Any]:
     except (OSError, ValueError) as exc:
         raise DocsError(f"{path}: cannot read the suite data ({exc}); record it with "
                         "python -m scenarios docs --record-suite RUN_DIR") from exc
+
+
+def load_json(path: Path, how: str) -> dict[str, Any]:
+    try:
+        return json.loads(Path(path).read_text())
+    except (OSError, ValueError) as exc:
+        raise DocsError(f"{path}: cannot read the benchmark data ({exc}); record it with {how}") from exc
 
 
 def load_csv(path: Path) -> list[dict[str, str]]:
@@ -159,7 +177,7 @@ def _measured(suite: Mapping[str, Any]) -> str:
     return f"Measured on {m['machine']}, {m['date']}, at commit {m['commit']} (`docs/data/suite.json`)."
 
 
-def table_readme_suite(suite: Mapping[str, Any], study, confirm) -> list[str]:
+def table_readme_suite(suite: Mapping[str, Any], study, confirm, bench) -> list[str]:
     sc = suite["scenarios"]
     rows = []
     for name, what in HEADLINE:
@@ -172,7 +190,7 @@ def table_readme_suite(suite: Mapping[str, Any], study, confirm) -> list[str]:
             "", f"{passed} of {len(verdicts)} scenarios pass every claim check. {_measured(suite)}"]
 
 
-def table_suite(suite: Mapping[str, Any], study, confirm) -> list[str]:
+def table_suite(suite: Mapping[str, Any], study, confirm, bench) -> list[str]:
     rows = []
     for name in sorted(suite["scenarios"]):
         s = suite["scenarios"][name]
@@ -184,7 +202,7 @@ def table_suite(suite: Mapping[str, Any], study, confirm) -> list[str]:
             "", _measured(suite)]
 
 
-def table_rl_levels(suite: Mapping[str, Any], study, confirm) -> list[str]:
+def table_rl_levels(suite: Mapping[str, Any], study, confirm, bench) -> list[str]:
     arms = suite["scenarios"]["compare_staircase_rl"]["arms"]
     levels = arms["adaptive"]["level_errors_vx"]
     rows = [[arm, *(_f(v["error_vx"]) for v in a["level_errors_vx"])] for arm, a in arms.items()]
@@ -200,7 +218,7 @@ def _never(r: Mapping[str, str]) -> str:
     return "PASS" if int(r["never_listed"]) == 0 else f"FAIL: {r['never_listed']}"
 
 
-def table_readme_study(suite, study: Sequence[Mapping[str, str]], confirm) -> list[str]:
+def table_readme_study(suite, study: Sequence[Mapping[str, str]], confirm, bench) -> list[str]:
     rows = []
     for variant, what in SHIPPED_DESIGNS:
         mine = [r for r in study if r["variant"] == variant and not r["note"]]
@@ -223,7 +241,7 @@ def table_readme_study(suite, study: Sequence[Mapping[str, str]], confirm) -> li
             "", "From `docs/data/robustness_study.csv` (each row names the commit that recorded it)."]
 
 
-def table_study(suite, study: Sequence[Mapping[str, str]], confirm) -> list[str]:
+def table_study(suite, study: Sequence[Mapping[str, str]], confirm, bench) -> list[str]:
     rows = []
     for r in study:
         where = r["set"] + (f" ({r['note']})" if r["note"] else "")
@@ -235,12 +253,96 @@ def table_study(suite, study: Sequence[Mapping[str, str]], confirm) -> list[str]
                 "chance level", "never, confirmed", "beats PD-only", "median settled error (m/s)", "recorded in"], rows)
 
 
-def table_confirm(suite, study, confirm: Sequence[Mapping[str, str]]) -> list[str]:
+def table_confirm(suite, study, confirm: Sequence[Mapping[str, str]], bench) -> list[str]:
     rows = [[r["set"], r["robot"], f"{r['falls_of_5']} / {r['falls_against_of_5']}",
              f"{r['falls']} / {r['falls_against']}", f"{r['only_falls']} / {r['only_falls_against']}",
              r["p_one_sided"]] for r in confirm]
     return _md(["set", "robot", "falls of 5, adaptive / PD-only", "falls on 40 fresh runs",
                 "only one arm fell, adaptive / PD-only", "one-sided p"], rows)
+
+
+def _bench_measured(data: Mapping[str, Any], name: str) -> str:
+    m = data["measured"]
+    load = ", ".join(f"{x:.2f}" for x in m["load_average"])
+    return (f"Measured on {m['machine']} ({m['cpu_count']} cores), {m['date']}, load average {load} (1, 5, 15 min) "
+            f"at the end, at commit {m['commit']} (`{(BENCH_REL / name).as_posix()}`).")
+
+
+def _met(value: float, target: float) -> str:
+    return "yes" if value >= target else "no"
+
+
+def table_bench_suite(suite, study, confirm, bench) -> list[str]:
+    data = bench["suite"]
+    f = data["figures"]
+    target = BENCH_TARGETS["suite"]
+    compared = data.get("compare")
+    same = "not compared" if compared is None else "yes" if not compared else f"no ({len(compared)} differences)"
+    rows = [["main job / physics limit (2 x bare `mj_step` in the same run), by CPU time",
+             f"{f['physics_fraction_cpu']:.2f}", f">= {target}", _met(f["physics_fraction_cpu"], target)],
+            ["the same by wall time", f"{f['physics_fraction']:.2f}", f">= {target} (quiet machine)",
+             _met(f["physics_fraction"], target)],
+            ["simulated s; wall s; CPU s of all its processes", f"{f['sim_s']:.0f}; {f['wall_s']:.1f}; {f['cpu_s']:.1f}",
+             "", ""],
+            ["CPU s: the arms; writing the results; worker start-up; the rest (the parent)",
+             f"{f['arms_cpu_s']:.1f}; {f['writing_cpu_s']:.1f}; {f['worker_startup_cpu_s']:.1f}; {f['rest_cpu_s']:.1f}",
+             "", ""],
+            ["the physics limit, CPU s (bare `mj_step` on each scenario's plant)",
+             f"{f['physics_fraction_cpu'] * f['cpu_s']:.1f}", "", ""],
+            ["every `timeseries.csv` and `summary.json` metric identical to the compared run", same, "yes",
+             "" if compared is None else _met(0 if compared else 1, 1)]]
+    return [*_md(["`bench_suite.py`, the whole suite, `--jobs 2`", "measured", "target", "met"], rows), "",
+            _bench_measured(data, "suite.json")]
+
+
+def table_bench_cosim(suite, study, confirm, bench) -> list[str]:
+    data = bench["cosim"]
+    bare = data["bare_mj_step"]["rtf_cpu"]
+    rows = [["bare `mj_step`", f"{bare:.2f}", "1.00", ""]]
+    for key, label, target in (("plant_only", "plant + Python controller, zero offsets (the master's loop)", None),
+                               ("inprocess", "in-process regulator core, Python controller", None),
+                               ("fmu", "pythonfmu regulator FMU, Python controller", 0.5),
+                               ("native_fmu", "native regulator FMU, Python controller", None),
+                               ("native_fmu_c_controller", "native regulator FMU + C controller (the run's default)",
+                                0.8)):
+        rate = data[key]["rtf_cpu"]
+        rows.append([label, f"{rate:.2f}", f"{rate / bare:.2f}", "" if target is None else f">= {target}"])
+    for key, label, target in (("libcosim_ssp", "libcosim, `CassieAVR.ssp` (both FMUs pythonfmu)", 0.5),
+                               ("master_plant_fmu", "our master, `--plant fmu` (pythonfmu plant FMU)", None)):
+        if key in data.get("system", {}):
+            rate = data["system"][key]["rtf_cpu"]
+            rows.append([label, f"{rate:.2f}", f"{rate / bare:.2f}", "" if target is None else f">= {target}"])
+    lines = _md(["loop (`nominal`, adaptive arm)", "simulated s per CPU s", "/ bare `mj_step`", "target"], rows)
+    if "c_host" in data:
+        host, ours = data["c_host"]["c_host"]["rtf_cpu"], data["c_host"]["master"]["rtf_cpu"]
+        ratio, target = ours / host, BENCH_TARGETS["master_over_c_host"]
+        lines += ["", *_md(["native plant FMU + native regulator FMU", "simulated s per CPU s", "/ bare `mj_step`"],
+                           [["the plain C host (`tests/support/native/fmi2_loop_host.c`)", f"{host:.2f}",
+                             f"{host / bare:.2f}"],
+                            ["our master (`--plant fmu`, fmpy)", f"{ours:.2f}", f"{ours / bare:.2f}"]]),
+                  "", f"Our master / the C host: {ratio:.2f} (target >= {target}: {'met' if ratio >= target else 'not met'})."]
+    return [*lines, "", f"{data['duration_s']:g} simulated s per loop, best of {data['repeat']}. "
+            + _bench_measured(data, "cosim.json")]
+
+
+def table_bench_campaign(suite, study, confirm, bench) -> list[str]:
+    data = bench["campaign"]
+    rows = []
+    for label, res in data["results"].items():
+        for r in res["runs"]:
+            # --fork-runs: the forked runs' CPU time is not counted (no process waits for them)
+            cpu = ["-"] * 3 if "--fork-runs" in label or r["cpu_s"] is None else [
+                f"{r['cpu_s']:.1f}", f"{r['rate_cpu']:.2f}", f"{r['rate_over_physics']:.2f}"]
+            rows.append([label, str(r["workers"]), f"{r['wall_s']:.1f}", *cpu, f"{r['rate_wall_per_worker']:.2f}",
+                         f"{res['scaling']:.2f}" if r["workers"] == 2 else ""])
+    lines = _md(["set-up", "workers", "wall s", "CPU s", "simulated s per CPU s", "/ bare `mj_step`",
+                 "simulated s per wall s per worker", "scaling wall(1)/wall(2)"], rows)
+    return [*lines, "", f"`robustness_random`, {data['samples']} samples x {len(data['arms'])} arms "
+            f"({', '.join(data['arms'])}) x 25 simulated s; bare `mj_step` on the samples' plants: "
+            f"{data['physics']['rate_cpu']:.2f} simulated s per CPU s; targets: >= {BENCH_TARGETS['campaign_rate']} of it "
+            f"per worker, scaling >= {BENCH_TARGETS['campaign_scaling']}; with `--fork-runs` the CPU time of the "
+            "forked runs is not counted. "
+            + _bench_measured(data, "campaign.json")]
 
 
 TABLES: dict[str, Callable[..., list[str]]] = {
@@ -250,6 +352,9 @@ TABLES: dict[str, Callable[..., list[str]]] = {
     "readme_study": table_readme_study,
     "study": table_study,
     "confirm": table_confirm,
+    "bench_suite": table_bench_suite,
+    "bench_cosim": table_bench_cosim,
+    "bench_campaign": table_bench_campaign,
 }
 
 
@@ -276,7 +381,9 @@ def all_tables(root: Path | None = None) -> dict[str, str]:
     data = (REPO_ROOT if root is None else root) / DATA_REL
     suite = load_suite(data / SUITE_DATA.name)
     study, confirm = load_csv(data / STUDY_DATA.name), load_csv(data / CONFIRM_DATA.name)
-    return {name: "\n".join(fn(suite, study, confirm)) for name, fn in TABLES.items()}
+    bench = {name: load_json(data / BENCH_REL.name / f"{name}.json", f"python benchmarks/bench_{name}.py --json FILE")
+             for name in BENCHMARKS}
+    return {name: "\n".join(fn(suite, study, confirm, bench)) for name, fn in TABLES.items()}
 
 
 def pages(root: Path | None = None, tables: Mapping[str, str] | None = None) -> dict[Path, tuple[str, str]]:

@@ -717,6 +717,49 @@ void cc_update(CcController *c) {
     write_servos(c, tg);
 }
 
+void cc_advance(CcController *c, long n, int *substep) {
+    int sub = c->p.control_substeps;
+    while (n > 0) {
+        long k = sub - *substep < n ? sub - *substep : n;
+        for (long i = 0; i < k; i++) mj_step(c->m, c->d);
+        n -= k;
+        *substep += (int)k;
+        if (*substep >= sub) {
+            *substep = 0;
+            cc_update(c);
+        }
+    }
+}
+
+int cc_fallen(const CcController *c, double height_m, double tilt_rad) {
+    const mjModel *m = c->m;
+    const mjData *d = c->d;
+    for (int i = 0; i < m->nq; i++)
+        if (!isfinite(d->qpos[i])) return 1;
+    for (int i = 0; i < m->nv; i++)
+        if (!isfinite(d->qvel[i])) return 1;
+    const mjtNum *q = d->qpos + c->fx.free_qadr;
+    if (q[2] - cc_ground_height(c, q[0], q[1]) < height_m) return 1;
+    double zz = d->xmat[9 * c->fx.pelvis_body + 8];
+    return acos(zz > 1.0 ? 1.0 : (zz < -1.0 ? -1.0 : zz)) > tilt_rad;
+}
+
+void cc_sense(const CcController *c, double out[CC_NSENSE]) {
+    const CcMemory *mm = &c->mem;
+    const mjtNum *q = c->d->qpos + c->fx.free_qadr;
+    cc_heading_state(c, out);
+    cc_foot_forces(c, out + 8);
+    out[10] = q[0];
+    out[11] = q[1];
+    out[12] = q[2];
+    out[13] = c->d->time;
+    out[14] = mm->vx_step_avg;
+    out[15] = mm->vy_filt;
+    out[16] = (double)mm->step_index;
+    out[17] = mm->stance == CC_LEFT ? 0.0 : 1.0;
+    out[18] = mm->tau;
+}
+
 int cc_init(CcController *c, mjModel *m, mjData *d, const CcParams *p, char *err, int errlen) {
     memset(c, 0, sizeof *c);
     c->m = m;

@@ -98,6 +98,17 @@ CC_API void cc_set_command(CcController *c, double vx, double vy, double yaw_rat
 CC_API int cc_set_offsets(CcController *c, const double *offsets);
 /* NominalController.update. */
 CC_API void cc_update(CcController *c);
+/* CassieWalker.advance's stepping: n plant steps (mj_step), the update every control_substeps
+ * steps; *substep counts the steps since the last update, across calls. */
+CC_API void cc_advance(CcController *c, long n, int *substep);
+/* CassiePhysics.fall_reason's test: 1 for a non-finite state, the pelvis less than height_m above
+ * the ground under it or tilted more than tilt_rad from upright, else 0. */
+CC_API int cc_fallen(const CcController *c, double height_m, double tilt_rad);
+/* The walker's signals in one call: cc_heading_state's eight (0-7), cc_foot_forces' two (8-9), the
+ * pelvis position (10-12), the time (13), vx_step_avg, vy_filt, step_index, stance (0 left, 1 right)
+ * and tau (14-18). */
+#define CC_NSENSE 19
+CC_API void cc_sense(const CcController *c, double out[CC_NSENSE]);
 /* Look the gait up again for the memory's gait speed (after the memory was restored). */
 CC_API void cc_memory_restored(CcController *c);
 /* The ground height under (x, y), m (plant.terrain.GroundHeight). */

@@ -41,6 +41,11 @@ MAX_GRID = 32
 MAX_BEZIER = 16
 #: The controller's modes and sides as the C enums number them.
 MODES = ("stand", "shift", "walk")
+#: What ``cc_sense`` fills in, in its order (``CC_NSENSE`` values; cassie_ctrl.h).
+SENSE_NAMES = ("yaw", "pitch", "roll", "vx", "vy", "roll_rate", "pitch_rate", "yaw_rate", "left_foot_force",
+               "right_foot_force", "pelvis_x", "pelvis_y", "pelvis_z", "t", "vx_step_avg", "vy_filt", "step_index",
+               "stance", "tau")
+N_SENSE = len(SENSE_NAMES)
 #: Compiler options: optimized, no FMA contraction (the sources say so by pragma too), no
 #: fast-math, hidden symbols except the API.
 CFLAGS = ("-O2", "-ffp-contract=off", "-fno-fast-math", "-std=c99", "-Wall", "-Wextra", "-Werror",
@@ -181,15 +186,16 @@ def find_compiler() -> str | None:
     return shutil.which(os.environ.get("CC", "cc")) or shutil.which("gcc")
 
 
-def build_library(out_dir: Path) -> Path:
-    """``libcassie_ctrl.so`` in ``out_dir``, linked against the wheel's libmujoco (rpath to it)."""
+def build_library(out_dir: Path, extra_flags: tuple[str, ...] = ()) -> Path:
+    """``libcassie_ctrl.so`` in ``out_dir``, linked against the wheel's libmujoco (rpath to it);
+    ``extra_flags``: more compiler options (the sanitizers, for the tests)."""
     src = write_sources(Path(out_dir) / "src")
     out = Path(out_dir) / "libcassie_ctrl.so"
     lib = mujoco_library()
     cc = find_compiler()
     if cc is None:
         raise CompilerMissing("building the C controller needs a C compiler (cc or gcc; set CC)")
-    cmd = [cc, *CFLAGS, "-shared", "-fPIC", f"-I{mujoco_dir() / 'include'}", f"-I{src[0].parent}",
+    cmd = [cc, *CFLAGS, *extra_flags, "-shared", "-fPIC", f"-I{mujoco_dir() / 'include'}", f"-I{src[0].parent}",
            *map(str, src), "-o", str(out), str(lib), f"-Wl,-rpath,{lib.parent}", "-lm"]
     res = subprocess.run(cmd, capture_output=True, text=True)
     if res.returncode:
@@ -319,6 +325,10 @@ class NativeLibrary:
         lib.cc_ground_height.restype = d
         lib.cc_foot_forces.argtypes = [vp, ctypes.POINTER(d * 2)]
         lib.cc_heading_state.argtypes = [vp, ctypes.POINTER(d * 8)]
+        lib.cc_advance.argtypes = [vp, ctypes.c_long, ctypes.POINTER(ctypes.c_int)]
+        lib.cc_fallen.argtypes = [vp, d, d]
+        lib.cc_fallen.restype = ctypes.c_int
+        lib.cc_sense.argtypes = [vp, ctypes.POINTER(d * N_SENSE)]
         lib.cc_memory_ptr.argtypes = [vp]
         lib.cc_memory_ptr.restype = ctypes.POINTER(CcMemory)
         lib.cc_targets_ptr.argtypes = [vp]
@@ -347,6 +357,7 @@ class NativeController:
         self._offsets = (ctypes.c_double * 6)()
         self._forces = (ctypes.c_double * 2)()
         self._heading = (ctypes.c_double * 8)()
+        self._sensed = (ctypes.c_double * N_SENSE)()
 
     def set_command(self, vx: float, vy: float, gaits, yaw_rate: float = 0.0) -> None:
         key = id(gaits)
@@ -376,6 +387,22 @@ class NativeController:
 
     def update(self) -> None:
         self._native.lib.cc_update(self._buf)
+
+    def advance(self, n_steps: int, substep: ctypes.c_int) -> None:
+        """``n_steps`` plant steps with :meth:`update` every ``control_substeps`` steps, in C
+        (``CassieWalker.advance``'s loop); ``substep``: the steps since the last update, carried
+        across calls."""
+        self._native.lib.cc_advance(self._buf, n_steps, ctypes.byref(substep))
+
+    def fallen(self, height_m: float, tilt_rad: float) -> bool:
+        """``CassiePhysics.fall_reason``'s test in C (the same comparisons on the same bits)."""
+        return bool(self._native.lib.cc_fallen(self._buf, height_m, tilt_rad))
+
+    def sense(self) -> tuple:
+        """The signals :data:`SENSE_NAMES` in one call (the same bits as :meth:`heading_state`,
+        :meth:`foot_normal_forces_n`, the pelvis position and the memory)."""
+        self._native.lib.cc_sense(self._buf, self._sensed)
+        return tuple(self._sensed)
 
     def foot_normal_forces_n(self) -> tuple[float, float]:
         """``CassiePhysics.foot_normal_forces_n`` in C (the same contacts in the same order: the same bits)."""

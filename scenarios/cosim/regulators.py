@@ -182,9 +182,7 @@ class FmuRegulator(FmuInstance, RegulatorPath):
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
         self._t = t
-        vals = self._val_in_real
-        for i, n in enumerate(self._in_real):
-            vals[i] = float(inputs[n])
+        self._val_in_real[:] = [float(inputs[n]) for n in self._in_real]
         int_changed = self._first_step
         for i, n in enumerate(self._in_int):
             v = int(inputs[n])
@@ -209,7 +207,7 @@ class FmuRegulator(FmuInstance, RegulatorPath):
             raise
         except Exception as exc:  # a ctypes argument error: never a traceback without the FMU log
             raise self._fail("FMI call", f"{type(exc).__name__}: {exc}") from None
-        return dict(zip(self._outputs, self._val_out))
+        return dict(zip(self._outputs, self._val_out[:]))
 
     def _checked(self, fn, args: tuple, which: str) -> None:
         status = fn(*args)

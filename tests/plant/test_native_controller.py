@@ -199,6 +199,105 @@ def test_walker_with_the_c_controller_walks_the_python_walker_s_bits(native):
         walker.get_state()
 
 
+def _walk_until_fall(model, **walker_kwargs):
+    """Walk at 0.5 m/s, pushed forward by 300 N from 1 s on, until the walker falls (4 s at most):
+    the telemetry and regulator inputs of every 10 ms, packed as doubles, and the fall."""
+    walker = CassieWalker(model, **walker_kwargs)
+    walker.set_command(0.5, 0.0)
+    out = []
+    while not walker.fell() and walker.time_s < WALK_S:
+        if abs(walker.time_s - 1.0) < 1e-9:
+            walker.set_pelvis_force([300.0, 0.0, 0.0])
+        walker.advance(REGULATOR_STEPS)
+        signals = [*walker.telemetry().values(), *walker.regulator_inputs().values()]
+        out.append(struct.pack(f"<{len(signals)}d", *signals))
+    return out, walker.time_s, walker.fall_reason
+
+
+def test_the_c_walker_falls_where_the_python_walker_falls(native):
+    """The C stepping, fall test and sensing (cc_advance, cc_fallen, cc_sense) end a falling walk at
+    the Python walker's time, for its reason, with its signals bit for bit on the way."""
+    model = load_model("menagerie")
+    python = _walk_until_fall(model)
+    c = _walk_until_fall(model, controller="native", native_library=native)
+    assert python[2] is not None and python[1] < WALK_S, "the push must make the walker fall"
+    assert c[1:] == python[1:]
+    first = next((i for i, (a, b) in enumerate(zip(python[0], c[0])) if a != b), None)
+    assert first is None and len(c[0]) == len(python[0]), f"signals differ from step {first}"
+
+
+@pytest.mark.parametrize("state", ["standing", "pelvis_at_the_height_limit", "pelvis_just_below_it", "tilted",
+                                   "non_finite_velocity"])
+def test_the_c_fall_test_is_the_python_one(native, state):
+    """cc_fallen answers what CassiePhysics.fall_reason says, on each side of each limit."""
+    import mujoco
+
+    from plant.cassie import FALL_HEIGHT_M, FALL_TILT_RAD
+
+    walker = CassieWalker(load_model("menagerie"), controller="native", native_library=native)
+    ph = walker.physics
+    m, d, qa = ph.model, ph.data, ph.free_qadr
+    if state == "pelvis_at_the_height_limit":  # the flat floor is at 0: not lower than the limit
+        d.qpos[qa + 2] = FALL_HEIGHT_M
+    elif state == "pelvis_just_below_it":
+        d.qpos[qa + 2] = math.nextafter(FALL_HEIGHT_M, 0.0)
+    elif state == "tilted":  # about x, just past the limit
+        half = (FALL_TILT_RAD + 1e-6) / 2
+        d.qpos[qa + 3:qa + 7] = [math.cos(half), math.sin(half), 0.0, 0.0]
+    elif state == "non_finite_velocity":
+        d.qvel[0] = math.nan
+    mujoco.mj_kinematics(m, d)
+    expected = state != "standing" and state != "pelvis_at_the_height_limit"
+    assert (ph.fall_reason() is not None) == expected
+    assert walker.controller.fallen(FALL_HEIGHT_M, FALL_TILT_RAD) == expected
+
+
 def test_walker_refuses_an_unknown_controller():
     with pytest.raises(ValueError, match="controller = 'c': must be one of python, native"):
         CassieWalker(load_model("menagerie"), controller="c")
+
+
+#: What the sanitized walker does in its own process (the library's path is its argument): walk on a
+#: flat floor and on terrain, pushed until it falls, every C call of the walker's loop on the way.
+SANITIZED_WALK = """
+import math, sys
+from plant.cassie import FALL_HEIGHT_M, FALL_TILT_RAD
+from plant.model import load_model
+from plant.native.native_ctrl import NativeLibrary
+from plant.perturbation import Perturbation
+from plant.sim import CassieWalker
+from plant.terrain import TerrainSpec
+lib = NativeLibrary(sys.argv[1])
+for pert in (None, Perturbation(terrain=TerrainSpec(max_height_m=0.1, max_slope_deg=10.0, seed=3))):
+    w = CassieWalker(load_model("menagerie", pert), controller="native", native_library=lib)
+    w.set_command(0.5, 0.0)
+    for k in range(300):
+        if k == 100:
+            w.set_pelvis_force([300.0, 0.0, 0.0])
+        w.advance(7)
+        w.telemetry(), w.regulator_inputs()
+    assert w.fell()
+    w.data.qvel[0] = math.nan
+    assert w.controller.fallen(FALL_HEIGHT_M, FALL_TILT_RAD)
+print("walked")
+"""
+
+
+@pytest.mark.sanitize
+def test_the_walker_s_c_calls_under_asan_and_ubsan_with_zero_findings(tmp_path):
+    import os
+    import subprocess
+    import sys
+
+    from native.test_native_hosts import SANITIZE
+
+    lib = build_library(tmp_path, extra_flags=SANITIZE)
+    assert b"__asan_report" in lib.read_bytes() and b"__ubsan_handle" in lib.read_bytes()  # instrumented
+    libasan = subprocess.run(["gcc", "-print-file-name=libasan.so"], capture_output=True, text=True).stdout.strip()
+    # Python itself is not instrumented and keeps memory until exit: leak checking would report it, not us.
+    env = {**os.environ, "LD_PRELOAD": libasan, "ASAN_OPTIONS": "detect_leaks=0:halt_on_error=1",
+           "UBSAN_OPTIONS": "halt_on_error=1:print_stacktrace=1"}
+    run = subprocess.run([sys.executable, "-c", SANITIZED_WALK, str(lib)], env=env, capture_output=True, text=True,
+                         timeout=900)
+    findings = run.stderr.count("ERROR: AddressSanitizer") + run.stderr.count("runtime error:")
+    assert run.returncode == 0 and findings == 0 and run.stdout.strip() == "walked", run.stderr[-4000:]
