@@ -21,7 +21,7 @@ def test_first_code_block_is_setup_plus_main_job_then_tests():
     assert setup_and_main.startswith("python3 -m venv .venv && .venv/bin/pip install -e '.[test]' && ")
     assert " -m scenarios run all " in setup_and_main and "--require-pass" in setup_and_main
     assert "--out runs" in setup_and_main  # relative, as users type it
-    assert tests.endswith(".venv/bin/python -m pytest -q")
+    assert tests.endswith(".venv/bin/python -m pytest -q -n 2")  # two workers: the 2-core machine
     for line in (setup_and_main, tests):
         assert "MENAGERIE_ROOT=../shared/cassie/menagerie " in line
         assert "/work/" not in line and "/tmp/" not in line  # nothing of one machine
