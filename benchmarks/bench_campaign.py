@@ -195,9 +195,7 @@ def report(label: str, runs: list[dict], samples: int, physics: dict[str, Any]) 
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("
-
-")[0])
+    ap = argparse.ArgumentParser(allow_abbrev=False, description=__doc__.split("\n\n")[0])
     ap.add_argument("--samples", type=int, default=20, help="samples of the campaign (default 20)")
     ap.add_argument("--fmu", default=None, help="the FMU (default: dist/, built if missing or stale)")
     ap.add_argument("--repeat", type=int, default=1, help="campaigns per worker count; the fastest counts")

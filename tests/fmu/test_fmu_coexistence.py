@@ -46,7 +46,7 @@ def builds(tmp_path_factory, build_module, built_fmu):
     """{"regulator": .fmu, "regulator_b": the same with Kp_x's default 0.5, "plant": .fmu,
     "plant_b": the same with joint_damping_scale's default 2.0}, each built by build.py."""
     regulator_b = build_edited(tmp_path_factory.mktemp("regulator_b"), "build_fmu", {
-        "fmu_src/core/avr_specs.py": (f'_param("Kp_x", {KP_X},', f'_param("Kp_x", {KP_X_B},')})
+        "fmu_src/core/avr_specs.py": (f'_param("Kp_x", METHOD, {KP_X},', f'_param("Kp_x", METHOD, {KP_X_B},')})
     plant_b = build_edited(tmp_path_factory.mktemp("plant_b"), "build_plant_fmu", {
         "fmu_src/plant_fmu/fmu_core.py": (f'_p("joint_damping_scale", {DAMPING},', f'_p("joint_damping_scale", {DAMPING_B},')})
     return {"regulator": built_fmu, "regulator_b": regulator_b,

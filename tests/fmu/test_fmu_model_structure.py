@@ -25,6 +25,7 @@ from fmpy import read_model_description
 from fmpy.fmi2 import FMU2Slave
 from fmpy.fmi3 import FMU3Slave
 
+from fmu_src.core.avr_specs import PARAM_REQUIRES
 from support.plant_fmu_support import built_plant_fmu
 
 FMUS = ("python-fmi2", "native-fmi2", "native-fmi3", "plant-fmi2")
@@ -207,6 +208,7 @@ def measured_initial_dependencies(fmu_id, md, unzip_dir):
     inputs, each set alone to another value before initialization, over ``INIT_BASES``."""
     knowns = [v for v in md.modelVariables if v.causality in ("input", "parameter")]
     found = {v.name: set() for v in md.modelVariables if v.causality == "output"}
+    by_name = {v.name: v for v in md.modelVariables}
     defaults = None
     for base, measure in INIT_BASES.get(fmu_id, (({}, None),)):
         reference = initialized_outputs(md, unzip_dir, base)
@@ -214,9 +216,13 @@ def measured_initial_dependencies(fmu_id, md, unzip_dir):
         for var in knowns:
             if var.name in base or (measure is not None and var.name not in measure):
                 continue
-            changed = initialized_outputs(md, unzip_dir, {**base, var.name: other_value(var)})
+            # A knob that acts only with another (PARAM_REQUIRES) is refused alone: both sides of
+            # its comparison set the one it requires.
+            needs = {b: other_value(by_name[b]) for a, b in PARAM_REQUIRES if a == var.name and b in by_name}
+            against = initialized_outputs(md, unzip_dir, {**base, **needs}) if needs else reference
+            changed = initialized_outputs(md, unzip_dir, {**base, **needs, var.name: other_value(var)})
             for name, value in changed.items():
-                if value != reference[name]:
+                if value != against[name]:
                     found[name].add(var.name)
     return found, defaults
 

@@ -16,6 +16,7 @@ import re
 
 import pytest
 from lxml import etree
+from fmu_src.core.avr_profiles import PROFILES
 
 from support.xml_schemas import (LS_REF_IMPORT_FIX, LS_REF_XSD, kind_of, ls_ref_parser, ls_ref_schema_text, osp_schema_text,
                          problems, xml_documents)
@@ -64,6 +65,7 @@ DOCUMENTS = {
     **{f"CassieAVRNative.ssp/resources/{fmu}/modelDescription.xml": "fmi2-model" for fmu in (
         "AdaptiveVelocityRegulatorNative_fmi2.fmu", "CassiePlantNative_fmi2.fmu", "CommandSource_fmi2.fmu")},
     **{f"{fmu}/{LS_REF_MANIFEST}": "fmi-ls-ref" for fmu in EVERY_FMU},
+    **{f"profiles/{name}.ssv": "ssv" for name in PROFILES},
 }
 #: The plant FMU's MuJoCo model files (MJCF: MuJoCo defines no XML schema), wherever the plant FMU is.
 MJCF_IN_PLANT = ("resources/cassie_plant_lib/models/menagerie/agility_cassie/cassie.xml",

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from fmu_src.core.avr_profiles import PROFILES
 from support.native_support import AARCH64_CC, MINGW_CC, MINGW_OBJDUMP, READELF, require
 
 FMI = pytest.mark.parametrize("fmi", [2, 3])
@@ -39,8 +40,10 @@ def test_build_all_writes_fmus_json_listing_every_fmu_built(built_all):
     require(MINGW_CC), require(AARCH64_CC)  # without them build.py skips their platforms (test_build_platforms.py)
     built = built_all.built
     paths = [p for p in built if p.suffix == ".fmu"]
-    assert {p.name for p in built} - {p.name for p in paths} == {"CassieAVR.ssp", "CassieAVR_osp", "CassieAVRNative.ssp"}
-    assert all(p.parent == built_all.dist for p in built)
+    profiles = [p for p in built if p.suffix == ".ssv"]
+    assert {p.name for p in built} - {p.name for p in paths + profiles} == {"CassieAVR.ssp", "CassieAVR_osp", "CassieAVRNative.ssp"}
+    assert sorted(p.stem for p in profiles) == sorted(PROFILES) and all(p.parent == built_all.dist / "profiles" for p in profiles)
+    assert all(p.parent == built_all.dist for p in built if p not in profiles)
     listing = json.loads((built_all.dist / "fmus.json").read_text())["fmus"]
     assert [e["file"] for e in listing] == [p.name for p in paths] and all(p.is_file() for p in paths)
     assert [(e["fmiVersion"], e["modelIdentifier"], e["implementation"], e["platforms"]) for e in listing] == [
