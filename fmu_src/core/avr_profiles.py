@@ -20,8 +20,8 @@ PROFILES: dict[str, dict[str, object]] = {
     "paper": {"leakage_per_s": 0.0},
     # the FMU's defaults
     "default": {},
-    # the randomized-robots study's shipped design (robustness_random_ramp, with what it inherits
-    # from robustness_random_start, _nuisance, _grounds, _settled_lr2, _settled and robustness_random)
+    # the randomized-robots study's shipped design (scenarios/campaigns/robustness_random.toml,
+    # variant "ramp")
     "robust": {"command_accel_limit_mps2": 0.5, "learn_settled_steps": 8, "learning_rate": 2e-6,
                "learn_ramp_max_mps2": 0.25},
 }

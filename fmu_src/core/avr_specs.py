@@ -189,7 +189,7 @@ PARAM_SPECS: tuple[VarSpec, ...] = (
            "settled over this many step_index changes, in [0, 1000]: settled means the "
            "reference equals the command (vx_des, vy_des) and so does its mean over the last "
            "completed step (each within 1e-9 m/s); a moving reference resets the count. While "
-           "they wait their learning errors are 0 (leakage and projection still act) and the "
+           "they wait their learning errors are 0 (leakage still acts) and the "
            "torso networks learn as usual. Errors during a command change are mostly the "
            "gait's own transient, which a learned offset carries over to the next command; "
            "0 switches it off (the paper's rule: learn at every call)", type="Integer"),

@@ -246,13 +246,20 @@ def error_state(ctx: Context):
         if first + ctx.run(inst, 2, n - 2, seed) != expected:
             raise Failed("after an Error, the state restored does not go on like an instance that saw no Error")
         api.free_state(inst, saved)
-    ctx.expect(api.reset(inst), (OK,), "fmiReset after an Error")
+    _reset_then_run_as_new(ctx, inst, expected, "after an Error")
+    return {"restored": can_state}
+
+
+def _reset_then_run_as_new(ctx: Context, inst, expected, after: str):
+    """fmiReset ``inst`` (in the state ``after`` names), initialize it again and run it:
+    its outputs must be ``expected``, a new instance's; then free it."""
+    api = ctx.api
+    ctx.expect(api.reset(inst), (OK,), f"fmiReset {after}")
     for status in api.enter_init(inst) + [api.exit_init(inst)]:
         ctx.expect(status, ACCEPTED, "initializing after the reset")
-    if ctx.run(inst, 0, n, seed) != expected:
-        raise Failed("after an Error and fmiReset the run's outputs differ from a new instance's")
+    if ctx.run(inst, 0, ctx.steps, ctx.options["seed"]) != expected:
+        raise Failed(f"{after} and fmiReset the run's outputs differ from a new instance's")
     api.free(inst)
-    return {"restored": can_state}
 
 
 # ---- arguments ----------------------------------------------------------------------------------
@@ -584,12 +591,7 @@ def reset(ctx: Context):
     api.free(fresh)
     inst = ctx.instance()
     ctx.run(inst, 0, n, seed + 1)
-    ctx.expect(api.reset(inst), (OK,), "fmiReset in the step state")
-    for status in api.enter_init(inst) + [api.exit_init(inst)]:
-        ctx.expect(status, ACCEPTED, "initializing after the reset")
-    if ctx.run(inst, 0, n, seed) != expected:
-        raise Failed("after fmiReset the run's outputs differ from a new instance's")
-    api.free(inst)
+    _reset_then_run_as_new(ctx, inst, expected, "after a run")
     return {"steps": n}
 
 
