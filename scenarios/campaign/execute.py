@@ -50,6 +50,8 @@ WORKER_WAIT_S = 60.0  # an existing scheduler must have a worker within this tim
 LOCAL_HOST = "127.0.0.1"
 #: The local cluster's dashboard: this machine, a free port (``--dashboard-address`` exposes it).
 DEFAULT_DASHBOARD = f"{LOCAL_HOST}:0"
+#: How the local cluster's dashboard address starts its line on stderr.
+DASHBOARD_LINE = "Dask dashboard: "
 
 
 class ConnectionFailed(Exception):
@@ -249,7 +251,7 @@ def open_client(opts: RunOptions, cdir: CampaignDir, retries: int) -> Iterator[A
                                    local_directory=str(cdir.dask_dir.resolve()), silence_logs=logging.ERROR)
         try:
             client = Client(cluster)
-            print(f"Dask dashboard: {client.dashboard_link}", file=sys.stderr)
+            print(f"{DASHBOARD_LINE}{client.dashboard_link}", file=sys.stderr)
             try:
                 yield client
             finally:

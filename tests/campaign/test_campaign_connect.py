@@ -27,6 +27,7 @@ from pathlib import Path
 import psutil
 import pytest
 
+from scenarios.campaign.execute import DASHBOARD_LINE
 from test_campaign_dask import BIN, CLI, MENAGERIE_ROOT, _env, campaign_file, rows, stop, wait_for
 
 LOOPBACK = {"127.0.0.1", "::1"}
@@ -76,7 +77,7 @@ def test_local_cluster_listens_on_loopback_only_and_prints_its_dashboard(tmp_pat
     assert len({(ip, port) for ip, port, _ in seen}) >= 6, seen
     exposed = sorted(s for s in seen if s[0] not in LOOPBACK)
     assert exposed == [], f"listening beyond loopback: {exposed}"
-    dashboard = [line for line in stderr.splitlines() if line.startswith("Dask dashboard: ")]
+    dashboard = [line for line in stderr.splitlines() if line.startswith(DASHBOARD_LINE)]
     assert len(dashboard) == 1 and dashboard[0].startswith("Dask dashboard: http://127.0.0.1:"), stderr
     port = int(dashboard[0].split(":")[-1].split("/")[0])
     assert any(p == port and ip in LOOPBACK for ip, p, _ in seen), (port, seen)

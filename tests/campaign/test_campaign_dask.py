@@ -26,6 +26,7 @@ import pytest
 
 from plant.model import menagerie_root
 
+from scenarios.campaign.execute import DASHBOARD_LINE
 from scenarios.campaign.store import TIMING_COLUMNS
 from support.paths import REPO_ROOT
 
@@ -261,7 +262,7 @@ def test_interrupt_then_resume_runs_every_sample_once(tmp_path, built_fmu):
     finally:
         stop(cli)
     assert cli.returncode == 130, err
-    lines = [line for line in err.strip().splitlines() if not line.startswith("Dask dashboard: http://127.0.0.1:")]
+    lines = [line for line in err.strip().splitlines() if not line.startswith(f"{DASHBOARD_LINE}http://127.0.0.1:")]
     assert len(lines) == 1, err  # the dashboard's address, then one line: no worker tracebacks
     assert lines[0].startswith("interrupted: ") and "--resume" in lines[0]
     for p in in_flight:

@@ -26,6 +26,7 @@ import pytest
 
 from scenarios.campaign import forkrun
 from scenarios.campaign import task as task_mod
+from scenarios.campaign.execute import DASHBOARD_LINE
 from scenarios.campaign.store import TIMING_COLUMNS
 from support.paths import REPO_ROOT
 
@@ -160,7 +161,7 @@ def test_interrupt_with_fork_runs_kills_the_runs_then_resume_finishes(tmp_path, 
         if cli.poll() is None:
             cli.kill()
             cli.wait()
-    lines = [line for line in err.strip().splitlines() if not line.startswith("Dask dashboard: ")]
+    lines = [line for line in err.strip().splitlines() if not line.startswith(DASHBOARD_LINE)]
     assert cli.returncode == 130 and lines[0].startswith("interrupted: "), err
     assert forked
     psutil.wait_procs(forked, timeout=30)

@@ -16,8 +16,8 @@ import re
 
 import pytest
 from lxml import etree
-from fmu_src.core.avr_profiles import PROFILES
 
+from fmu_src.core.avr_profiles import PROFILES
 from support.xml_schemas import (LS_REF_IMPORT_FIX, LS_REF_XSD, kind_of, ls_ref_parser, ls_ref_schema_text, osp_schema_text,
                          problems, xml_documents)
 
