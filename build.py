@@ -39,10 +39,12 @@ import hashlib
 import io
 import json
 import logging
+import os
 import sys
 import tempfile
 import xml.etree.ElementTree as ET
 import zipfile
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 REPO_ROOT = Path(__file__).resolve().parent
@@ -129,7 +131,7 @@ def _guarded_fmu(entries: dict[str, bytes], tree: ET.ElementTree, identifier: st
     tree.write(xml_out, encoding="UTF-8", xml_declaration=True)
     entries["modelDescription.xml"] = xml_out.getvalue()
     fmu_path = Path(out_dir) / f"{identifier}.fmu"
-    write_zip(entries, fmu_path)
+    write_zip(entries, fmu_path, compress=sanitize)  # else a draft: add_reference writes it again
     log.info("built %s", fmu_path)
     return fmu_path
 
@@ -157,7 +159,7 @@ def build_native_fmu(fmi_version: int, out_dir: Path = DEFAULT_OUT) -> Path:
     """Build ``<out_dir>/AdaptiveVelocityRegulatorNative_fmi<2|3>.fmu`` reproducibly, with the binaries of
     every platform whose compiler is installed (``build_native.PLATFORMS``)."""
     fmu_path = Path(out_dir) / build_native.fmu_name(fmi_version)
-    write_zip(build_native.fmu_entries(fmi_version, UNITS, DEFAULT_EXPERIMENT), fmu_path)
+    write_zip(build_native.fmu_entries(fmi_version, UNITS, DEFAULT_EXPERIMENT), fmu_path, compress=False)  # a draft
     log.info("built %s", fmu_path)
     return crosscheck.add_reference(fmu_path)
 
@@ -168,7 +170,7 @@ def build_native_plant_fmu(fmi_version: int = 2, out_dir: Path = DEFAULT_OUT) ->
     from fmu_src.plant_fmu.native import build_native_plant
 
     fmu_path = Path(out_dir) / build_native_plant.fmu_name(fmi_version)
-    write_zip(build_native_plant.fmu_entries(fmi_version, PLANT_UNITS), fmu_path)
+    write_zip(build_native_plant.fmu_entries(fmi_version, PLANT_UNITS), fmu_path, compress=False)  # a draft
     log.info("built %s", fmu_path)
     return crosscheck.add_reference(fmu_path)
 
@@ -274,20 +276,40 @@ def fmu_entry(path: Path, implementation: str) -> dict:
             "implementation": implementation, "platforms": platforms, "sha256": sha256_of(path)}
 
 
-def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False) -> list[Path]:
+def build_all(out_dir: Path = DEFAULT_OUT, *, sanitize: bool = False, jobs: int | None = None) -> list[Path]:
     """Build every FMU (the pythonfmu regulator, both native regulators, the CassiePlant
     FMU, the CommandSource FMUs, FMI 2.0 and 3.0, the native CassiePlantNative FMUs, FMI 2.0 and 3.0),
     each with its reference results inside, the FMI cross-check vendor tree
     ``<out_dir>/cross-check/`` (``fmu_src/packing/crosscheck.py``), ``<out_dir>/fmus.json``
-    listing the FMUs, the CassieAVR system (SSP and OSP) and the Python-free CassieAVRNative SSP."""
-    regulator = build_fmu(out_dir, sanitize=sanitize)
-    native_regulators = [build_native_fmu(v, out_dir) for v in (2, 3)]
+    listing the FMUs, the CassieAVR system (SSP and OSP) and the Python-free CassieAVRNative SSP.
+
+    The FMUs are built ``jobs`` at a time (default: one per CPU), in threads: their compilers and
+    reference simulations are processes of their own.  The two pythonfmu builds run one after
+    the other (pythonfmu's builder imports the slave through ``sys.path``); every FMU is the
+    same file whatever ``jobs`` is."""
+    from fmu_src.plant_fmu.native import build_native_plant  # noqa: F401 (imported here, not in a thread)
+
+    def pythonfmu_builds() -> tuple[Path, Path]:
+        return build_fmu(out_dir, sanitize=sanitize), build_plant_fmu(out_dir)
+
+    # longest first: the pool's last task is then a short one
+    tasks = {"native_plants": lambda v: build_native_plant_fmu(v, out_dir), "native": lambda v: build_native_fmu(v, out_dir),
+             "command": lambda v: build_command_source(v, out_dir)}
+    with ThreadPoolExecutor(max_workers=max(1, jobs or os.cpu_count() or 1), thread_name_prefix="build") as pool:
+        futures = {(name, v): pool.submit(make, v) for name, make in tasks.items() for v in (3, 2)}
+        python = pool.submit(pythonfmu_builds)
+        try:
+            done = {key: f.result() for key, f in futures.items()}
+            regulator, plant = python.result()
+        except BaseException:
+            pool.shutdown(cancel_futures=True)
+            raise
+    native_regulators = [done["native", v] for v in (2, 3)]
     built = [(regulator, "python")] + [(path, "native") for path in native_regulators]
-    plant = build_plant_fmu(out_dir)
     built.append((plant, "python"))
-    command, command3 = (build_command_source(v, out_dir) for v in (2, 3))
+    command, command3 = (done["command", v] for v in (2, 3))
     built += [(command, "native"), (command3, "native")]
-    native_plants = [build_native_plant_fmu(v, out_dir) for v in (2, 3)]
+    native_plants = [done["native_plants", v] for v in (2, 3)]
     built += [(path, "native") for path in native_plants]
     crosscheck.write_vendor_tree(out_dir, [path for path, _ in built], build_native.describe.VERSION)
     listing = {"fmus": [fmu_entry(path, kind) for path, kind in built]}

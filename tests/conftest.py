@@ -4,8 +4,9 @@ offline Menagerie model beside the repository is the model loader's own default)
 Tests never use the system temp folder directly: FMUs are built and extracted under
 pytest's ``tmp_path``/``tmp_path_factory``, and tools are found beside the running
 interpreter (``venv_tool``), never through ``PATH``. The FMUs build.py builds are built once
-per test session, whatever the number of pytest-xdist workers (``support.shared.made_once``),
-and only read; each worker extracts its own copy.
+per test session, whatever the number of pytest-xdist workers (``support.builds``): from one
+whole build when the session reads it anyway, else each alone; they are only read, and each
+worker extracts its own copy.
 
 ``AVR_TEST_FMU=/path/to/AdaptiveVelocityRegulator.fmu`` makes the FMU tests use that FMU
 instead of building one (the sanitizer run, tests/fmu/test_fmu_sanitize.py, points it at a
@@ -28,7 +29,13 @@ sys.path[:0] = [str(p) for p in sorted(Path(__file__).parent.iterdir())
 
 from support.native_support import REGULATOR_FMUS  # noqa: E402
 from support.paths import SUPPORT_DIR  # noqa: E402
-from support.shared import made_once  # noqa: E402
+from support import builds  # noqa: E402
+
+
+def pytest_collection_finish(session):
+    """One whole build for the session's FMUs when its tests read the whole build anyway
+    (``support.builds``)."""
+    builds.use_whole_build(session.items)
 
 
 @pytest.fixture(scope="session")
@@ -45,7 +52,7 @@ def built_fmu(tmp_path_factory, build_module):
     given = os.environ.get("AVR_TEST_FMU")
     if given:
         return Path(given)
-    return made_once(tmp_path_factory, "fmu", build_module.build_fmu)
+    return builds.regulator_fmu(tmp_path_factory, build_module)
 
 
 def _unzip(fmu, dest) -> str:
@@ -79,29 +86,31 @@ class BuiltAll:
 def built_all(tmp_path_factory, build_module) -> BuiltAll:
     """``build_all`` once per session, shared by the tests that read a whole build (its XML
     documents, fmus.json, the cross-check tree); they only read it."""
-    out, built = made_once(tmp_path_factory, "dist", lambda out: (out, [Path(p) for p in build_module.build_all(out)]))
+    out, built = builds.whole_build(tmp_path_factory, build_module)
     return BuiltAll(out, tuple(built))
 
 
 @pytest.fixture(scope="session")
 def native_fmus(tmp_path_factory, build_module):
     """{2: path, 3: path}: both native FMUs exactly as build.py builds them."""
-    return made_once(tmp_path_factory, "native_fmus",
-                     lambda out: {v: build_module.build_native_fmu(v, out) for v in (2, 3)})
+    return builds.by_version(tmp_path_factory, build_module, "native_fmus", build_module.build_native.fmu_name,
+                             build_module.build_native_fmu)
 
 
 @pytest.fixture(scope="session")
 def native_plant_fmus(tmp_path_factory, build_module):
     """{2: path, 3: path}: both native CassiePlant FMUs exactly as build.py builds them."""
-    return made_once(tmp_path_factory, "native_plant_fmus",
-                     lambda out: {v: build_module.build_native_plant_fmu(v, out) for v in (2, 3)})
+    from fmu_src.plant_fmu.native import build_native_plant
+
+    return builds.by_version(tmp_path_factory, build_module, "native_plant_fmus", build_native_plant.fmu_name,
+                             build_module.build_native_plant_fmu)
 
 
 @pytest.fixture(scope="session")
 def command_sources(tmp_path_factory, build_module):
     """{2: path, 3: path}: both CommandSource FMUs exactly as build.py builds them."""
-    return made_once(tmp_path_factory, "command_sources",
-                     lambda out: {v: build_module.build_command_source(v, out) for v in (2, 3)})
+    return builds.by_version(tmp_path_factory, build_module, "command_sources", build_module.command_source.fmu_name,
+                             build_module.build_command_source)
 
 
 @dataclass(frozen=True)

@@ -24,17 +24,19 @@ def read_entries(path: Path) -> dict[str, bytes]:
         return {name: archive.read(name) for name in archive.namelist() if not name.endswith("/")}
 
 
-def write_zip(entries: dict[str, bytes], path: Path) -> None:
+def write_zip(entries: dict[str, bytes], path: Path, *, compress: bool = True) -> None:
     """Write ``entries`` to the archive ``path`` (replaced atomically) in sorted order with fixed
-    timestamps and modes, so that the same entries always give the same bytes."""
+    timestamps and modes, so that the same entries always give the same bytes.  ``compress=False``
+    stores them: for a draft that is read back and written again (the build's FMU before its
+    reference results go in), whose final bytes are the same either way."""
     buffer = io.BytesIO()
     with zipfile.ZipFile(buffer, "w") as archive:
         for name in sorted(entries):
             info = zipfile.ZipInfo(name, date_time=ZIP_EPOCH)
-            info.compress_type = zipfile.ZIP_DEFLATED
+            info.compress_type = zipfile.ZIP_DEFLATED if compress else zipfile.ZIP_STORED
             info.create_system = ZIP_CREATE_SYSTEM_UNIX
             info.external_attr = (EXECUTABLE_MODE if name.endswith(".so") else FILE_MODE) << 16
-            archive.writestr(info, entries[name], compresslevel=ZIP_COMPRESS_LEVEL)
+            archive.writestr(info, entries[name], compresslevel=ZIP_COMPRESS_LEVEL if compress else None)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_suffix(path.suffix + ".tmp")
     tmp.write_bytes(buffer.getvalue())

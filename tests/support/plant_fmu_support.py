@@ -1,6 +1,6 @@
 """Shared by tests/fmu/test_plant_fmu.py and tests/ssp/test_ssp.py: the CassiePlant FMU and the
 CassieAVR system exactly as build.py builds them, built once per test session into pytest's
-temporary folder (``support.shared.made_once``), and a small fmpy helper that reports statuses
+temporary folder (``support.builds``), and a small fmpy helper that reports statuses
 instead of raising."""
 from __future__ import annotations
 
@@ -10,23 +10,17 @@ from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import FMU2Slave
 
-from support.shared import made_once
+from support import builds
 
 
 def built_plant_fmu(tmp_path_factory, build_module) -> Path:
-    return Path(made_once(tmp_path_factory, "plant_fmu", build_module.build_plant_fmu))
+    return builds.plant_fmu(tmp_path_factory, build_module)
 
 
 def built_system(tmp_path_factory, build_module, regulator_fmu) -> Path:
     """A folder holding the command source FMU, CassieAVR.ssp and CassieAVR_osp/ (build.py's own functions)
     around ``regulator_fmu`` (the session's pythonfmu regulator)."""
-    def make(out: Path) -> Path:
-        plant = built_plant_fmu(tmp_path_factory, build_module)
-        command = build_module.build_command_source(2, out)
-        build_module.build_ssp(out, plant, regulator_fmu, command)
-        build_module.build_osp(out, plant, regulator_fmu, command)
-        return out
-    return made_once(tmp_path_factory, "system", make)
+    return builds.system(tmp_path_factory, build_module, regulator_fmu)
 
 
 class Plant:
