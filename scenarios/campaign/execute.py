@@ -130,6 +130,13 @@ def _quiet_dask() -> Iterator[None]:
         dlog.setLevel(old)
 
 
+def _worker_log_level() -> int:
+    """The local cluster's workers log only what kills them, unless we are verbose (-v): every
+    task failure and worker death already reaches the campaign's rows with its reason, and a
+    worker's heartbeat that outlives the scheduler on Ctrl-C is not an error of the run."""
+    return logging.ERROR if log.isEnabledFor(logging.INFO) else logging.CRITICAL
+
+
 def scheduler_file_problem(path: str | Path) -> str | None:
     """What is wrong with ``--scheduler-file path`` (Dask's JSON file with the scheduler's
     ``address``), or None."""
@@ -248,7 +255,7 @@ def open_client(opts: RunOptions, cdir: CampaignDir, retries: int) -> Iterator[A
         with _signal(signal.SIGINT, signal.SIG_IGN):
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host=LOCAL_HOST,
                                    dashboard_address=opts.dashboard_address,
-                                   local_directory=str(cdir.dask_dir.resolve()), silence_logs=logging.ERROR)
+                                   local_directory=str(cdir.dask_dir.resolve()), silence_logs=_worker_log_level())
         try:
             client = Client(cluster)
             print(f"{DASHBOARD_LINE}{client.dashboard_link}", file=sys.stderr)
