@@ -1,11 +1,12 @@
 """``python -m scenarios campaign NAME|FILE [--variant V] --out DIR [--workers N [--dashboard-address HOST:PORT] |
---scheduler ADDRESS | --scheduler-file FILE] [--resume]``.
+--scheduler ADDRESS | --scheduler-file FILE] [--resume] [--no-plots]``.
 
 Validates the campaign and every sample before anything runs (exit 2 with every
 problem), claims DIR (exit 2 if it holds another campaign, or this one without
 ``--resume``), runs the samples that are not complete on Dask, streams the rows to
 ``DIR/campaign.csv``, then (with ``confirm_runs``) runs the confirmation stage in
-``DIR/confirm``, writes ``DIR/campaign.md`` and prints the table per arm.
+``DIR/confirm``, writes ``DIR/campaign.md`` (and its plots, unless ``--no-plots``) and prints the
+table per arm.
 Exit status: 0 every row complete (the stage's too); 1 some failed (they are in the CSV with the reason;
 ``--resume`` runs them again); 2 invalid campaign, arguments or DIR, or a scheduler that cannot be used
 (unreachable, not Dask, no worker; one line); 130 interrupted.
@@ -13,6 +14,7 @@ Exit status: 0 every row complete (the stage's too); 1 some failed (they are in 
 from __future__ import annotations
 
 import dataclasses
+import functools
 import logging
 import sys
 from pathlib import Path
@@ -62,6 +64,8 @@ def add_parser(sub) -> None:
     sp.add_argument("--seed", type=int, default=None,
                     help="draw the samples from this seed instead of the file's: the same design on other robots "
                          "(recorded in campaign.json and campaign.md)")
+    sp.add_argument("--no-plots", action="store_true",
+                    help="write campaign.md without its plots (python -m scenarios report DIR writes them later)")
     sp.add_argument("--dry-run", action="store_true", help="validate and list the samples; run nothing")
     sp.set_defaults(func=cmd_campaign)
 
@@ -193,7 +197,7 @@ def cmd_campaign(args) -> int:
     finally:
         cdir.finish()
         cdir.close()
-    rc = _finish(out, write_report, text_table)
+    rc = _finish(out, functools.partial(write_report, plots=not args.no_plots), text_table)
     return rc if stage_ok else 2
 
 

@@ -63,7 +63,7 @@ def _factor_cells(r: dict[str, Any], factors: Sequence[str]) -> str:
     return ", ".join(f"{f} = {_f(r[f], 3) if isinstance(r[f], float) else r[f]}" for f in factors)
 
 
-def _paired_lines(data: analysis.CampaignData) -> list[str]:
+def _paired_lines(data: analysis.CampaignData, plot: bool = True) -> list[str]:
     if len(data.arms) < 2:
         return []
     a, b = data.arms[:2]
@@ -77,7 +77,7 @@ def _paired_lines(data: analysis.CampaignData) -> list[str]:
              f"{_f(p['max_diff_vy'], 4)} m/s).", ""]
     lines += _verdict_lines(data, a, b)
     lines += _agreement_lines(data, b)
-    return lines + ["![paired](paired.png)", ""]
+    return lines + (["![paired](paired.png)", ""] if plot else [])
 
 
 def _pct(ci) -> str:
@@ -259,7 +259,8 @@ def _unconverged_lines(data: analysis.CampaignData) -> list[str]:
     return lines + [""] if lines else []
 
 
-def render(data: analysis.CampaignData, plots: Sequence[str]) -> str:
+def render(data: analysis.CampaignData, plots: Sequence[str], *, paired_plot: bool = True) -> str:
+    """campaign.md's text; ``plots``: the plots written beside it, ``paired_plot``: whether paired.png is."""
     m = data.manifest
     failed = [r for r in data.rows if r["status"] != "complete"]
     expected = data.expected_rows
@@ -282,17 +283,17 @@ def render(data: analysis.CampaignData, plots: Sequence[str]) -> str:
     lines += [""] if failed else []
     lines += _unconverged_lines(data)
     lines += [f"![{p}]({p})" for p in plots] + [""]
-    return "\n".join(lines + _paired_lines(data) + _worst_lines(data)) + "\n"
+    return "\n".join(lines + _paired_lines(data, paired_plot) + _worst_lines(data)) + "\n"
 
 
-def write_report(root: Path) -> Path:
-    """Write ``root/campaign.md`` and its plots; return the path."""
+def write_report(root: Path, *, plots: bool = True) -> Path:
+    """Write ``root/campaign.md`` and (unless ``plots`` is false) its plots; return the path."""
     from scenarios.campaign import plots as plots_mod
 
     data = analysis.load(root)
-    written = plots_mod.write_plots(data)
+    written = plots_mod.write_plots(data) if plots else []
     path = Path(root) / REPORT_NAME
-    path.write_text(render(data, [p for p in written if p != "paired.png"]))
+    path.write_text(render(data, [p for p in written if p != "paired.png"], paired_plot="paired.png" in written))
     return path
 
 

@@ -249,7 +249,7 @@ def _run(args, tmp_path: Path, built_fmu: Path) -> subprocess.CompletedProcess:
     env = {**__import__("os").environ, "MENAGERIE_ROOT": str(menagerie_root().resolve()),
            "TMPDIR": str(tmp_path / "systemp")}
     (tmp_path / "systemp").mkdir(exist_ok=True)
-    return subprocess.run(CLI + [str(a) for a in args] + ["--fmu", str(built_fmu), "--workers", "2"],
+    return subprocess.run(CLI + [str(a) for a in args] + ["--fmu", str(built_fmu), "--workers", "2", "--no-plots"],
                           capture_output=True, text=True, timeout=WAIT_S, env=env, cwd=tmp_path)
 
 

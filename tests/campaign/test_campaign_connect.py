@@ -61,7 +61,8 @@ def _listening(pid: int) -> set[tuple[str, int, int]]:
 # --------------------------------------------------------------------------- local cluster
 def test_local_cluster_listens_on_loopback_only_and_prints_its_dashboard(tmp_path, built_fmu):
     out = tmp_path / "out"
-    cli = subprocess.Popen(CLI + [campaign_file(tmp_path, 1), "--out", out, "--workers", "2", "--fmu", built_fmu],
+    cli = subprocess.Popen(CLI + [campaign_file(tmp_path, 1), "--out", out, "--workers", "2", "--fmu", built_fmu,
+                                  "--no-plots"],
                            env=_env(tmp_path), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     seen: set[tuple[str, int, int]] = set()
     try:
@@ -112,7 +113,7 @@ def test_scheduler_file_with_two_worker_processes(tmp_path, built_fmu):
         shutil.copy(built_fmu, tmp_path / "fmus" / Path(built_fmu).name)
         # every path relative to the working folder: the campaign file, --out, the scheduler file, --fmu
         r = subprocess.run(CLI + ["smoke1.toml", "--out", "out", "--scheduler-file", "scheduler.json",
-                                  "--fmu", f"fmus/{Path(built_fmu).name}"],
+                                  "--fmu", f"fmus/{Path(built_fmu).name}", "--no-plots"],
                            capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path)
         assert r.returncode == 0, r.stderr
         _complete(tmp_path / "out")
@@ -164,7 +165,7 @@ def test_tls_scheduler_with_dasks_security_configuration(tmp_path, built_fmu):
                       "DASK_DISTRIBUTED__COMM__TLS__CLIENT__CERT": str(cert),
                       "DASK_DISTRIBUTED__COMM__TLS__CLIENT__KEY": str(key)}
         r = subprocess.run(CLI + [str(a) for a in (campaign_file(tmp_path, 1), "--out", out, "--scheduler", address,
-                                                   "--fmu", built_fmu)],
+                                                   "--fmu", built_fmu, "--no-plots")],
                            capture_output=True, text=True, timeout=300, env=client_env, cwd=tmp_path)
         assert r.returncode == 0, r.stderr
         _complete(out)

@@ -151,9 +151,11 @@ def test_smoke_campaign_local_cluster(smoke_run):
 def test_same_seed_same_csv_apart_from_timings(smoke_run, tmp_path, built_fmu):
     _, first, _ = smoke_run
     out = tmp_path / "again"
-    r = run_cli([SMOKE, "--out", out, "--workers", 1], tmp_path, built_fmu)
+    r = run_cli([SMOKE, "--out", out, "--workers", 1, "--no-plots"], tmp_path, built_fmu)
     assert r.returncode == 0, r.stderr
     assert without_timing(rows(out)) == without_timing(rows(first))
+    # --no-plots: the report's text, no plot (`scenarios report` writes them later)
+    assert (out / "campaign.md").is_file() and not list(out.glob("*.png")) and ".png" not in (out / "campaign.md").read_text()
     assert rows(out) != rows(first)  # the timings differ: two real runs, not a copy
     assert_clean(tmp_path, out)
 
@@ -174,7 +176,7 @@ def test_campaign_on_a_scheduler_and_worker_started_as_processes(smoke_run, tmp_
                                        "--no-dashboard", "--local-directory", tmp_path / "worker"], env=env,
                                       cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         out = tmp_path / "out"
-        r = run_cli([SMOKE, "--out", out, "--scheduler", address], tmp_path, built_fmu)
+        r = run_cli([SMOKE, "--out", out, "--scheduler", address, "--no-plots"], tmp_path, built_fmu)
         assert r.returncode == 0, r.stderr
         assert without_timing(rows(out)) == without_timing(rows(first))
     finally:
@@ -222,7 +224,8 @@ def test_killed_worker_mid_campaign(retries, tmp_path, built_fmu):
     out = tmp_path / "out"
     # 6 draws x 2 speeds: each worker starts several samples after its first result is in the
     # csv, so a loaded machine (the row lands late) still leaves a run younger than 1 s to catch
-    args = [campaign_file(tmp_path, 6), "--out", out, "--workers", 2, "--retries", retries, "--fmu", built_fmu]
+    args = [campaign_file(tmp_path, 6), "--out", out, "--workers", 2, "--retries", retries, "--fmu", built_fmu,
+            "--no-plots"]
     cli = subprocess.Popen(CLI + [str(a) for a in args], env=_env(tmp_path), cwd=tmp_path,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -251,7 +254,7 @@ def test_interrupt_then_resume_runs_every_sample_once(tmp_path, built_fmu):
     """Ctrl-C as a terminal sends it: SIGINT to the whole process group (CLI and workers)."""
     out = tmp_path / "out"
     cfile = campaign_file(tmp_path, 3)
-    cli = subprocess.Popen(CLI + [str(cfile), "--out", str(out), "--workers", "1", "--fmu", str(built_fmu)],
+    cli = subprocess.Popen(CLI + [str(cfile), "--out", str(out), "--workers", "1", "--fmu", str(built_fmu), "--no-plots"],
                            env=_env(tmp_path), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            start_new_session=True)
     try:
@@ -271,7 +274,7 @@ def test_interrupt_then_resume_runs_every_sample_once(tmp_path, built_fmu):
     done = {x["sample"] for x in before}
     assert 1 <= len(done) < 6 and all(x["status"] == "complete" for x in before)
 
-    r = run_cli([cfile, "--out", out, "--workers", 2, "--resume"], tmp_path, built_fmu)
+    r = run_cli([cfile, "--out", out, "--workers", 2, "--resume", "--no-plots"], tmp_path, built_fmu)
     assert r.returncode == 0, r.stderr
     after = rows(out)
     assert sorted((x["sample"], x["arm"]) for x in after) == [(f"s{i:04d}", a) for i in range(6)
@@ -284,7 +287,7 @@ def test_interrupt_then_resume_runs_every_sample_once(tmp_path, built_fmu):
 
 def test_task_timeout_recorded_as_failed(tmp_path, built_fmu):
     out = tmp_path / "out"
-    r = run_cli([SMOKE, "--out", out, "--workers", 1, "--task-timeout", 0.2], tmp_path, built_fmu)
+    r = run_cli([SMOKE, "--out", out, "--workers", 1, "--task-timeout", 0.2, "--no-plots"], tmp_path, built_fmu)
     assert r.returncode == 1
     rs = rows(out)
     assert len(rs) == 8 and all(x["status"] == "failed" and x["error"].startswith("timeout: ") for x in rs)

@@ -128,7 +128,7 @@ def test_smoke_campaign_with_fork_runs_gives_the_same_rows(tmp_path, built_fmu):
     for mode, extra in (("fork", ["--fork-runs"]), ("plain", [])):
         out = tmp_path / mode
         r = subprocess.run([sys.executable, "-m", "scenarios", "campaign", str(SMOKE), "--out", str(out),
-                            "--workers", "2", "--fmu", str(built_fmu), *extra], capture_output=True, text=True,
+                            "--workers", "2", "--fmu", str(built_fmu), "--no-plots", *extra], capture_output=True, text=True,
                            env=env, cwd=tmp_path, timeout=300)
         assert r.returncode == 0, r.stderr
         with open(out / "campaign.csv", newline="") as fh:
@@ -145,7 +145,7 @@ def test_interrupt_with_fork_runs_kills_the_runs_then_resume_finishes(tmp_path, 
     cli_cmd = [sys.executable, "-c", "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
                "from scenarios.cli import main; sys.exit(main())", "campaign"]
     out = tmp_path / "out"
-    args = [str(SMOKE), "--out", str(out), "--workers", "2", "--fmu", str(built_fmu), "--fork-runs"]
+    args = [str(SMOKE), "--out", str(out), "--workers", "2", "--fmu", str(built_fmu), "--fork-runs", "--no-plots"]
     cli = subprocess.Popen(cli_cmd + args, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            text=True, start_new_session=True)
     try:
