@@ -2,10 +2,11 @@
 the OSP structure, run by libcosim, by fmpy's simulate_ssp, by Ecos and by our own master
 with the plant as an FMU; scenarios exported as SSPs (python -m scenarios export-ssp).
 
-The main case is ``mass_20kg``'s adaptive arm, 30 s: a 20 kg torso (nominal 10.33 kg),
+The main case is ``mass_20kg``'s adaptive arm, 20 s: a 20 kg torso (nominal 10.33 kg),
 0.5 m/s, the adaptive regulator at its defaults but the suite's seed (1).  Criterion in every master: no fall and a
 step-averaged speed error of at most 0.03 m/s over the last 5 s (the suite's metric,
-``scenarios.results.metrics.steady_state_error``).
+``scenarios.results.metrics.steady_state_error``; our master: 0.053 m/s at 12 s, 0.031 at 15 s,
+0.014 at 20 s, 0.0066 at 30 s).  The scenarios run at their full durations in the -m long test.
 
 What differs between the masters, and why:
 * libcosim, Ecos and fmpy exchange Jacobi-style (every FMU steps with the inputs of the
@@ -52,7 +53,11 @@ from support.plant_fmu_support import built_plant_fmu, built_system
 from scenarios.lang.scenario import CommandPoint, Push
 from support.paths import REPO_ROOT
 
-DURATION_S = 30.0
+DURATION_S = 20.0
+#: The start-values run is compared with the exported SSP's over its first seconds: a parameter
+#: the two SSPs bind differently parts them at once (the torso mass) or at the first learning
+#: step, 0.4 s (the seed).
+AGAIN_S = 5.0
 #: mass_20kg's parameters as start values on top of the nominal SSP: its plant's torso mass and
 #: its adaptive arm's regulator seed (the suite's seed 1; the FMU's default is 0).
 HEAVY = {"plant": {"torso_mass_kg": 20.0}, "avr": {"seed": 1}}
@@ -242,14 +247,15 @@ def test_the_masters_leave_nothing_in_the_temp_folder(master_runs):
     assert master_runs[1] == []
 
 
-# ---- the loop in three masters (30 s each) --------------------------------------------------
+# ---- the loop in three masters (20 s each) --------------------------------------------------
 def test_loop_in_libcosim_from_the_ssp_file(ssp, libcosim_rows, heavy_scenario):
     fell, error = _verdict(libcosim_rows)
     assert not fell and error <= MAX_ERROR, error
     # the nominal SSP with mass_20kg's parameters as start values: the same run, bit for bit
     assert HEAVY["avr"] == {"seed": heavy_scenario.arm("adaptive").overrides_dict()["seed"]}
-    again = system_run.run_libcosim(ssp, DURATION_S, HEAVY)
-    assert all(np.array_equal(again[n], libcosim_rows[n]) for n in again.dtype.names)
+    again = system_run.run_libcosim(ssp, AGAIN_S, HEAVY)
+    assert len(again) == round(AGAIN_S / system.STEP_S)
+    assert all(np.array_equal(again[n], libcosim_rows[n][:len(again)]) for n in again.dtype.names)
 
 
 def test_loop_in_fmpy_simulate_ssp(heavy_ssp, libcosim_rows):
@@ -293,7 +299,7 @@ def test_loop_in_our_master_with_the_plant_fmu(heavy_scenario, built_fmu, plant_
 
 
 def test_our_master_in_jacobi_order_is_libcosims_run(jacobi_rows, libcosim_rows):
-    """The exported mass_20kg SSP in libcosim is our master's run in Jacobi order (30 s,
+    """The exported mass_20kg SSP in libcosim is our master's run in Jacobi order (20 s,
     every column, JACOBI_AGREEMENT)."""
     assert len(jacobi_rows) == len(libcosim_rows) and not libcosim_rows["plant_fell"].any()
     assert _jacobi_gap(jacobi_rows, libcosim_rows) <= JACOBI_AGREEMENT
@@ -414,8 +420,12 @@ def _same_verdict(a: dict, b: dict) -> bool:
     return (a["overall"], [c["verdict"] for c in a["checks"]]) == (b["overall"], [c["verdict"] for c in b["checks"]])
 
 
-#: Time-varying (a 30 N push at 2.5 s on 0.5 m/s), 30 s; its claim checks the adaptive arm only.
+#: Time-varying (a 30 N push at 2.5 s on 0.5 m/s); its claim checks the adaptive arm only.
 TIME_VARYING = "push_fwd_30n"
+#: Its first 12 s (30 s in the suite and the -m long test): the push and the recovery, and a
+#: claim that passes (our master: steady-state error 0.012 <= 0.05 m/s, converged 4.0 s after
+#: the push <= 5 s).
+TIME_VARYING_S = 12.0
 
 
 @pytest.fixture(scope="module")
@@ -423,7 +433,7 @@ def time_varying(system_dir, built_fmu, plant_fmu, tmp_path_factory):
     """push_fwd_30n's adaptive arm: exported, run in libcosim and Ecos and by our master in
     Jacobi order (:func:`_exported_runs`), and our master's default run (Gauss-Seidel, the
     in-process plant: what the suite reports)."""
-    (scenario,) = spec.resolve_targets([TIME_VARYING])
+    scenario = spec.override(spec.resolve_targets([TIME_VARYING])[0], duration_s=TIME_VARYING_S)
     runs = _exported_runs(scenario, "adaptive", tmp_path_factory.mktemp("time_varying"), plant_fmu, built_fmu,
                           system_dir / "CommandSource_fmi2.fmu", ecos=True)
     (runs["gauss-seidel"],) = master.run_scenario(scenario, "fmu", fmu_path=built_fmu, arms=("adaptive",))
@@ -431,7 +441,7 @@ def time_varying(system_dir, built_fmu, plant_fmu, tmp_path_factory):
 
 
 def test_exported_time_varying_scenario_is_our_masters_run_and_verdict(time_varying):
-    """libcosim and Ecos give our master's Jacobi run (JACOBI_AGREEMENT, every column, 30 s),
+    """libcosim and Ecos give our master's Jacobi run (JACOBI_AGREEMENT, every column, 12 s),
     and the claim check on their rows gives the verdict of our master's run in either order."""
     scenario, runs = time_varying
     assert scenario.pushes and {c.arm for c in scenario.claim.checks} == {"adaptive"}
@@ -452,7 +462,7 @@ def test_fmucontainer_packs_the_exported_ssp_into_one_fmu_that_runs_our_masters_
                                                                                       sequential, order):
     """fmucontainer (found beside the interpreter) packs push_fwd_30n's exported SSP (plant,
     regulator, command source, parameter values as start values) into one FMI 2.0 FMU; fmpy's
-    simulate_fmu runs it for 30 s and gives our master's run, bit for bit, in the matching
+    simulate_fmu runs it for 12 s and gives our master's run, bit for bit, in the matching
     order: the container's parallel mode is our Jacobi order, its sequential mode (regulator,
     plant, command source) our default Gauss-Seidel order."""
     from fmpy import read_model_description
