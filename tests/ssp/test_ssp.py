@@ -16,7 +16,7 @@ What differs between the masters, and why:
   ``seed`` (the networks' encoders) included, which is what export-ssp writes (with the
   FMU's default seed 0 instead, psi_x parts by 1e-4 at the first learning step, the first
   walking step).  Ecos gives our master's doubles exactly; libcosim differs by ulps
-  (3e-13 over 30 s of mass_20kg, 4e-13 over push_fwd_30n): its time points are integer
+  (2.5e-13 over 20 s of mass_20kg, 4e-13 over 30 s of push_fwd_30n): its time points are integer
   nanoseconds divided by 1e9 and its step size their difference, ulps away from 0.005 s,
   which the regulator's learning rule multiplies in.  Handed that clock, our master gives
   libcosim's doubles exactly; on uneven terrain the contacts amplify the ulps to O(1) over
@@ -24,9 +24,8 @@ What differs between the masters, and why:
 * fmpy 0.3.32's simulate_ssp starts every connection at 0.0 instead of the outputs after
   initialization, so its first step runs the plant with no command and the regulator with
   zero inputs: the one master whose trajectory must differ.  Measured on mass_20kg's
-  exported SSP, 30 s: the trajectories part from t = 0.8 s (every column within 1.05 of
-  libcosim's; the end of the walk 8 mm apart, 15.35 m), the steady-state speed errors
-  0.0060 and 0.0063 m/s (3.5e-4 apart): the same verdict.
+  exported SSP, 20 s: the walk ends 49 mm short of libcosim's 10.42 m, the steady-state
+  speed errors 0.0148 and 0.0143 m/s (4.9e-4 apart): the same verdict.
 * fmu-manipulation-toolbox's fmucontainer packs the exported SSP into one FMU; in fmpy's
   simulate_fmu it gives our master's run bit for bit: its parallel mode in Jacobi order,
   its sequential mode (regulator, plant, command source) in Gauss-Seidel order.
@@ -63,7 +62,7 @@ AGAIN_S = 5.0
 HEAVY = {"plant": {"torso_mass_kg": 20.0}, "avr": {"seed": 1}}
 MAX_ERROR = 0.03  # m/s, the issue's criterion (the suite's mass_20kg claim)
 #: libcosim vs our master in Jacobi order: only the regulator's dt differs by ulps (see the
-#: docstring), 3e-13 measured over 30 s; a master that samples, orders or parameterises
+#: docstring), 2.5e-13 measured over 20 s; a master that samples, orders or parameterises
 #: differently is off by 1e-4 or more (a different seed: 1e-4 at the first learning step).
 JACOBI_AGREEMENT = 1e-9
 
