@@ -188,14 +188,25 @@ def _ramped(inputs):
     return out
 
 
+#: learn_ramp_max_mps2 on the ramped replay: the settings and the limits it is computed with.
+RAMP_PARAMS = {**LOOP_PARAMS, "command_accel_limit_mps2": 0.5, "learn_settled_steps": 3}
+RAMP_LIMITS = (0.0, 0.25, 0.39, 0.41)
+
+
+@pytest.fixture(scope="module")
+def ramp_reference(closed_loop_inputs):
+    """The ramped replay and the numpy core's outputs on it for each of RAMP_LIMITS (once for both FMI versions)."""
+    seq = _ramped(closed_loop_inputs)
+    return seq, {a: core_outputs(seq, **RAMP_PARAMS, learn_ramp_max_mps2=a) for a in RAMP_LIMITS}
+
+
 @pytest.mark.parametrize("fmi", [2, 3])
-def test_ramp_settling_matches_the_core(native_fmus, closed_loop_inputs, fmi):
+def test_ramp_settling_matches_the_core(native_fmus, ramp_reference, fmi):
     """learn_ramp_max_mps2 in C as in the core where commands ramp: the 0.1 m/s^2 ramps count
     as settled at 0.25 (the velocity rows learn on them, unlike with 0) and the 0.4 m/s^2
     ones do not (the rows learn as with a limit just below 0.4, not as with one above)."""
-    seq = _ramped(closed_loop_inputs)
-    params = {**LOOP_PARAMS, "command_accel_limit_mps2": 0.5, "learn_settled_steps": 3}
-    ref = {a: core_outputs(seq, **params, learn_ramp_max_mps2=a) for a in (0.0, 0.25, 0.39, 0.41)}
+    seq, ref = ramp_reference
+    params = RAMP_PARAMS
     assert not np.array_equal(ref[0.25], ref[0.0])  # learning on the slow ramps
     assert np.array_equal(ref[0.25], ref[0.39]) and not np.array_equal(ref[0.39], ref[0.41])
     slave = AnySlave(native_fmus[fmi]).init(**params, learn_ramp_max_mps2=0.25)
