@@ -219,12 +219,16 @@ def _kill_a_busy_worker(cli: subprocess.Popen, out: Path) -> tuple[str, int]:
     return sample, run.pid
 
 
+#: The killed-worker campaign's random draws (x 2 speeds: twice as many samples).
+DRAWS = 4
+
+
 @pytest.mark.parametrize("retries", [2, 0])
 def test_killed_worker_mid_campaign(retries, tmp_path, built_fmu):
     out = tmp_path / "out"
-    # 6 draws x 2 speeds: each worker starts several samples after its first result is in the
-    # csv, so a loaded machine (the row lands late) still leaves a run younger than 1 s to catch
-    args = [campaign_file(tmp_path, 6), "--out", out, "--workers", 2, "--retries", retries, "--fmu", built_fmu,
+    # 4 draws x 2 speeds: each worker starts three samples after its first, so a loaded machine
+    # (the first row lands late) still leaves a run younger than 1 s to catch
+    args = [campaign_file(tmp_path, DRAWS), "--out", out, "--workers", 2, "--retries", retries, "--fmu", built_fmu,
             "--no-plots"]
     cli = subprocess.Popen(CLI + [str(a) for a in args], env=_env(tmp_path), cwd=tmp_path,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
@@ -235,7 +239,7 @@ def test_killed_worker_mid_campaign(retries, tmp_path, built_fmu):
         stop(cli)
     wait_for(lambda: gone(run_pid), "the killed worker's run process to die", 30)
     rs = rows(out)
-    assert sorted((x["sample"], x["arm"]) for x in rs) == [(f"s{i:04d}", a) for i in range(12)
+    assert sorted((x["sample"], x["arm"]) for x in rs) == [(f"s{i:04d}", a) for i in range(2 * DRAWS)
                                                           for a in ("adaptive", "pd_only")]  # each once
     others = [x for x in rs if x["sample"] != killed]
     assert all(x["status"] == "complete" for x in others), [(x["sample"], x["error"]) for x in rs]
@@ -243,7 +247,7 @@ def test_killed_worker_mid_campaign(retries, tmp_path, built_fmu):
     if retries:
         assert cli.returncode == 0, err
         assert all(x["status"] == "complete" for x in mine), mine
-        assert tries(out) == {f"s{i:04d}": 2 if f"s{i:04d}" == killed else 1 for i in range(12)}, (killed, err)
+        assert tries(out) == {f"s{i:04d}": 2 if f"s{i:04d}" == killed else 1 for i in range(2 * DRAWS)}, (killed, err)
     else:
         assert cli.returncode == 1, err
         assert all(x["status"] == "failed" and x["error"].startswith("KilledWorker after 0 retries") for x in mine), mine
