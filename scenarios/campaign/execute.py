@@ -117,12 +117,17 @@ def _scratch_env(tmp_dir: Path) -> Iterator[None]:
         tempfile.tempdir = None
 
 
+def _verbose() -> bool:
+    """Whether the campaign logs at INFO (``-v``): then Dask's own logs stay as they are."""
+    return log.isEnabledFor(logging.INFO)
+
+
 @contextlib.contextmanager
 def _quiet_dask() -> Iterator[None]:
     """Dask logs every connection at INFO: keep its errors only, unless we are verbose (-v)."""
     dlog = logging.getLogger("distributed")
     old = dlog.level
-    if not log.isEnabledFor(logging.INFO):
+    if not _verbose():
         dlog.setLevel(logging.ERROR)
     try:
         yield
@@ -134,7 +139,7 @@ def _worker_log_level() -> int:
     """The local cluster's workers log only what kills them, unless we are verbose (-v): every
     task failure and worker death already reaches the campaign's rows with its reason, and a
     worker's heartbeat that outlives the scheduler on Ctrl-C is not an error of the run."""
-    return logging.ERROR if log.isEnabledFor(logging.INFO) else logging.CRITICAL
+    return logging.ERROR if _verbose() else logging.CRITICAL
 
 
 def scheduler_file_problem(path: str | Path) -> str | None:

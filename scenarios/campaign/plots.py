@@ -20,6 +20,8 @@ from scenarios.campaign.task import COMPLETE
 SSE_KEYS = (("steady_state_error_vx", "sse_vx (m/s)"), ("steady_state_error_vy", "sse_vy (m/s)"))
 #: Command factors of ``speeds.png`` and the metric each is achieved as.
 SPEED_FACTORS = (("vx_des", "mean_vx_last_s"), ("vy_des", "mean_vy_last_s"))
+#: The paired comparison's plot (campaign.md shows it in its own section).
+PAIRED = "paired.png"
 
 
 def _plt():
@@ -157,7 +159,7 @@ def paired(data: analysis.CampaignData) -> str | None:
     ax.set_ylabel(f"{a} {label} (m/s)")
     ax.set_title(f"below the line: {a} better\n(not shown: only {a} fell {n_fa}, only {b} fell {n_fb})", fontsize=9)
     ax.grid(alpha=0.3)
-    return _save(fig, data.root, "paired.png")
+    return _save(fig, data.root, PAIRED)
 
 
 def speeds(data: analysis.CampaignData) -> str | None:

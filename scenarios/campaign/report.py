@@ -10,6 +10,7 @@ from pathlib import Path
 from typing import Any, Sequence
 
 from scenarios.campaign import analysis
+from scenarios.campaign.plots import PAIRED, write_plots
 from scenarios.campaign.store import COPY_NAME, REPORT_NAME
 
 log = logging.getLogger(__name__)
@@ -63,7 +64,7 @@ def _factor_cells(r: dict[str, Any], factors: Sequence[str]) -> str:
     return ", ".join(f"{f} = {_f(r[f], 3) if isinstance(r[f], float) else r[f]}" for f in factors)
 
 
-def _paired_lines(data: analysis.CampaignData, plot: bool = True) -> list[str]:
+def _paired_lines(data: analysis.CampaignData, plot: bool) -> list[str]:
     if len(data.arms) < 2:
         return []
     a, b = data.arms[:2]
@@ -77,7 +78,7 @@ def _paired_lines(data: analysis.CampaignData, plot: bool = True) -> list[str]:
              f"{_f(p['max_diff_vy'], 4)} m/s).", ""]
     lines += _verdict_lines(data, a, b)
     lines += _agreement_lines(data, b)
-    return lines + (["![paired](paired.png)", ""] if plot else [])
+    return lines + ([f"![paired]({PAIRED})", ""] if plot else [])
 
 
 def _pct(ci) -> str:
@@ -259,8 +260,8 @@ def _unconverged_lines(data: analysis.CampaignData) -> list[str]:
     return lines + [""] if lines else []
 
 
-def render(data: analysis.CampaignData, plots: Sequence[str], *, paired_plot: bool = True) -> str:
-    """campaign.md's text; ``plots``: the plots written beside it, ``paired_plot``: whether paired.png is."""
+def render(data: analysis.CampaignData, plots: Sequence[str]) -> str:
+    """campaign.md's text; ``plots``: the plots written beside it (``paired.png`` goes with its section)."""
     m = data.manifest
     failed = [r for r in data.rows if r["status"] != "complete"]
     expected = data.expected_rows
@@ -282,18 +283,16 @@ def render(data: analysis.CampaignData, plots: Sequence[str], *, paired_plot: bo
         lines.append(f"- failed: {r['sample']} / {r['arm']}: `{str(r.get('error') or '')[:200]}`")
     lines += [""] if failed else []
     lines += _unconverged_lines(data)
-    lines += [f"![{p}]({p})" for p in plots] + [""]
-    return "\n".join(lines + _paired_lines(data, paired_plot) + _worst_lines(data)) + "\n"
+    lines += [f"![{p}]({p})" for p in plots if p != PAIRED] + [""]
+    return "\n".join(lines + _paired_lines(data, PAIRED in plots) + _worst_lines(data)) + "\n"
 
 
 def write_report(root: Path, *, plots: bool = True) -> Path:
     """Write ``root/campaign.md`` and (unless ``plots`` is false) its plots; return the path."""
-    from scenarios.campaign import plots as plots_mod
-
     data = analysis.load(root)
-    written = plots_mod.write_plots(data) if plots else []
+    written = write_plots(data) if plots else []
     path = Path(root) / REPORT_NAME
-    path.write_text(render(data, [p for p in written if p != "paired.png"], paired_plot="paired.png" in written))
+    path.write_text(render(data, written))
     return path
 
 
