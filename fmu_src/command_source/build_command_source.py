@@ -224,13 +224,6 @@ def fmu_entries(fmi_version: int, schedule: str | None = None) -> dict[str, byte
     return entries
 
 
-def build(fmi_version: int, out_dir: Path, schedule: str | None = None) -> Path:
-    """Write ``<out_dir>/CommandSource_fmi<version>.fmu`` (reproducible zip) and return its path."""
-    path = Path(out_dir) / fmu_name(fmi_version)
-    write_zip(fmu_entries(fmi_version, schedule), path)
-    return path
-
-
 def with_schedule(fmu: str | Path, schedule: str, out: str | Path) -> Path:
     """A copy of the built CommandSource FMU ``fmu`` playing ``schedule`` instead (same GUID:
     the schedule is not part of it)."""
