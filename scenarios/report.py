@@ -12,18 +12,15 @@ pass only when every arm is complete.
 """
 from __future__ import annotations
 
-import logging
 from pathlib import Path
 from typing import Any
 
 from fmu_src.core.avr_errors import AvrError
-from scenarios.errors import ScenarioError
 from scenarios.lang.formatting import show
 from scenarios.results.metrics import CONVERGENCE_TOL_MPS, LEVEL_WINDOW_S, STEADY_WINDOW_S
 from scenarios.results.output import TABLE_COLUMNS, fmt, incomplete_arms, summary_commands, table_rows
 from scenarios.results.output import verdict as output_verdict
 
-log = logging.getLogger(__name__)
 #: Claim values in the report: 4 significant digits.
 REPORT_FLOAT_FORMAT = ".4g"
 
@@ -43,14 +40,8 @@ def collect(out_dir: Path) -> list[tuple[str, dict[str, Any] | None, str | None]
         found[name], bad = read_summary(f)
         if bad:
             problems[name] = f"invalid {f}: " + "; ".join(bad)
-    order: list[str] = []
-    try:
-        suite = [s.name for s in spec.load_suite(check_plant=False)]
-    except ScenarioError as exc:
-        log.warning("the suite does not validate: %s", exc)
-        suite = [p.stem for p in spec.suite_files()]
-    order.extend(suite)
-    order.extend(sorted(n for n in found if n not in suite))
+    suite = [p.stem for p in spec.suite_files()]  # a suite scenario's name is its file's stem
+    order = suite + sorted(n for n in found if n not in suite)
     out = []
     for name in order:
         if name in found:

@@ -243,10 +243,12 @@ def _same_file(a: str | None, b: str | None) -> bool:
 def resolve_targets(targets: list[str], *, check_plant: bool = True) -> list[Scenario]:
     """``all``, ``paper``, a suite scenario name, or a path to a scenario file; every
     scenario once. ScenarioError lists every problem (invalid files, unknown names, a
-    scenario named twice, two files with one name)."""
+    scenario named twice, two files with one name). A suite name reads its own file only
+    (a suite scenario's name is its file's stem); ``all`` and ``paper`` read the whole suite."""
     out: list[tuple[str, Scenario]] = []
     problems: list[str] = []
     suite: list[Scenario] | None = None
+    by_stem = {f.stem: f for f in suite_files()}
     for t in targets:
         p = Path(t)
         if t.endswith(".toml") or p.exists():
@@ -255,24 +257,28 @@ def resolve_targets(targets: list[str], *, check_plant: bool = True) -> list[Sce
             except ScenarioError as exc:
                 problems.extend(f"{t}: {q}" for q in exc.problems)
             continue
+        if t in by_stem:
+            try:
+                s = load_scenario(by_stem[t], check_plant=check_plant)
+            except ScenarioError as exc:
+                problems.extend(f"suite: {by_stem[t].name}: {q}" for q in exc.problems)
+                continue
+            if s.name != t:
+                problems.append(f"suite: {by_stem[t].name}: name = {s.name!r}: must equal the file name ({t!r})")
+            else:
+                out.append((t, s))
+            continue
+        if t not in ("all", "paper"):
+            hint = did_you_mean(t, [*by_stem, "all", "paper"], "", cutoff=TARGET_HINT_CUTOFF)
+            problems.append(f"{t!r}: no such scenario in the suite or file{hint}")
+            continue
         if suite is None:
             try:
                 suite = load_suite(check_plant=check_plant)
             except ScenarioError as exc:
                 problems.extend(f"suite: {q}" for q in exc.problems)
                 suite = []
-        if t == "all":
-            out.extend((t, s) for s in suite)
-        elif t == "paper":
-            out.extend((t, s) for s in suite if "paper" in s.tags)
-        else:
-            match = [s for s in suite if s.name == t]
-            if match:
-                out.extend((t, s) for s in match)
-            elif suite or not problems:
-                names = [s.name for s in suite] + ["all", "paper"]
-                hint = did_you_mean(t, names, "", cutoff=TARGET_HINT_CUTOFF)
-                problems.append(f"{t!r}: no such scenario in the suite or file{hint}")
+        out.extend((t, s) for s in suite if t == "all" or "paper" in s.tags)
     unique, clashes = distinct(out)
     if problems or clashes:
         raise ScenarioError(problems + clashes)

@@ -245,6 +245,22 @@ def test_resolve_targets():
         spec.resolve_targets(["nominl"])
 
 
+def test_a_suite_name_reads_its_own_file_and_all_reads_every_file(tmp_path, monkeypatch):
+    """A broken suite file stops ``all`` (named with its problem) but not another scenario
+    named on its own; a file whose name is not its stem is refused when named."""
+    nominal = (spec.SUITE_DIR / "nominal.toml").read_text()
+    (tmp_path / "nominal.toml").write_text(nominal)
+    (tmp_path / "broken.toml").write_text(nominal.replace("duration_s = ", "duration_s = -"))
+    (tmp_path / "renamed.toml").write_text(nominal)
+    monkeypatch.setattr(spec, "SUITE_DIR", tmp_path)
+    assert [s.name for s in spec.resolve_targets(["nominal"], check_plant=False)] == ["nominal"]
+    with pytest.raises(ScenarioError, match=r"suite: broken\.toml: duration_s") as err:
+        spec.resolve_targets(["all"], check_plant=False)
+    assert "renamed.toml: name = 'nominal': must equal the file name ('renamed')" in str(err.value)
+    with pytest.raises(ScenarioError, match=r"renamed\.toml: name = 'nominal': must equal the file name"):
+        spec.resolve_targets(["renamed"], check_plant=False)
+
+
 # --------------------------------------------------------------------------- metrics
 def rows_from(t, vx_avg, vx_des, vy=None, vy_des=None, step_index=None):
     n = len(t)
