@@ -1,10 +1,10 @@
 """Train the RL-HZD policy with Augmented Random Search (ARS V1-t, Mania et al. 2018).
 
-    python -m scenarios.rl_hzd.train [--iterations 40] [--directions 8] [--top 4]
+    python -m scenarios.rl_hzd.train [--iterations 40] [--directions 8] [--top 4] [--episode-s 8]
                                      [--workers 2] [--seed 0] [--out scenarios/rl_hzd/policy.json]
 
 On the nominal Cassie (Menagerie model, nominal controller, no perturbation), each episode
-walks ``EPISODE_S`` seconds with two commands drawn from the episode's seed: forward
+walks ``--episode-s`` seconds (default ``EPISODE_S``) with two commands drawn from the episode's seed: forward
 speed uniform in [0, 1] m/s, lateral in [-0.2, 0.2] m/s, the second from half-time.
 The reward per 10 ms communication step, from ``REWARD_FROM_S`` on, is
 ``exp(-(e_vx/0.2)^2 - (e_vy/0.2)^2)`` (step-averaged forward error, filtered lateral error,
@@ -33,6 +33,7 @@ from plant.constants import OFFSET_NAMES
 log = logging.getLogger(__name__)
 
 EPISODE_S = 8.0
+MAX_EPISODE_S = 600.0
 COMM_STEP_S = 0.01
 PLANT_STEPS_PER_COMM = 20          # 0.5 ms plant steps
 REWARD_FROM_S = 1.5                # after the stand and weight shift (0.8 s) and first steps
@@ -51,12 +52,13 @@ class ArsSettings:
     noise: float = 0.005           # rad: a 0.05 rad constant swing-hip offset already trips it
     seed: int = 0
     model: str = "menagerie"
+    episode_s: float = EPISODE_S   # s; must exceed REWARD_FROM_S
 
 
-def _commands(seed_words) -> list[tuple[float, float, float]]:
+def _commands(seed_words, episode_s: float) -> list[tuple[float, float, float]]:
     rng = np.random.default_rng(np.random.SeedSequence(list(seed_words)))
     return [(t, float(rng.uniform(*VX_RANGE_MPS)), float(rng.uniform(*VY_RANGE_MPS)))
-            for t in (0.0, EPISODE_S / 2)]
+            for t in (0.0, episode_s / 2)]
 
 
 _MODEL_CACHE: dict = {}
@@ -71,13 +73,14 @@ def _walker(model_source: str):
     return CassieWalker(_MODEL_CACHE[model_source])
 
 
-def episode_return(weights: np.ndarray, seed_words, model_source: str = "menagerie") -> float:
+def episode_return(weights: np.ndarray, seed_words, model_source: str = "menagerie",
+                   episode_s: float = EPISODE_S) -> float:
     """Mean reward per communication step of one episode (0 for steps after a fall)."""
     from fmu_src.core.avr_params import RegulatorInputs
 
     walker, policy = _walker(model_source), HzdPolicy(weights)
-    commands = _commands(seed_words)
-    n_steps = round(EPISODE_S / COMM_STEP_S)
+    commands = _commands(seed_words, episode_s)
+    n_steps = round(episode_s / COMM_STEP_S)
     total = 0.0
     for k in range(n_steps):
         t = k * COMM_STEP_S
@@ -98,8 +101,8 @@ def episode_return(weights: np.ndarray, seed_words, model_source: str = "menager
 
 
 def _task(args) -> float:
-    weights, seed_words, model = args
-    return episode_return(weights, seed_words, model)
+    weights, seed_words, model, episode_s = args
+    return episode_return(weights, seed_words, model, episode_s)
 
 
 def _iteration(pool, theta, it: int, s: ArsSettings) -> tuple[np.ndarray, float]:
@@ -108,7 +111,7 @@ def _iteration(pool, theta, it: int, s: ArsSettings) -> tuple[np.ndarray, float]
     tasks = []
     for j, d in enumerate(deltas):
         words = (s.seed, it, j)   # the same episode for +d and -d (common random numbers)
-        tasks += [(theta + s.noise * d, words, s.model), (theta - s.noise * d, words, s.model)]
+        tasks += [(theta + s.noise * d, words, s.model, s.episode_s), (theta - s.noise * d, words, s.model, s.episode_s)]
     returns = np.array(pool.map(_task, tasks)).reshape(s.directions, 2)
     best = np.argsort(-returns.max(axis=1), kind="stable")[: s.top]
     sigma = returns[best].std() or 1.0
@@ -118,7 +121,7 @@ def _iteration(pool, theta, it: int, s: ArsSettings) -> tuple[np.ndarray, float]
 
 def evaluate(pool, theta, s: ArsSettings) -> float:
     """Mean return on the fixed evaluation episodes (seed words (seed, -1, j))."""
-    tasks = [(theta, (s.seed, 2 ** 31, j), s.model) for j in range(EVAL_EPISODES)]
+    tasks = [(theta, (s.seed, 2 ** 31, j), s.model, s.episode_s) for j in range(EVAL_EPISODES)]
     return float(np.mean(pool.map(_task, tasks)))
 
 
@@ -171,6 +174,8 @@ def main(argv=None) -> int:
     s = ArsSettings(**{k: getattr(args, k) for k in ArsSettings.__dataclass_fields__})
     problems = [f"--{k} {getattr(s, k)}: must be >= 1" for k in ("iterations", "directions", "top")
                 if getattr(s, k) < 1]
+    if not REWARD_FROM_S < s.episode_s <= MAX_EPISODE_S:
+        problems.append(f"--episode-s {s.episode_s}: must be > {REWARD_FROM_S} (the reward starts there) and <= {MAX_EPISODE_S}")
     if s.top > s.directions:
         problems.append(f"--top {s.top}: must be <= --directions {s.directions}")
     if args.workers < 1:
@@ -178,7 +183,7 @@ def main(argv=None) -> int:
     if problems:
         ap.error("; ".join(problems))
     theta, curve, wall = train(s, args.workers)
-    settings = {**asdict(s), "episode_s": EPISODE_S, "reward_from_s": REWARD_FROM_S,
+    settings = {**asdict(s), "reward_from_s": REWARD_FROM_S,
                 "vx_range_mps": VX_RANGE_MPS, "vy_range_mps": VY_RANGE_MPS,
                 "error_scale_mps": ERROR_SCALE_MPS, "wall_s": round(wall, 1), "workers": args.workers}
     save_policy(args.out, theta, settings, curve)

@@ -55,8 +55,9 @@ def test_bad_weights_and_foreign_files_are_refused(tmp_path):
 
 
 def test_training_is_reproducible_from_its_seed():
-    """Two short trainings with the same seed give bit-identical weights (real episodes)."""
-    s = T.ArsSettings(iterations=1, directions=2, top=1, seed=7)
+    """Two short trainings with the same seed give bit-identical weights (real 3 s episodes:
+    1.5 s of reward after the stand; the draws and their order do not depend on the length)."""
+    s = T.ArsSettings(iterations=1, directions=2, top=1, seed=7, episode_s=3.0)
     w1, curve1, _ = T.train(s, workers=1)
     w2, curve2, _ = T.train(s, workers=2)
     assert np.array_equal(w1, w2) and curve1 == curve2
@@ -102,3 +103,11 @@ def test_level_errors_are_per_command_level_and_none_when_cut_short():
     assert levels[0]["error_vx"] == pytest.approx(0.1)
     assert levels[1]["error_vx"] == pytest.approx(0.0)
     assert level_errors_vx(rows, window_s=2.0, fell=True)[1]["error_vx"] is None
+
+
+def test_training_flags_out_of_range_are_named_at_once(capsys):
+    with pytest.raises(SystemExit) as stop:
+        T.main(["--iterations", "0", "--episode-s", "1.0", "--top", "9", "--directions", "8"])
+    err = capsys.readouterr().err
+    assert stop.value.code == 2 and "--iterations 0: must be >= 1" in err and "--top 9: must be <= --directions 8" in err
+    assert "--episode-s 1.0: must be > 1.5 (the reward starts there) and <= 600.0" in err
