@@ -24,6 +24,7 @@ their own modules.
 
 from __future__ import annotations
 
+import copy
 import logging
 import os
 import pathlib
@@ -164,11 +165,7 @@ def load_perturbed(source: str | os.PathLike = "menagerie",
             joint, actuator or the pelvis body missing.
         PerturbationError: ``perturbation`` is invalid.
     """
-    if perturbation is not None:
-        if not isinstance(perturbation, Perturbation):
-            raise PerturbationError(
-                f"perturbation={perturbation!r} must be a Perturbation or None")
-        perturbation.validate()
+    _validated(perturbation)
     src = os.fspath(source)
     spec = _source_spec(src)
     model = _compile(spec, src)
@@ -186,7 +183,31 @@ def load_perturbed(source: str | os.PathLike = "menagerie",
         key = model.key(HOME_KEY)
         if key.qpos.shape != (model.nq,):
             raise ModelError(f"{HOME_KEY!r} keyframe has {key.qpos.size} qpos, model nq={model.nq}")
+    return _perturbed(model, perturbation, src)
 
+
+def perturbed_copy(model: mujoco.MjModel, perturbation: Perturbation | None,
+                   source: str | os.PathLike = "") -> tuple[mujoco.MjModel, Applied | None]:
+    """``load_perturbed(source, perturbation)`` from ``model``, what ``load_perturbed(source)``
+    compiled, without compiling again: a copy of ``model`` with the perturbation applied, the same
+    bytes. ``model`` itself is left as it is. A perturbation with terrain edits the model before it
+    is compiled: ValueError (call :func:`load_perturbed`)."""
+    _validated(perturbation)
+    if perturbation is not None and perturbation.terrain is not None:
+        raise ValueError("a perturbation with terrain is compiled into the model: use load_perturbed")
+    return _perturbed(copy.copy(model), perturbation, os.fspath(source))  # MjModel's copy is a deep copy
+
+
+def _validated(perturbation: Perturbation | None) -> None:
+    if perturbation is not None:
+        if not isinstance(perturbation, Perturbation):
+            raise PerturbationError(
+                f"perturbation={perturbation!r} must be a Perturbation or None")
+        perturbation.validate()
+
+
+def _perturbed(model: mujoco.MjModel, perturbation: Perturbation | None,
+               src: str) -> tuple[mujoco.MjModel, Applied | None]:
     applied = None if perturbation is None else apply_to_compiled(model, perturbation)
     if perturbation is not None:
         apply_environment(model, perturbation)

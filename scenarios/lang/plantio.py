@@ -11,6 +11,8 @@ import logging
 import os
 from typing import TYPE_CHECKING, Any
 
+from plant.errors import ModelError
+
 if TYPE_CHECKING:  # pragma: no cover
     import mujoco
 
@@ -102,14 +104,10 @@ def body_problems(scenario: "Scenario") -> list[tuple[str, str]]:
 
 @functools.lru_cache(maxsize=8)
 def _model_bodies(model: str, stamp: tuple | None) -> tuple[str, ...] | None:
-    """The body names of ``model`` (world first), or None when it does not load."""
-    from plant.model import load_model
-
-    try:
-        m = load_model(model)
-    except Exception:  # the model's own problem is reported by _base_model_check
-        return None
-    return tuple(m.body(i).name for i in range(m.nbody))
+    """The body names of ``model`` (world first), or None when it does not load (its own
+    problem is reported by :func:`_base_model_check`)."""
+    m = _base_model(model, stamp)
+    return None if isinstance(m, ModelError) else tuple(m.body(i).name for i in range(m.nbody))
 
 
 def _file_stamp(model: str) -> tuple | None:
@@ -127,17 +125,24 @@ def _file_stamp(model: str) -> tuple | None:
     return st.st_mtime_ns, st.st_size
 
 
-@functools.lru_cache(maxsize=16)
-def _base_model_check(model: str, stamp: tuple | None) -> tuple[float | None, str | None]:
-    """(its torso mass, None) when ``model`` loads as a Cassie, else (None, the reason)."""
-    from plant.errors import ModelError
+@functools.lru_cache(maxsize=8)
+def _base_model(model: str, stamp: tuple | None) -> "mujoco.MjModel | ModelError":
+    """``model`` compiled without a perturbation, once per process and stamp (callers only read
+    it), or why it is not a Cassie model that loads."""
     from plant.model import load_model
-    from plant.perturbation import torso_mass_kg
 
     try:
-        return torso_mass_kg(load_model(model)), None
-    except ModelError as exc:
-        return None, str(exc)
+        return load_model(model)
+    except ModelError as exc:  # the model's problem, reported by _base_model_check
+        return exc
+
+
+def _base_model_check(model: str, stamp: tuple | None) -> tuple[float | None, str | None]:
+    """(its torso mass, None) when ``model`` loads as a Cassie, else (None, the reason)."""
+    from plant.perturbation import torso_mass_kg
+
+    m = _base_model(model, stamp)
+    return (None, str(m)) if isinstance(m, ModelError) else (torso_mass_kg(m), None)
 
 
 def load_plant_model(scenario: "Scenario", *, shared: bool = False) -> tuple["mujoco.MjModel", dict]:
@@ -147,25 +152,36 @@ def load_plant_model(scenario: "Scenario", *, shared: bool = False) -> tuple["mu
     perturbation) and then shared by every caller, who must only read it (a walker
     works on its own copy): the arms of a run's scenarios on one plant compile it once.
     """
-    from plant.model import load_perturbed, model_summary
+    from plant.model import model_summary
 
     pert = build_perturbation(scenario)
-    if shared:
-        stamp = _file_stamp(scenario.model)
-        if _base_model_check(scenario.model, stamp)[1] is None:  # else compile below, which raises the model's error
-            model, summary = _shared_model(scenario.model, stamp, pert)
-            return model, dict(summary)
-    model, applied = load_perturbed(scenario.model, pert)
+    stamp = _file_stamp(scenario.model)
+    if shared and _base_model_check(scenario.model, stamp)[1] is None:  # else compile below: the model's error
+        model, summary = _shared_model(scenario.model, stamp, pert)
+        return model, dict(summary)
+    model, applied = _compiled(scenario.model, stamp, pert)
     summary = model_summary(model)
     log.info("scenario %s: model %s, perturbation %s: %s", scenario.name, scenario.model, pert, applied)
     return model, summary
 
 
+def _compiled(model: str, stamp: tuple | None, pert: "Perturbation | None"):
+    """``plant.model.load_perturbed(model, pert)``: without terrain, a perturbed copy of the
+    process's base model (:func:`_base_model`; the same bytes, one compile less)."""
+    from plant.model import load_perturbed, perturbed_copy
+
+    if pert is None or pert.terrain is None:
+        base = _base_model(model, stamp)
+        if not isinstance(base, ModelError):
+            return perturbed_copy(base, pert, model)
+    return load_perturbed(model, pert)  # raises the model's error
+
+
 @functools.lru_cache(maxsize=8)
 def _shared_model(model: str, stamp: tuple | None, pert: "Perturbation | None") -> tuple["mujoco.MjModel", dict]:
-    from plant.model import load_perturbed, model_summary
+    from plant.model import model_summary
 
-    compiled, applied = load_perturbed(model, pert)
+    compiled, applied = _compiled(model, stamp, pert)
     log.info("model %s, perturbation %s: compiled (shared in this process): %s", model, pert, applied)
     return compiled, model_summary(compiled)
 

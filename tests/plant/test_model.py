@@ -162,6 +162,34 @@ def test_com_offset_and_damping(nominal):
     _assert_unchanged_except(nom, per, {})
 
 
+def _model_bytes(model) -> bytes:
+    buf = np.zeros(mujoco.mj_sizeModel(model), dtype=np.uint8)
+    mujoco.mj_saveModel(model, None, buf)
+    return buf.tobytes()
+
+
+@pytest.mark.parametrize("src", SOURCES)
+def test_a_perturbed_copy_is_the_compiled_perturbed_model_byte_for_byte(nominal, src):
+    """plant.model.perturbed_copy (what a run uses instead of compiling each arm's model again)
+    gives load_perturbed's model, every byte (mj_saveModel), and leaves the base model alone."""
+    base = nominal[src]
+    before = _model_bytes(base)
+    cases = [None, Perturbation(torso_mass_kg=15.0),
+             Perturbation(torso_added_mass_kg=4.0, torso_com_offset_m=(0.05, -0.02, 0.1), joint_damping_scale=2.5),
+             Perturbation(floor_friction=0.6, slope_deg=5.0, cross_slope_deg=-3.0,
+                          link_mass_scale=(("left-hip-pitch", 1.3),), link_mass_kg=(("right-shin", 0.7),))]
+    for pert in cases:
+        copied, applied = plant_model.perturbed_copy(base, pert, src)
+        compiled, applied_compiled = plant_model.load_perturbed(src, pert)
+        assert copied is not base and _model_bytes(copied) == _model_bytes(compiled), pert
+        assert applied == applied_compiled
+    assert _model_bytes(base) == before
+    with pytest.raises(ValueError, match="use load_perturbed"):
+        plant_model.perturbed_copy(base, Perturbation(terrain=TerrainSpec(max_height_m=0.02, max_slope_deg=5.0, seed=1)), src)
+    with pytest.raises(PerturbationError, match="joint_damping_scale"):
+        plant_model.perturbed_copy(base, Perturbation(joint_damping_scale=-1.0), src)
+
+
 def test_validation_lists_every_problem():
     with pytest.raises(PerturbationError) as e:
         Perturbation(torso_mass_kg=-1, joint_damping_scale=20).validate()

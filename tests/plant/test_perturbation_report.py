@@ -39,19 +39,23 @@ def test_resolved_gives_the_absolute_mass_for_consumers_of_absolute_masses():
 
 
 def test_the_scenario_layer_compiles_an_added_mass_plant_once(monkeypatch):
-    """Loading a scenario with ``torso_added_mass_kg`` compiles its model once (with the
-    perturbation), not a second time to learn the nominal mass."""
-    from scenarios.lang.plantio import load_plant_model
-    from scenarios.lang import spec
+    """Loading a scenario with ``torso_added_mass_kg`` compiles its model once in a process
+    (the base model, which the scenario check shares), not a second time to learn the nominal
+    mass nor again for the next arm: each arm's model is a perturbed copy."""
+    from scenarios.lang import plantio, spec
 
-    heavy = spec.override(spec.resolve_targets(["compare_staircase"])[0], duration_s=0.2)
+    heavy = spec.override(spec.resolve_targets(["compare_staircase"], check_plant=False)[0], duration_s=0.2,
+                          check_plant=False)
     assert heavy.torso_added_mass_kg == 5.0 and heavy.terrain is None
+    plantio._base_model.cache_clear()
     compiled = []
     real = plant.model._compile
     monkeypatch.setattr(plant.model, "_compile", lambda *a, **k: compiled.append(a[1]) or real(*a, **k))
-    model, summary = load_plant_model(heavy)
+    model, summary = plantio.load_plant_model(heavy)
     assert compiled == ["menagerie"]
     assert summary["pelvis_mass_kg"] == NOMINAL_TORSO_MASS_KG + 5.0
+    again, _ = plantio.load_plant_model(heavy)
+    assert compiled == ["menagerie"] and again is not model
 
 
 def test_the_plant_fmu_gets_the_mass_the_plant_applied():
