@@ -24,26 +24,13 @@ from pathlib import Path
 import psutil
 import pytest
 
-from plant.model import menagerie_root
-
 from scenarios.campaign.execute import DASHBOARD_LINE
 from scenarios.campaign.store import TIMING_COLUMNS
-from support.paths import REPO_ROOT
+from support.smoke_campaign import CLI, SMOKE, WAIT_S, campaign_env, run_campaign
+from support.smoke_campaign import smoke_run as shared_smoke_run
 
-SMOKE = REPO_ROOT / "scenarios" / "campaigns" / "smoke.toml"
 BIN = Path(sys.executable).parent
-# The CLI as an interactive shell starts it: SIGINT at its default (a shell's background
-# job, like this test's, would start it with SIGINT ignored).
-CLI = [sys.executable, "-c", "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-       "from scenarios.cli import main; sys.exit(main())", "campaign"]
-MENAGERIE_ROOT = str(menagerie_root().resolve())  # the model loader's one default
-WAIT_S = 180.0  # bound of every wait below; the smoke tasks take ~3 s each on a busy 2-core machine
-
-
-def _env(tmp_path: Path) -> dict[str, str]:
-    systemp = tmp_path / "systemp"  # stands for the system temp folder: must stay empty
-    systemp.mkdir(exist_ok=True)
-    return {**os.environ, "TMPDIR": str(systemp), "MENAGERIE_ROOT": MENAGERIE_ROOT}  # the CLI runs in tmp_path
+_env = campaign_env
 
 
 def campaign_file(tmp_path: Path, samples: int) -> Path:
@@ -54,9 +41,7 @@ def campaign_file(tmp_path: Path, samples: int) -> Path:
     return path
 
 
-def run_cli(args, tmp_path: Path, fmu: Path, timeout: float = WAIT_S) -> subprocess.CompletedProcess:
-    return subprocess.run(CLI + [str(a) for a in args] + ["--fmu", str(fmu)], capture_output=True, text=True,
-                          timeout=timeout, env=_env(tmp_path), cwd=tmp_path)
+run_cli = run_campaign
 
 
 def rows(out: Path) -> list[dict[str, str]]:
@@ -121,10 +106,7 @@ def stop(proc: subprocess.Popen) -> None:
 # --------------------------------------------------------------------------- local cluster
 @pytest.fixture(scope="module")
 def smoke_run(tmp_path_factory, built_fmu):
-    tmp = tmp_path_factory.mktemp("smoke")
-    out = tmp / "out"
-    r = run_cli([SMOKE, "--out", out, "--workers", 2], tmp, built_fmu)
-    return tmp, out, r
+    return shared_smoke_run(tmp_path_factory, built_fmu)  # once per session: test_campaign_fork reads it too
 
 
 def test_smoke_campaign_local_cluster(smoke_run):

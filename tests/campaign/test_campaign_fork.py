@@ -29,9 +29,9 @@ from scenarios.campaign import task as task_mod
 from scenarios.campaign.execute import DASHBOARD_LINE
 from scenarios.campaign.store import TIMING_COLUMNS
 from support.paths import REPO_ROOT
+from support.smoke_campaign import SMOKE, run_campaign, smoke_run
 
 NOMINAL = REPO_ROOT / "scenarios" / "suite" / "nominal.toml"
-SMOKE = REPO_ROOT / "scenarios" / "campaigns" / "smoke.toml"
 
 
 def sample_task(tmp_path: Path, sid: str, duration: float = 0.5, **kw) -> task_mod.Task:
@@ -122,18 +122,18 @@ def test_a_forked_run_past_its_timeout_is_killed_and_the_server_goes_on(tmp_path
     assert [r["status"] for r in again["rows"]] == ["complete", "complete"]
 
 
-def test_smoke_campaign_with_fork_runs_gives_the_same_rows(tmp_path, built_fmu):
-    env = {**os.environ, "MENAGERIE_ROOT": str(menagerie_root().resolve())}  # the loader's default
+def test_smoke_campaign_with_fork_runs_gives_the_same_rows(tmp_path, tmp_path_factory, built_fmu):
+    """The session's plain smoke campaign (support.smoke_campaign) again with ``--fork-runs``."""
+    _, plain_out, plain = smoke_run(tmp_path_factory, built_fmu)
+    assert plain.returncode == 0, plain.stderr
     got = {}
-    for mode, extra in (("fork", ["--fork-runs"]), ("plain", [])):
-        out = tmp_path / mode
-        r = subprocess.run([sys.executable, "-m", "scenarios", "campaign", str(SMOKE), "--out", str(out),
-                            "--workers", "2", "--fmu", str(built_fmu), "--no-plots", *extra], capture_output=True, text=True,
-                           env=env, cwd=tmp_path, timeout=300)
-        assert r.returncode == 0, r.stderr
-        with open(out / "campaign.csv", newline="") as fh:
+    out = tmp_path / "fork"
+    r = run_campaign([SMOKE, "--out", out, "--workers", 2, "--no-plots", "--fork-runs"], tmp_path, built_fmu)
+    assert r.returncode == 0, r.stderr
+    assert not (out / ".tmp").exists() and not (out / ".dask").exists() and not list((tmp_path / "systemp").iterdir())
+    for mode, folder in (("fork", out), ("plain", plain_out)):
+        with open(folder / "campaign.csv", newline="") as fh:
             got[mode] = [{k: v for k, v in row.items() if k not in TIMING_COLUMNS} for row in csv.DictReader(fh)]
-        assert not (out / ".tmp").exists() and not (out / ".dask").exists()
     assert len(got["fork"]) == 8 and all(row["status"] == "complete" for row in got["fork"])
     assert got["fork"] == got["plain"]
 
