@@ -27,8 +27,9 @@ from pathlib import Path
 import psutil
 import pytest
 
+from plant.model import menagerie_root
 from scenarios.campaign.execute import DASHBOARD_LINE
-from test_campaign_dask import BIN, CLI, MENAGERIE_ROOT, _env, campaign_file, rows, stop, wait_for
+from test_campaign_dask import BIN, CLI, _env, campaign_file, rows, stop, wait_for
 
 LOOPBACK = {"127.0.0.1", "::1"}
 #: Dask's connect timeout for the failure cases (its default, 30 s, only makes them slower).
@@ -216,7 +217,7 @@ def test_schedulers_that_cannot_be_used_are_one_line_and_exit_2(tmp_path, built_
     from scenarios.cli import main as cli_main
 
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("MENAGERIE_ROOT", MENAGERIE_ROOT)  # absolute: the test runs in tmp_path
+    monkeypatch.setenv("MENAGERIE_ROOT", str(menagerie_root().resolve()))  # absolute: the test runs in tmp_path
     (tmp_path / "folder").mkdir()
     (tmp_path / "notjson.json").write_text("{not json")
     (tmp_path / "noaddress.json").write_text('{"type": "Scheduler"}')
