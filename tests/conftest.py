@@ -32,10 +32,20 @@ from support.paths import SUPPORT_DIR  # noqa: E402
 from support import builds  # noqa: E402
 
 
+def pytest_collection_modifyitems(session, config, items):
+    """The test modules that read no build first (``support.builds.builds_last``)."""
+    items[:] = builds.builds_last(items)
+
+
 def pytest_collection_finish(session):
-    """One whole build for the session's FMUs when its tests read the whole build anyway
-    (``support.builds``)."""
-    builds.use_whole_build(session.items)
+    """One whole build for the session's FMUs when its tests read the whole build anyway,
+    started now, while the first tests run (``support.builds``)."""
+    if builds.use_whole_build(session.items) and not session.config.option.collectonly:
+        builds.start_whole_build(session.config._tmp_path_factory)
+
+
+def pytest_sessionfinish(session):
+    builds.stop_whole_build()
 
 
 @pytest.fixture(scope="session")
@@ -86,7 +96,7 @@ class BuiltAll:
 def built_all(tmp_path_factory, build_module) -> BuiltAll:
     """``build_all`` once per session, shared by the tests that read a whole build (its XML
     documents, fmus.json, the cross-check tree); they only read it."""
-    out, built = builds.whole_build(tmp_path_factory, build_module)
+    out, built = builds.whole_build(tmp_path_factory)
     return BuiltAll(out, tuple(built))
 
 
@@ -131,8 +141,9 @@ class RegulatorFmu:
 
 
 @pytest.fixture(scope="session", params=REGULATOR_FMUS)
-def regulator_fmu(request, tmp_path_factory) -> RegulatorFmu:
-    """Each regulator FMU in turn: the pythonfmu FMU (FMI 2.0) and the native FMI 2.0 and 3.0 FMUs."""
+def regulator_fmu(request, tmp_path_factory, build_module) -> RegulatorFmu:
+    """Each regulator FMU in turn: the pythonfmu FMU (FMI 2.0) and the native FMI 2.0 and 3.0 FMUs.
+    (``build_module``: the collection sees that it reads a build, whose fixtures it asks for by name.)"""
     implementation, version = request.param.split("-fmi")
     if implementation == "python":
         return RegulatorFmu("python", 2, request.getfixturevalue("built_fmu"), request.getfixturevalue("fmu_dir"))

@@ -228,10 +228,11 @@ def _not_provided(fmu_dir, fmi: int) -> set:
 
 
 @pytest.fixture(scope="module", params=[*REGULATOR_FMUS, *COMMAND_SOURCES, *NATIVE_PLANTS])
-def any_fmu(request, tmp_path_factory, unzip):
+def any_fmu(request, tmp_path_factory, unzip, build_module):
     """(FMI version, extracted folder) of each FMU build.py builds with a C FMI layer: the
     pythonfmu regulator (behind its C guard), the native regulators, the CommandSource FMUs and
-    the native CassiePlant FMUs."""
+    the native CassiePlant FMUs.  (``build_module``: the collection sees that it reads a build,
+    whose fixtures it asks for by name.)"""
     kind, fmi = request.param.rsplit("-fmi", 1)
     fmi = int(fmi)
     if kind == "python":
