@@ -32,6 +32,7 @@ from support.paths import SUPPORT_DIR  # noqa: E402
 from support import builds  # noqa: E402
 
 
+@pytest.hookimpl(trylast=True)  # after -m has deselected
 def pytest_collection_modifyitems(session, config, items):
     """The test modules that read no build first (``support.builds.builds_last``)."""
     items[:] = builds.builds_last(items)
