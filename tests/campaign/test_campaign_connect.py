@@ -216,8 +216,8 @@ def test_schedulers_that_cannot_be_used_are_one_line_and_exit_2(tmp_path, built_
 
     from scenarios.cli import main as cli_main
 
+    monkeypatch.setenv("MENAGERIE_ROOT", str(menagerie_root().resolve()))  # absolute, before the test moves to tmp_path
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("MENAGERIE_ROOT", str(menagerie_root().resolve()))  # absolute: the test runs in tmp_path
     (tmp_path / "folder").mkdir()
     (tmp_path / "notjson.json").write_text("{not json")
     (tmp_path / "noaddress.json").write_text('{"type": "Scheduler"}')
