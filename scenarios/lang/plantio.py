@@ -102,7 +102,6 @@ def body_problems(scenario: "Scenario") -> list[tuple[str, str]]:
     return out
 
 
-@functools.lru_cache(maxsize=8)
 def _model_bodies(model: str, stamp: tuple | None) -> tuple[str, ...] | None:
     """The body names of ``model`` (world first), or None when it does not load (its own
     problem is reported by :func:`_base_model_check`)."""
@@ -156,7 +155,7 @@ def load_plant_model(scenario: "Scenario", *, shared: bool = False) -> tuple["mu
 
     pert = build_perturbation(scenario)
     stamp = _file_stamp(scenario.model)
-    if shared and _base_model_check(scenario.model, stamp)[1] is None:  # else compile below: the model's error
+    if shared:  # a model that does not load raises its error here, never cached
         model, summary = _shared_model(scenario.model, stamp, pert)
         return model, dict(summary)
     model, applied = _compiled(scenario.model, stamp, pert)

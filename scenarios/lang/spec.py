@@ -195,6 +195,12 @@ def suite_files() -> list[Path]:
     return sorted(SUITE_DIR.glob("*.toml"))
 
 
+def _suite_name_problem(s: Scenario) -> str | None:
+    """A suite scenario's name is its file's stem (the name finds the file, and names the output folder)."""
+    stem = Path(s.source).stem
+    return None if s.name == stem else f"{Path(s.source).name}: name = {s.name!r}: must equal the file name ({stem!r})"
+
+
 def load_suite(*, check_plant: bool = True) -> list[Scenario]:
     """Every suite file, validated; all problems of all files in one ScenarioError."""
     scenarios, problems = [], []
@@ -203,10 +209,7 @@ def load_suite(*, check_plant: bool = True) -> list[Scenario]:
             scenarios.append(load_scenario(f, check_plant=check_plant))
         except ScenarioError as exc:
             problems.extend(f"{f.name}: {p}" for p in exc.problems)
-    for s in scenarios:
-        stem = Path(s.source).stem
-        if s.name != stem:
-            problems.append(f"{Path(s.source).name}: name = {s.name!r}: must equal the file name ({stem!r})")
+    problems += [q for s in scenarios if (q := _suite_name_problem(s))]
     scenarios, clashes = distinct([(s.source, s) for s in scenarios])
     if problems or clashes:
         raise ScenarioError(problems + clashes, source=str(SUITE_DIR))
@@ -263,8 +266,9 @@ def resolve_targets(targets: list[str], *, check_plant: bool = True) -> list[Sce
             except ScenarioError as exc:
                 problems.extend(f"suite: {by_stem[t].name}: {q}" for q in exc.problems)
                 continue
-            if s.name != t:
-                problems.append(f"suite: {by_stem[t].name}: name = {s.name!r}: must equal the file name ({t!r})")
+            bad = _suite_name_problem(s)
+            if bad:
+                problems.append(f"suite: {bad}")
             else:
                 out.append((t, s))
             continue
