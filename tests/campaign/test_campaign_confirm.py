@@ -15,7 +15,6 @@ from __future__ import annotations
 import csv
 import json
 import subprocess
-import sys
 import tomllib
 from pathlib import Path
 
@@ -24,6 +23,7 @@ import pytest
 from scenarios.campaign import analysis, report, sampling, spec
 from scenarios.campaign.store import CampaignDir
 from support.paths import REPO_ROOT
+from support.smoke_campaign import run_campaign
 
 from test_campaign_spec import BASE, GROUND_FACTORS, NUISANCE_FACTOR, campaign, problems_of  # noqa: E402
 
@@ -192,7 +192,6 @@ def test_the_report_gives_the_confirmed_verdict_and_every_listed_draws_fresh_run
 
 
 # --------------------------------------------------------------------------- real runs
-CLI = [sys.executable, "-m", "scenarios", "campaign"]
 WAIT_S = 600.0  # bound of each CLI call; ~25 runs of 2 s, each well under 2 s of wall on 2 cores
 
 REAL = """
@@ -244,13 +243,7 @@ def _real_campaign(tmp_path: Path, first: str) -> Path:
 
 
 def _run(args, tmp_path: Path, built_fmu: Path) -> subprocess.CompletedProcess:
-    from plant.model import menagerie_root
-
-    env = {**__import__("os").environ, "MENAGERIE_ROOT": str(menagerie_root().resolve()),
-           "TMPDIR": str(tmp_path / "systemp")}
-    (tmp_path / "systemp").mkdir(exist_ok=True)
-    return subprocess.run(CLI + [str(a) for a in args] + ["--fmu", str(built_fmu), "--workers", "2", "--no-plots"],
-                          capture_output=True, text=True, timeout=WAIT_S, env=env, cwd=tmp_path)
+    return run_campaign([*args, "--workers", 2, "--no-plots"], tmp_path, built_fmu, timeout=WAIT_S)
 
 
 def _csv(path: Path) -> list[dict[str, str]]:

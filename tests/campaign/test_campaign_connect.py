@@ -29,7 +29,8 @@ import pytest
 
 from plant.model import menagerie_root
 from scenarios.campaign.execute import DASHBOARD_LINE
-from test_campaign_dask import BIN, CLI, _env, campaign_file, rows, stop, wait_for
+from support.smoke_campaign import CLI, campaign_env
+from test_campaign_dask import BIN, campaign_file, rows, stop, wait_for
 
 LOOPBACK = {"127.0.0.1", "::1"}
 #: Dask's connect timeout for the failure cases (its default, 30 s, only makes them slower).
@@ -64,7 +65,7 @@ def test_local_cluster_listens_on_loopback_only_and_prints_its_dashboard(tmp_pat
     out = tmp_path / "out"
     cli = subprocess.Popen(CLI + [campaign_file(tmp_path, 1), "--out", out, "--workers", "2", "--fmu", built_fmu,
                                   "--no-plots"],
-                           env=_env(tmp_path), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                           env=campaign_env(tmp_path), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     seen: set[tuple[str, int, int]] = set()
     try:
         while cli.poll() is None:
@@ -103,7 +104,7 @@ def _worker(tmp_path: Path, env: dict, address: str, name: str, *extra) -> subpr
 
 
 def test_scheduler_file_with_two_worker_processes(tmp_path, built_fmu):
-    env = _env(tmp_path)
+    env = campaign_env(tmp_path)
     procs = []
     try:
         sched, sched_file, address = _scheduler(tmp_path, env)
@@ -154,7 +155,7 @@ def _self_signed(folder: Path) -> tuple[Path, Path]:
 def test_tls_scheduler_with_dasks_security_configuration(tmp_path, built_fmu):
     key, cert = _self_signed(tmp_path)
     tls = ["--tls-ca-file", cert, "--tls-cert", cert, "--tls-key", key]
-    env = _env(tmp_path)
+    env = campaign_env(tmp_path)
     procs = []
     try:
         sched, _, address = _scheduler(tmp_path, env, "--protocol", "tls", *tls)

@@ -30,7 +30,6 @@ from support.smoke_campaign import CLI, SMOKE, WAIT_S, campaign_env, run_campaig
 from support.smoke_campaign import smoke_run as shared_smoke_run
 
 BIN = Path(sys.executable).parent
-_env = campaign_env
 
 
 def campaign_file(tmp_path: Path, samples: int) -> Path:
@@ -39,9 +38,6 @@ def campaign_file(tmp_path: Path, samples: int) -> Path:
     path = tmp_path / f"smoke{samples}.toml"
     path.write_text(text)
     return path
-
-
-run_cli = run_campaign
 
 
 def rows(out: Path) -> list[dict[str, str]]:
@@ -125,7 +121,7 @@ def test_smoke_campaign_local_cluster(smoke_run):
     assert_clean(tmp, out)
     # `scenarios report` over the folder holding the campaign lists it with its table
     r = subprocess.run([sys.executable, "-m", "scenarios", "report", str(tmp)], capture_output=True, text=True,
-                       timeout=120, env=_env(tmp))
+                       timeout=120, env=campaign_env(tmp))
     assert r.returncode == 0, r.stderr
     assert "## Campaigns\n\n### [out](out/campaign.md)" in (tmp / "report.md").read_text()
 
@@ -133,7 +129,7 @@ def test_smoke_campaign_local_cluster(smoke_run):
 def test_same_seed_same_csv_apart_from_timings(smoke_run, tmp_path, built_fmu):
     _, first, _ = smoke_run
     out = tmp_path / "again"
-    r = run_cli([SMOKE, "--out", out, "--workers", 1, "--no-plots"], tmp_path, built_fmu)
+    r = run_campaign([SMOKE, "--out", out, "--workers", 1, "--no-plots"], tmp_path, built_fmu)
     assert r.returncode == 0, r.stderr
     assert without_timing(rows(out)) == without_timing(rows(first))
     # --no-plots: the report's text, no plot (`scenarios report` writes them later)
@@ -145,7 +141,7 @@ def test_same_seed_same_csv_apart_from_timings(smoke_run, tmp_path, built_fmu):
 # --------------------------------------------------------------------------- existing scheduler
 def test_campaign_on_a_scheduler_and_worker_started_as_processes(smoke_run, tmp_path, built_fmu):
     _, first, _ = smoke_run
-    env = _env(tmp_path)
+    env = campaign_env(tmp_path)
     sched_file = tmp_path / "scheduler.json"
     procs = []
     try:
@@ -158,7 +154,7 @@ def test_campaign_on_a_scheduler_and_worker_started_as_processes(smoke_run, tmp_
                                        "--no-dashboard", "--local-directory", tmp_path / "worker"], env=env,
                                       cwd=tmp_path, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
         out = tmp_path / "out"
-        r = run_cli([SMOKE, "--out", out, "--scheduler", address, "--no-plots"], tmp_path, built_fmu)
+        r = run_campaign([SMOKE, "--out", out, "--scheduler", address, "--no-plots"], tmp_path, built_fmu)
         assert r.returncode == 0, r.stderr
         assert without_timing(rows(out)) == without_timing(rows(first))
     finally:
@@ -212,7 +208,7 @@ def test_killed_worker_mid_campaign(retries, tmp_path, built_fmu):
     # (the first row lands late) still leaves a run younger than 1 s to catch
     args = [campaign_file(tmp_path, DRAWS), "--out", out, "--workers", 2, "--retries", retries, "--fmu", built_fmu,
             "--no-plots"]
-    cli = subprocess.Popen(CLI + [str(a) for a in args], env=_env(tmp_path), cwd=tmp_path,
+    cli = subprocess.Popen(CLI + [str(a) for a in args], env=campaign_env(tmp_path), cwd=tmp_path,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
         killed, run_pid = _kill_a_busy_worker(cli, out)
@@ -241,7 +237,7 @@ def test_interrupt_then_resume_runs_every_sample_once(tmp_path, built_fmu):
     out = tmp_path / "out"
     cfile = campaign_file(tmp_path, 3)
     cli = subprocess.Popen(CLI + [str(cfile), "--out", str(out), "--workers", "1", "--fmu", str(built_fmu), "--no-plots"],
-                           env=_env(tmp_path), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                           env=campaign_env(tmp_path), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            start_new_session=True)
     try:
         wait_for(lambda: (out / "campaign.csv").is_file() and len(rows(out)) >= 2, "the first sample's rows")
@@ -260,7 +256,7 @@ def test_interrupt_then_resume_runs_every_sample_once(tmp_path, built_fmu):
     done = {x["sample"] for x in before}
     assert 1 <= len(done) < 6 and all(x["status"] == "complete" for x in before)
 
-    r = run_cli([cfile, "--out", out, "--workers", 2, "--resume", "--no-plots"], tmp_path, built_fmu)
+    r = run_campaign([cfile, "--out", out, "--workers", 2, "--resume", "--no-plots"], tmp_path, built_fmu)
     assert r.returncode == 0, r.stderr
     after = rows(out)
     assert sorted((x["sample"], x["arm"]) for x in after) == [(f"s{i:04d}", a) for i in range(6)
@@ -273,7 +269,7 @@ def test_interrupt_then_resume_runs_every_sample_once(tmp_path, built_fmu):
 
 def test_task_timeout_recorded_as_failed(tmp_path, built_fmu):
     out = tmp_path / "out"
-    r = run_cli([SMOKE, "--out", out, "--workers", 1, "--task-timeout", 0.2, "--no-plots"], tmp_path, built_fmu)
+    r = run_campaign([SMOKE, "--out", out, "--workers", 1, "--task-timeout", 0.2, "--no-plots"], tmp_path, built_fmu)
     assert r.returncode == 1
     rs = rows(out)
     assert len(rs) == 8 and all(x["status"] == "failed" and x["error"].startswith("timeout: ") for x in rs)

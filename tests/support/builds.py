@@ -49,7 +49,7 @@ def builds_last(items) -> list:
     return [i for name in order for i in modules[name]]
 
 
-def whole_build(tmp_path_factory, build_module=None) -> tuple[Path, list[Path]]:
+def whole_build(tmp_path_factory) -> tuple[Path, list[Path]]:
     """``python build.py --out FOLDER`` once per session: the folder and the paths build_all
     returned (the lines build.py prints).  In a process of its own: pythonfmu's builder changes
     ``sys.path``, which must not happen under a test running beside it."""
