@@ -141,9 +141,10 @@ def test_every_example_runs_as_written(page, tmp_path, built_all, monkeypatch):
 
 
 def _visible(folder):
-    """A folder's entries without dot-folders: tool caches (.hypothesis, .pytest_cache) that
-    tests running beside this one may create are not an example's doing."""
-    return {name for name in os.listdir(folder) if not name.startswith(".")}
+    """A folder's entries without the caches that tests running beside this one may create and
+    that are not an example's doing: dot-folders (.hypothesis, .pytest_cache) and Python's
+    bytecode cache (``__pycache__/build.*.pyc``, written when a test first loads build.py)."""
+    return {name for name in os.listdir(folder) if not name.startswith(".") and name != "__pycache__"}
 
 
 _clone_entries = _visible(REPO_ROOT)
