@@ -11,13 +11,16 @@ A long example runs shortened where the page marks it, right above the block, wi
 ``<!-- docs-test: "OLD" -> "NEW" -->`` (the text OLD of the block replaced by NEW) and says so in
 its own text.
 
-Each page's examples run from a fresh working folder laid out like the clone (the code folders
-linked, ``dist/`` the session's own ``build.py`` run), so what they write (``runs/``, plots,
-exported files) lands under pytest's ``tmp_path``, never in the clone. A block the tests do not
+Each page's examples run from a fresh working folder laid out like the clone: its code folders
+link to one copy of the clone's code made for the session (the code finds ``dist/`` and
+``build/`` beside itself, and a link into the clone would resolve to the clone's), ``dist/`` is
+the session's own ``build.py`` run. So what they write (``runs/``, plots, exported files, an
+FMU built on demand) lands under pytest's temporary folders, never in the clone. A block the tests do not
 run carries ``<!-- skip: next "why" -->`` and says why in the page's own text.
 """
 import os
 import re
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -29,23 +32,32 @@ from sybil import Sybil
 from sybil.parsers.markdown import CodeBlockParser, SkipParser
 
 from support.paths import REPO_ROOT
+from support.shared import made_once
 
 PAGES = [REPO_ROOT / "README.md", *sorted((REPO_ROOT / "docs").glob("*.md"))]
 #: Fence languages that are shown, not run.
 SHOWN = ("text", "xml", "csv", "c")
-#: What a page's working folder links from the clone (the rest it makes itself).
+#: What a page's working folder takes from the clone (through the session's copy of it).
 LINKED = ("build.py", "benchmarks", "fmu_src", "plant", "scenarios", "tests", "pyproject.toml")
+#: What the copy leaves out of the clone (besides dot-folders and *.egg-info): what builds and
+#: runs write, and caches.
+NOT_COPIED = ("dist", "build", "runs", "__pycache__", "dist-asan")
 #: A bash block's time limit, s: the slowest documented example (a short campaign on a local
 #: Dask cluster) takes about a minute on the 2-core CI machine when nothing else runs.
 BASH_TIMEOUT_S = 600
 
 
 def _env() -> dict[str, str]:
+    """This environment with this interpreter first on PATH and the models as absolute paths (the
+    code copy is not beside the clone's ``shared/``)."""
+    from plant import model
+
     env = dict(os.environ)
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '/usr/bin:/bin')}"
     root = env.get("MENAGERIE_ROOT")
     if root:
         env["MENAGERIE_ROOT"] = str((REPO_ROOT / root).resolve()) if not os.path.isabs(root) else root
+    env["CASSIE_OSU_XML"] = str(model.osu_model_path().resolve())
     return env
 
 
@@ -115,18 +127,42 @@ SYBIL = Sybil(parsers=[
 ])
 
 
-def _workdir(tmp_path: Path, dist: Path) -> Path:
-    for name in LINKED:
-        (tmp_path / name).symlink_to(REPO_ROOT / name)
-    (tmp_path / "dist").symlink_to(dist)
+def _copy_code(folder: Path, dist: Path) -> Path:
+    """The clone's code in ``folder`` (copies: the code finds its ``dist/`` and ``build/`` beside
+    its resolved path), ``dist`` linked as its ``dist/``, its ``build/`` seeded with the C
+    controller the clone's code builds (the same sources, so the same cache key)."""
+    from plant.native.native_ctrl import cached_library_path
+    from plant.sim import NATIVE_CACHE
+
+    for source in REPO_ROOT.iterdir():
+        if source.name.startswith(".") or source.name in NOT_COPIED or source.name.endswith(".egg-info"):
+            continue
+        if source.is_dir():
+            shutil.copytree(source, folder / source.name, ignore=shutil.ignore_patterns("__pycache__"))
+        else:
+            shutil.copy2(source, folder / source.name)
+    (folder / "dist").symlink_to(dist)
+    library = cached_library_path(NATIVE_CACHE).parent
+    shutil.copytree(library, folder / "build" / "native_ctrl" / library.name)
+    return folder
+
+
+def _workdir(tmp_path: Path, code: Path) -> Path:
+    for name in (*LINKED, "dist"):
+        (tmp_path / name).symlink_to(code / name)
     return tmp_path
 
 
 @pytest.mark.parametrize("page", PAGES, ids=[str(p.relative_to(REPO_ROOT)) for p in PAGES])
-def test_every_example_runs_as_written(page, tmp_path, built_all, monkeypatch):
+def test_every_example_runs_as_written(page, tmp_path, tmp_path_factory, built_all, monkeypatch):
     assert untyped_fences(page.read_text()) == [], "fences without a language (```text for output and pictures)"
-    monkeypatch.chdir(_workdir(tmp_path, built_all.dist))
-    monkeypatch.setenv("MENAGERIE_ROOT", _env()["MENAGERIE_ROOT"]) if "MENAGERIE_ROOT" in os.environ else None
+    code = made_once(tmp_path_factory, "docs_code", lambda folder: _copy_code(folder, built_all.dist))
+    monkeypatch.chdir(_workdir(tmp_path, code))
+    env = _env()
+    for name in ("MENAGERIE_ROOT", "CASSIE_OSU_XML"):
+        if name in env:
+            monkeypatch.setenv(name, env[name])
+    before = _visible(REPO_ROOT)
     document = SYBIL.parse(page)
     ran, skipped = 0, []
     for example in document:
@@ -137,7 +173,7 @@ def test_every_example_runs_as_written(page, tmp_path, built_all, monkeypatch):
             skipped.append(example.line)
             continue
         ran += 1
-    assert not (_visible(REPO_ROOT) - _clone_entries), "an example wrote into the clone"
+    assert not (_visible(REPO_ROOT) - before), "an example wrote into the clone"
 
 
 def _visible(folder):
@@ -146,8 +182,6 @@ def _visible(folder):
     bytecode cache (``__pycache__/build.*.pyc``, written when a test first loads build.py)."""
     return {name for name in os.listdir(folder) if not name.startswith(".") and name != "__pycache__"}
 
-
-_clone_entries = _visible(REPO_ROOT)
 
 
 def test_fences_without_a_language_are_found():
