@@ -341,26 +341,38 @@ def test_resume_keeps_complete_samples_drops_the_rest_and_torn_lines(tmp_path):
     assert set(TIMING_COLUMNS) <= set(again.cols)
 
 
-def test_cli_refuses_invalid_campaign_and_foreign_folder(tmp_path):
+def _cli(capsys, *args: str) -> tuple[int, str, str]:
+    """``python -m scenarios campaign ARGS`` in this process (its exit code, stdout, stderr)."""
+    from scenarios.cli import main as cli_main
+
+    try:
+        rc = cli_main(["campaign", *args])
+    except SystemExit as exc:
+        rc = exc.code
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
+def test_cli_refuses_invalid_campaign_and_foreign_folder(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text(BASE + "[factors.joint_damping_scale]\ndist = \"uniform\"\nlow = 0.5\nhigh = 20.0\n")
+    # one real process: the exit status a shell sees; the other calls run the same main() in this one
     cmd = [sys.executable, "-m", "scenarios", "campaign"]
     r = subprocess.run(cmd + [str(bad), "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
     assert r.returncode == 2 and "factors.joint_damping_scale = 20" in r.stderr and not (tmp_path / "o").exists()
     (tmp_path / "taken").mkdir()
     (tmp_path / "taken" / "x").write_text("")
-    r = subprocess.run(cmd + ["smoke", "--out", str(tmp_path / "taken")], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 2 and "holds no campaign" in r.stderr
-    r = subprocess.run(cmd + ["smoke", "--dry-run"], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0 and len(r.stdout.splitlines()) == 5
+    rc, _, err = _cli(capsys, "smoke", "--out", str(tmp_path / "taken"))
+    assert rc == 2 and "holds no campaign" in err
+    rc, listed, _ = _cli(capsys, "smoke", "--dry-run")
+    assert rc == 0 and len(listed.splitlines()) == 5
     # --seed: the same design on other samples; the same seed, the same samples
-    other = subprocess.run(cmd + ["smoke", "--dry-run", "--seed", "8"], capture_output=True, text=True, timeout=120)
-    again = subprocess.run(cmd + ["smoke", "--dry-run", "--seed", "8"], capture_output=True, text=True, timeout=120)
-    assert other.returncode == 0 and len(other.stdout.splitlines()) == 5
-    assert other.stdout.splitlines()[0] == r.stdout.splitlines()[0] and other.stdout != r.stdout
-    assert again.stdout == other.stdout
-    r = subprocess.run(cmd + ["smoke", "--dry-run", "--seed", "-1"], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 2 and "--seed -1: must be within [0, " in r.stderr
+    rc, other, _ = _cli(capsys, "smoke", "--dry-run", "--seed", "8")
+    assert rc == 0 and len(other.splitlines()) == 5
+    assert other.splitlines()[0] == listed.splitlines()[0] and other != listed
+    assert _cli(capsys, "smoke", "--dry-run", "--seed", "8")[1] == other
+    rc, _, err = _cli(capsys, "smoke", "--dry-run", "--seed", "-1")
+    assert rc == 2 and "--seed -1: must be within [0, " in err
 
 
 PARENT = BASE + """

@@ -162,8 +162,9 @@ CORPUS = {
 def test_each_broken_fmu_fails_exactly_its_check(tmp_path, built_all, case):
     patch, check, words = CORPUS[case]
     folder = _patched(tmp_path, built_all.dist, **patch)
-    # a time limit far above the group's ~1 s, short enough for the hang to cost little
-    proc, report = checked(tmp_path, folder, "--timeout", "10")
+    # a time limit far above a group's time (every group of a check takes ~1.1 s together here),
+    # short enough for the hang to cost little
+    proc, report = checked(tmp_path, folder, "--timeout", "4")
     assert proc.returncode == 1, proc.stdout
     assert list(failed(report)) == [check], proc.stdout
     assert words in failed(report)[check], failed(report)[check]
