@@ -61,12 +61,15 @@ def require(tool: Path) -> Path:
 def wine_env(tmp_path_factory) -> dict[str, str]:
     """The whole environment a Windows program runs in under Wine: Wine's own variables only, and a
     Wine prefix (with its HOME) initialised once per test session (``wineboot``, about 10 s) for
-    every Wine test; they run their programs in it, each from its own tmp_path."""
+    every Wine test; they run their programs in it, each from its own tmp_path.  TMPDIR is a folder
+    of the session's too: the Wine server puts its socket folder (``wine-XXXXXX``) there, which
+    it leaves behind."""
     wine = require(WINE)
 
     def make(folder: Path) -> dict[str, str]:
+        (folder / "tmp").mkdir()
         env = {"WINEPREFIX": str(folder / "wineprefix"), "WINEDEBUG": "-all", "HOME": str(folder),
-               "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin"}
+               "WINEDLLOVERRIDES": "mscoree,mshtml=", "PATH": "/usr/bin:/bin", "TMPDIR": str(folder / "tmp")}
         proc = subprocess.run([str(wine), "wineboot", "--init"], env=env, capture_output=True, text=True, timeout=900)
         assert proc.returncode == 0, proc.stderr[-3000:]
         return env
