@@ -88,10 +88,16 @@ def input_sequence(n, seed):
     return seq
 
 
+#: Where :func:`unzipped` extracts: a folder of this worker's under pytest's temporary folders (set
+#: by tests/conftest.py when the session starts). Never beside the FMU: the session's builds are
+#: shared by every worker and only read (a test lists what a build holds).
+UNZIP_ROOT: dict[str, Path] = {}
+
+
 def unzipped(fmu_path) -> str:
-    """``fmu_path`` extracted into a new folder beside it (the FMUs are built under pytest's
-    tmp_path: nothing goes to the system temp folder)."""
-    return extract(str(fmu_path), unzipdir=tempfile.mkdtemp(prefix="unzip_", dir=Path(fmu_path).parent))
+    """``fmu_path`` extracted into a new folder under :data:`UNZIP_ROOT` (nothing goes to the
+    system temp folder or into a shared build)."""
+    return extract(str(fmu_path), unzipdir=tempfile.mkdtemp(prefix="unzip_", dir=UNZIP_ROOT["folder"]))
 
 
 def logged_slave(fmu_path, messages: list, name="avr") -> "AnySlave":
