@@ -49,20 +49,8 @@ def pytest_collection_finish(session):
         builds.start_whole_build(session.config._tmp_path_factory)
 
 
-def pytest_addoption(parser):
-    parser.addoption("--write-module-seconds", action="store_true",
-                     help="write each test module's time to tests/module_seconds.json: the order in which "
-                          "the next sessions hand the modules to the workers (longest first)")
-
-
-def pytest_runtest_logreport(report):
-    builds.add_report(report.nodeid, report.duration)
-
-
 def pytest_sessionfinish(session):
     builds.stop_whole_build()
-    if session.config.getoption("write_module_seconds") and not hasattr(session.config, "workerinput"):
-        builds.write_module_seconds()  # the reports of every worker reach this (the controller)
 
 
 @pytest.fixture(scope="session")

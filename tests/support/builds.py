@@ -9,8 +9,6 @@ test that reads it waits for it on its lock.
 """
 from __future__ import annotations
 
-import json
-import math
 import subprocess
 import sys
 import threading
@@ -29,11 +27,6 @@ BUILD_FIXTURE = "build_module"
 BUILD_TIMEOUT_S = 1800
 #: The build process running now, if any (stopped when the session ends: stop_whole_build).
 _RUNNING: dict[str, subprocess.Popen] = {}
-#: Each test module's seconds in a whole ``pytest -n 2`` session (setup, call and teardown of its
-#: tests), written by ``pytest --write-module-seconds``: only the order of the modules depends on it.
-MODULE_SECONDS = Path(__file__).resolve().parents[1] / "module_seconds.json"
-#: This session's seconds per module so far (add_report).
-_TIMES: dict[str, float] = {}
 
 
 def use_whole_build(items) -> bool:
@@ -44,38 +37,16 @@ def use_whole_build(items) -> bool:
 
 def builds_last(items) -> list:
     """``items`` with the test modules that read no build first, so a session's first tests run
-    while its build is made; within each part the longest modules first (by
-    :data:`MODULE_SECONDS`; a module it does not list counts as the longest, then more tests
-    first), so that the last module a worker gets from ``--dist loadscope`` is a short one and
-    the two workers end together (pyproject.toml's ``--no-loadscope-reorder`` leaves the order
-    to this); each module's tests together and in their order."""
+    while its build is made; within each part the modules with more tests first (pytest-xdist's
+    own order for ``--dist loadscope``, which pyproject.toml's ``--no-loadscope-reorder`` leaves
+    to this), each module's tests together and in their order."""
     modules: dict[str, list] = {}
     for item in items:
         modules.setdefault(item.nodeid.split("::")[0], []).append(item)
     reads = {name: any(BUILD_FIXTURE in getattr(i, "fixturenames", ()) for i in group)
              for name, group in modules.items()}
-    seconds = module_seconds()
-    order = sorted(modules, key=lambda name: (reads[name], -seconds.get(name, math.inf), -len(modules[name])))
+    order = sorted(modules, key=lambda name: (reads[name], -len(modules[name])))
     return [i for name in order for i in modules[name]]
-
-
-def module_seconds() -> dict[str, float]:
-    """Each test module's time in a whole session (:data:`MODULE_SECONDS`), {} without the file."""
-    try:
-        return json.loads(MODULE_SECONDS.read_text())
-    except FileNotFoundError:
-        return {}
-
-
-def add_report(nodeid: str, seconds: float) -> None:
-    """Count a test report's time (setup, call or teardown) to its module."""
-    module = nodeid.split("::")[0]
-    _TIMES[module] = _TIMES.get(module, 0.0) + seconds
-
-
-def write_module_seconds() -> None:
-    """:data:`MODULE_SECONDS` from this session's reports (``pytest --write-module-seconds``)."""
-    MODULE_SECONDS.write_text(json.dumps({m: round(t, 1) for m, t in sorted(_TIMES.items())}, indent=1) + "\n")
 
 
 def whole_build(tmp_path_factory) -> tuple[Path, list[Path]]:
