@@ -27,8 +27,8 @@ from pathlib import Path
 import psutil
 import pytest
 
-from plant.model import menagerie_root
 from scenarios.campaign.execute import DASHBOARD_LINE
+from support.paths import MODEL_ENV
 from support.smoke_campaign import CLI, campaign_env
 from test_campaign_dask import BIN, campaign_file, rows, stop, wait_for
 
@@ -218,7 +218,7 @@ def test_schedulers_that_cannot_be_used_are_one_line_and_exit_2(tmp_path, built_
 
     from scenarios.cli import main as cli_main
 
-    monkeypatch.setenv("MENAGERIE_ROOT", str(menagerie_root().resolve()))  # absolute, before the test moves to tmp_path
+    monkeypatch.setenv("MENAGERIE_ROOT", MODEL_ENV["MENAGERIE_ROOT"])  # absolute: the test moves to tmp_path
     monkeypatch.chdir(tmp_path)
     (tmp_path / "folder").mkdir()
     (tmp_path / "notjson.json").write_text("{not json")

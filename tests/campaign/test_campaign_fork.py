@@ -14,22 +14,20 @@ import csv
 import os
 import signal
 import subprocess
-import sys
 import threading
 import time
 from pathlib import Path
 
 import psutil
 
-from plant.model import menagerie_root
 import pytest
 
 from scenarios.campaign import forkrun
 from scenarios.campaign import task as task_mod
 from scenarios.campaign.execute import DASHBOARD_LINE
 from scenarios.campaign.store import TIMING_COLUMNS
-from support.paths import REPO_ROOT
-from support.smoke_campaign import SMOKE, run_campaign, smoke_run
+from support.paths import MODEL_ENV, REPO_ROOT
+from support.smoke_campaign import CLI, SMOKE, run_campaign, smoke_run
 
 NOMINAL = REPO_ROOT / "scenarios" / "suite" / "nominal.toml"
 
@@ -141,12 +139,10 @@ def test_smoke_campaign_with_fork_runs_gives_the_same_rows(tmp_path, tmp_path_fa
 def test_interrupt_with_fork_runs_kills_the_runs_then_resume_finishes(tmp_path, built_fmu):
     """Ctrl-C as a terminal sends it (SIGINT to the CLI's process group): exit 130, no
     server or forked run left alive; ``--resume`` runs only what was not complete."""
-    env = {**os.environ, "MENAGERIE_ROOT": str(menagerie_root().resolve())}  # the loader's default
-    cli_cmd = [sys.executable, "-c", "import signal, sys; signal.signal(signal.SIGINT, signal.default_int_handler); "
-               "from scenarios.cli import main; sys.exit(main())", "campaign"]
+    env = {**os.environ, "MENAGERIE_ROOT": MODEL_ENV["MENAGERIE_ROOT"]}  # the loader's default, absolute
     out = tmp_path / "out"
     args = [str(SMOKE), "--out", str(out), "--workers", "2", "--fmu", str(built_fmu), "--fork-runs", "--no-plots"]
-    cli = subprocess.Popen(cli_cmd + args, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    cli = subprocess.Popen(CLI + args, env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                            text=True, start_new_session=True)
     try:
         deadline = time.monotonic() + 180
@@ -168,7 +164,7 @@ def test_interrupt_with_fork_runs_kills_the_runs_then_resume_finishes(tmp_path, 
     assert not [p for p in forked if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
     before = _rows(out)
     done = {x["sample"] for x in before}
-    r = subprocess.run(cli_cmd + args + ["--resume"], env=env, cwd=tmp_path, capture_output=True, text=True,
+    r = subprocess.run(CLI + args + ["--resume"], env=env, cwd=tmp_path, capture_output=True, text=True,
                        timeout=300)
     assert r.returncode == 0, r.stderr
     after = _rows(out)

@@ -31,7 +31,7 @@ import pytest
 from sybil import Sybil
 from sybil.parsers.markdown import CodeBlockParser, SkipParser
 
-from support.paths import REPO_ROOT
+from support.paths import MODEL_ENV, REPO_ROOT
 from support.shared import made_once
 
 PAGES = [REPO_ROOT / "README.md", *sorted((REPO_ROOT / "docs").glob("*.md"))]
@@ -50,14 +50,8 @@ BASH_TIMEOUT_S = 600
 def _env() -> dict[str, str]:
     """This environment with this interpreter first on PATH and the models as absolute paths (the
     code copy is not beside the clone's ``shared/``)."""
-    from plant import model
-
-    env = dict(os.environ)
+    env = {**os.environ, **MODEL_ENV}
     env["PATH"] = f"{Path(sys.executable).parent}{os.pathsep}{env.get('PATH', '/usr/bin:/bin')}"
-    root = env.get("MENAGERIE_ROOT")
-    if root:
-        env["MENAGERIE_ROOT"] = str((REPO_ROOT / root).resolve()) if not os.path.isabs(root) else root
-    env["CASSIE_OSU_XML"] = str(model.osu_model_path().resolve())
     return env
 
 
@@ -158,10 +152,8 @@ def test_every_example_runs_as_written(page, tmp_path, tmp_path_factory, built_a
     assert untyped_fences(page.read_text()) == [], "fences without a language (```text for output and pictures)"
     code = made_once(tmp_path_factory, "docs_code", lambda folder: _copy_code(folder, built_all.dist))
     monkeypatch.chdir(_workdir(tmp_path, code))
-    env = _env()
-    for name in ("MENAGERIE_ROOT", "CASSIE_OSU_XML"):
-        if name in env:
-            monkeypatch.setenv(name, env[name])
+    for name, value in MODEL_ENV.items():
+        monkeypatch.setenv(name, value)
     before = _visible(REPO_ROOT)
     document = SYBIL.parse(page)
     ran, skipped = 0, []

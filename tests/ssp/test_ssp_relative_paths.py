@@ -10,7 +10,7 @@ import shutil
 import subprocess
 import sys
 
-from plant.model import menagerie_root
+from support.paths import MODEL_ENV
 from support.plant_fmu_support import built_plant_fmu, built_system
 
 SCRIPT = """
@@ -41,7 +41,7 @@ def test_ssp_python_entry_points_and_commands_take_relative_paths(tmp_path_facto
     shutil.copy(system / "CommandSource_fmi2.fmu", tmp_path / "fmus" / "CommandSource_fmi2.fmu")
     shutil.copy(system / "CassieAVR.ssp", tmp_path / "CassieAVR.ssp")
     (tmp_path / "systemp").mkdir()
-    env = {**os.environ, "TMPDIR": str(tmp_path / "systemp"), "MENAGERIE_ROOT": str(menagerie_root().resolve())}
+    env = {**os.environ, "TMPDIR": str(tmp_path / "systemp"), "MENAGERIE_ROOT": MODEL_ENV["MENAGERIE_ROOT"]}
 
     def run(*args):
         return subprocess.run([sys.executable, *args], cwd=tmp_path, env=env, capture_output=True, text=True,

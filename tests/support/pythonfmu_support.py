@@ -10,8 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from plant import model
-from support.paths import REPO_ROOT
+from support.paths import MODEL_ENV, REPO_ROOT
 
 #: What build.py needs of the repository: itself, the FMU sources, the plant, the method page.
 _TREE = ("build.py", "fmu_src", "plant", "docs/method.md")
@@ -20,8 +19,7 @@ _BUILD = "import sys\nfrom pathlib import Path\nimport build\nprint(getattr(buil
 
 def _model_env() -> dict:
     """The model locations as absolute paths (a copy of the repository is not beside shared/)."""
-    return {**os.environ, "MENAGERIE_ROOT": str(model.menagerie_root().resolve()),
-            "CASSIE_OSU_XML": str(model.osu_model_path().resolve())}
+    return {**os.environ, **MODEL_ENV}
 
 
 def build_edited(tmp: Path, function: str, edits: dict[str, tuple[str, str]]) -> Path:

@@ -11,8 +11,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from plant.model import menagerie_root
-from support.paths import REPO_ROOT
+from support.paths import MODEL_ENV, REPO_ROOT
 from support.shared import made_once
 
 SMOKE = REPO_ROOT / "scenarios" / "campaigns" / "smoke.toml"
@@ -29,7 +28,7 @@ def campaign_env(folder: Path) -> dict[str, str]:
     temp folder), the Menagerie folder the model loader's default gives."""
     systemp = folder / "systemp"
     systemp.mkdir(exist_ok=True)
-    return {**os.environ, "TMPDIR": str(systemp), "MENAGERIE_ROOT": str(menagerie_root().resolve())}
+    return {**os.environ, "TMPDIR": str(systemp), "MENAGERIE_ROOT": MODEL_ENV["MENAGERIE_ROOT"]}
 
 
 def run_campaign(args, folder: Path, fmu: Path, timeout: float = WAIT_S) -> subprocess.CompletedProcess:
