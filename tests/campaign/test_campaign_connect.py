@@ -29,7 +29,7 @@ import pytest
 
 from scenarios.campaign.execute import DASHBOARD_LINE
 from support.paths import MODEL_ENV
-from support.smoke_campaign import CLI, campaign_env
+from support.smoke_campaign import CLI, campaign_env, campaign_in_process
 from test_campaign_dask import BIN, campaign_file, rows, stop, wait_for
 
 LOOPBACK = {"127.0.0.1", "::1"}
@@ -216,8 +216,6 @@ def test_schedulers_that_cannot_be_used_are_one_line_and_exit_2(tmp_path, built_
                                                                  monkeypatch):
     import dask
 
-    from scenarios.cli import main as cli_main
-
     monkeypatch.setenv("MENAGERIE_ROOT", MODEL_ENV["MENAGERIE_ROOT"])  # absolute: the test moves to tmp_path
     monkeypatch.chdir(tmp_path)
     (tmp_path / "folder").mkdir()
@@ -239,12 +237,8 @@ def test_schedulers_that_cannot_be_used_are_one_line_and_exit_2(tmp_path, built_
     with dask.config.set({"distributed.comm.timeouts.connect": CONNECT_TIMEOUT}):
         for extra, message in cases:
             t0 = time.monotonic()
-            try:
-                rc = cli_main(["campaign", str(smoke), "--out", "out", "--fmu", str(built_fmu), *extra])
-            except SystemExit as exc:
-                rc = exc.code
-            cap = capsys.readouterr()
-            assert rc == 2 and message in cap.err and "Traceback" not in cap.err, (extra, cap.err)
-            assert len(cap.err.strip().splitlines()) == 1 and cap.out == "", (extra, cap.err)
+            rc, out, err = campaign_in_process(capsys, smoke, "--out", "out", "--fmu", built_fmu, *extra)
+            assert rc == 2 and message in err and "Traceback" not in err, (extra, err)
+            assert len(err.strip().splitlines()) == 1 and out == "", (extra, err)
             assert not (tmp_path / "out").exists(), extra
             assert time.monotonic() - t0 < 30, extra  # twice the connect timeout at most, plus the checks

@@ -25,6 +25,7 @@ from scenarios.lang import spec as scenario_spec
 from scenarios.campaign import analysis, sampling, spec, tomlw
 from scenarios.campaign.store import CampaignDir, CampaignDirError, TIMING_COLUMNS
 from support.paths import REPO_ROOT
+from support.smoke_campaign import campaign_in_process
 
 BASE = """
 name = "c"
@@ -341,18 +342,6 @@ def test_resume_keeps_complete_samples_drops_the_rest_and_torn_lines(tmp_path):
     assert set(TIMING_COLUMNS) <= set(again.cols)
 
 
-def _cli(capsys, *args: str) -> tuple[int, str, str]:
-    """``python -m scenarios campaign ARGS`` in this process (its exit code, stdout, stderr)."""
-    from scenarios.cli import main as cli_main
-
-    try:
-        rc = cli_main(["campaign", *args])
-    except SystemExit as exc:
-        rc = exc.code
-    out, err = capsys.readouterr()
-    return rc, out, err
-
-
 def test_cli_refuses_invalid_campaign_and_foreign_folder(tmp_path, capsys):
     bad = tmp_path / "bad.toml"
     bad.write_text(BASE + "[factors.joint_damping_scale]\ndist = \"uniform\"\nlow = 0.5\nhigh = 20.0\n")
@@ -362,16 +351,16 @@ def test_cli_refuses_invalid_campaign_and_foreign_folder(tmp_path, capsys):
     assert r.returncode == 2 and "factors.joint_damping_scale = 20" in r.stderr and not (tmp_path / "o").exists()
     (tmp_path / "taken").mkdir()
     (tmp_path / "taken" / "x").write_text("")
-    rc, _, err = _cli(capsys, "smoke", "--out", str(tmp_path / "taken"))
+    rc, _, err = campaign_in_process(capsys, "smoke", "--out", str(tmp_path / "taken"))
     assert rc == 2 and "holds no campaign" in err
-    rc, listed, _ = _cli(capsys, "smoke", "--dry-run")
+    rc, listed, _ = campaign_in_process(capsys, "smoke", "--dry-run")
     assert rc == 0 and len(listed.splitlines()) == 5
     # --seed: the same design on other samples; the same seed, the same samples
-    rc, other, _ = _cli(capsys, "smoke", "--dry-run", "--seed", "8")
+    rc, other, _ = campaign_in_process(capsys, "smoke", "--dry-run", "--seed", "8")
     assert rc == 0 and len(other.splitlines()) == 5
     assert other.splitlines()[0] == listed.splitlines()[0] and other != listed
-    assert _cli(capsys, "smoke", "--dry-run", "--seed", "8")[1] == other
-    rc, _, err = _cli(capsys, "smoke", "--dry-run", "--seed", "-1")
+    assert campaign_in_process(capsys, "smoke", "--dry-run", "--seed", "8")[1] == other
+    rc, _, err = campaign_in_process(capsys, "smoke", "--dry-run", "--seed", "-1")
     assert rc == 2 and "--seed -1: must be within [0, " in err
 
 

@@ -37,6 +37,19 @@ def run_campaign(args, folder: Path, fmu: Path, timeout: float = WAIT_S) -> subp
                           timeout=timeout, env=campaign_env(folder), cwd=folder)
 
 
+def campaign_in_process(capsys, *args) -> tuple[int, str, str]:
+    """``python -m scenarios campaign ARGS`` in this process: (its exit code, stdout, stderr), the
+    output captured by pytest's ``capsys``."""
+    from scenarios.cli import main as cli_main
+
+    try:
+        rc = cli_main(["campaign", *(str(a) for a in args)])
+    except SystemExit as exc:
+        rc = exc.code
+    out, err = capsys.readouterr()
+    return rc, out, err
+
+
 def smoke_run(tmp_path_factory, fmu: Path) -> tuple[Path, Path, subprocess.CompletedProcess]:
     """(the folder it ran from, its output folder, the finished CLI process) of the session's
     plain smoke campaign (with its plots)."""
