@@ -298,8 +298,9 @@ def master_vs_c_host(scenario: Scenario, folder: Path, repeat: int) -> dict[str,
     - ``c_host``: ``tests/support/native/fmi2_loop_host.c`` (the loop in C: set, doStep, get, each
       step's outputs printed), CPU time of its loop as it measures it (initialization excluded);
     - ``master``: :func:`scenarios.cosim.master.run_arm` with ``--plant fmu`` on the native plant FMU
-      and the native regulator FMU (fmpy), CPU time of the whole arm (FMU extraction and
-      initialization included: the ratio is a lower bound).
+      and the native regulator FMU (fmpy), CPU time of its communication steps (``loop_cpu_s``:
+      extraction and initialization excluded, as in the C host); ``master_arm``: the same run's
+      CPU time as a whole (FMU extraction and initialization included).
     """
     import re
 
@@ -334,7 +335,8 @@ def master_vs_c_host(scenario: Scenario, folder: Path, repeat: int) -> dict[str,
         c0 = time.process_time()
         r = master.run_arm(scenario, "adaptive", FmuRegulator(reg_fmu), model=model, model_summary=summary,
                            plant=plant_factory(plant_fmu, unpack_dir=folder))
-        runs["master"] = {"sim_s": r.sim_s, "cpu_s": time.process_time() - c0}
+        runs["master_arm"] = {"sim_s": r.sim_s, "cpu_s": time.process_time() - c0}
+        runs["master"] = {"sim_s": r.sim_s, "cpu_s": r.timings["loop_cpu_s"]}
         for key, m in runs.items():
             m["rtf_cpu"] = m["sim_s"] / m["cpu_s"]
             if key not in best or m["rtf_cpu"] > best[key]["rtf_cpu"]:
@@ -462,9 +464,11 @@ def main(argv=None) -> int:
         host, ours = res["c_host"]["c_host"], res["c_host"]["master"]
         r["master_over_c_host"] = ours["rtf_cpu"] / host["rtf_cpu"]
         target = BENCH_TARGETS["master_over_c_host"]
-        print(f"the native plant FMU + native regulator FMU: the plain C host {host['rtf_cpu']:.2f}, our master "
-              f"{ours['rtf_cpu']:.2f} sim s / CPU s: master / C host {r['master_over_c_host']:.3f} (target >= {target}: "
-              f"{'met' if r['master_over_c_host'] >= target else 'MISSED'})")
+        print(f"the native plant FMU + native regulator FMU, the loop (initialization excluded): the plain C host "
+              f"{host['rtf_cpu']:.2f}, our master {ours['rtf_cpu']:.2f} sim s / CPU s: master / C host "
+              f"{r['master_over_c_host']:.3f} (target >= {target}: {'met' if r['master_over_c_host'] >= target else 'MISSED'})"
+              f"; our master's whole arm (extraction and initialization included) "
+              f"{res['c_host']['master_arm']['rtf_cpu']:.2f} sim s / CPU s")
     if "suite_jobs2_wall_s" in res:
         print(f"suite `run all --jobs 2`: {res['suite_jobs2_wall_s']:.1f} s wall (exit {res['suite_returncode']})")
     built.cleanup()

@@ -373,11 +373,11 @@ class NominalController:
         for k in offsets:
             if k not in self.offsets:
                 raise KeyError(f"unknown offset key {k!r}; allowed: {', '.join(OFFSET_NAMES)}")
-        for k, v in offsets.items():
-            v = float(v)
-            if not math.isfinite(v):
-                raise ValueError(f"offset {k} must be finite, got {v}")
-            self.offsets[k] = v
+        values = {k: float(v) for k, v in offsets.items()}
+        bad = [f"offset {k} must be finite, got {v}" for k, v in values.items() if not math.isfinite(v)]
+        if bad:  # none set: all or nothing
+            raise ValueError("; ".join(bad))
+        self.offsets.update(values)
 
     @property
     def swing(self) -> str:

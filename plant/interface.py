@@ -10,7 +10,17 @@ Units: SI; speeds in the heading frame (x forward, y left), angles in rad.
 """
 from __future__ import annotations
 
-from typing import Any, Mapping, Protocol
+from typing import Any, Mapping, Protocol, Sequence
+
+#: The regulator inputs a plant senses, in the order of :meth:`Plant.regulator_inputs` and of
+#: the head of :meth:`Plant.signals`.
+REGULATOR_INPUT_NAMES = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
+#: The last telemetry keys: the command the plant was given, with the sensed ``yaw`` and
+#: ``yaw_rate`` between (the order of the results' columns).
+TELEMETRY_TAIL = ("vx_des", "vy_des", "yaw", "yaw_rate", "yaw_rate_des")
+#: The telemetry's keys, in the order of :meth:`Plant.telemetry` and of the tail of :meth:`Plant.signals`.
+TELEMETRY_NAMES = ("t", "pelvis_x", "pelvis_y", "pelvis_z", "vx", "vy", "vx_step_avg", "vy_signal", "pitch", "roll",
+                   "stance", "tau", "step_index", "left_foot_force", "right_foot_force", *TELEMETRY_TAIL)
 
 
 class Plant(Protocol):
@@ -30,12 +40,20 @@ class Plant(Protocol):
         """The regulator's joint offsets (rad), keys from ``plant.constants.OFFSET_NAMES``;
         an unknown key raises KeyError."""
 
+    def set_offset_values(self, values: Sequence[float]) -> None:
+        """:meth:`set_offsets` of all six offsets given as numbers in ``OFFSET_NAMES``' order
+        (the master's per-step call: no names to look up)."""
+
     def regulator_inputs(self) -> dict:
-        """The sensed regulator inputs: ``vx``, ``vy``, ``pitch``, ``roll``, ``pitch_rate``,
-        ``roll_rate`` (floats) and ``step_index`` (int)."""
+        """The sensed regulator inputs (:data:`REGULATOR_INPUT_NAMES`): ``vx``, ``vy``, ``pitch``,
+        ``roll``, ``pitch_rate``, ``roll_rate`` (floats) and ``step_index`` (int)."""
 
     def telemetry(self) -> dict:
-        """Named values for logging, always the same keys in the same order."""
+        """Named floats for logging: :data:`TELEMETRY_NAMES`, in that order."""
+
+    def signals(self) -> tuple:
+        """The values of :meth:`regulator_inputs` then of :meth:`telemetry`, in one call (the
+        master's per-step read; the same numbers, ``step_index`` as the plant holds it)."""
 
     def advance(self, n_steps: int) -> None:
         """Advance ``n_steps`` plant steps of :attr:`SIM_DT_S` with the nominal controller."""
@@ -51,4 +69,4 @@ class Plant(Protocol):
         """Free what the plant holds (an FMU instance); calling it again does nothing."""
 
 
-__all__ = ["Plant"]
+__all__ = ["Plant", "REGULATOR_INPUT_NAMES", "TELEMETRY_NAMES", "TELEMETRY_TAIL"]

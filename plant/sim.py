@@ -26,22 +26,42 @@ from __future__ import annotations
 import ctypes
 import logging
 import math
+import operator
 from pathlib import Path
-from typing import Mapping
+from typing import Mapping, Sequence
 
 import mujoco
 
 from plant.cassie import FALL_HEIGHT_M, FALL_TILT_RAD, CassiePhysics
-from plant.constants import CONTROLLERS
+from plant.constants import CONTROLLERS, OFFSET_NAMES
 from plant.controller_params import ControllerParams
 from plant.controller import NominalController
 from plant.gaits import GaitLibrary
+from plant.interface import REGULATOR_INPUT_NAMES, TELEMETRY_NAMES, TELEMETRY_TAIL
+from plant.native.native_ctrl import SENSE_NAMES
 
 log = logging.getLogger(__name__)
 
 #: Where the C controller is built when no library is given: ``build/`` of the checkout
 #: (ignored by git), one folder per version of its sources.
 NATIVE_CACHE = Path(__file__).resolve().parents[1] / "build" / "native_ctrl"
+
+
+#: The sensed signal (``SENSE_NAMES``) behind each name of :data:`REGULATOR_INPUT_NAMES` and
+#: :data:`TELEMETRY_NAMES` whose signal has another name (any other: the same name).
+SENSED_AS = {"regulator": {"vx": "vx_step_avg", "vy": "vy_filt"}, "telemetry": {"vy_signal": "vy_filt"}}
+
+
+def _pick_sensed() -> tuple[operator.itemgetter, operator.itemgetter]:
+    """What :meth:`CassieWalker.signals` takes from the sensed signals: the regulator inputs and
+    the telemetry before ``TELEMETRY_TAIL``, then its ``yaw`` and ``yaw_rate``."""
+    at = {n: i for i, n in enumerate(SENSE_NAMES)}
+    reg = [at[SENSED_AS["regulator"].get(n, n)] for n in REGULATOR_INPUT_NAMES]
+    tel = [at[SENSED_AS["telemetry"].get(n, n)] for n in TELEMETRY_NAMES[:-len(TELEMETRY_TAIL)]]
+    return operator.itemgetter(*reg, *tel), operator.itemgetter(at["yaw"], at["yaw_rate"])
+
+
+_HEAD, _TAIL = _pick_sensed()
 
 
 class CassieWalker:
@@ -128,11 +148,24 @@ class CassieWalker:
         """Regulator joint offsets (rad); keys from ``OFFSET_NAMES``; unknown key -> KeyError."""
         self.controller.set_offsets(offsets)
 
+    def set_offset_values(self, values: Sequence[float]) -> None:
+        """:meth:`set_offsets` of the six offsets in ``OFFSET_NAMES``' order."""
+        if self.controller_kind == "native":
+            self.controller.set_offset_values(values)
+        else:
+            self.controller.set_offsets(dict(zip(OFFSET_NAMES, values, strict=True)))
+
+    def signals(self) -> tuple:
+        """The values of :meth:`regulator_inputs` then of :meth:`telemetry` (``step_index`` a
+        float holding a whole number) in one call: ``plant.interface.Plant.signals``."""
+        s = self._signals()
+        return (*_HEAD(s), self.vx_des, self.vy_des, *_TAIL(s), self.yaw_rate_des)
+
     def regulator_inputs(self) -> dict:
         """Signals for the regulator (see ``plant/controller.py`` for definitions)."""
-        _, pitch, roll, _, _, roll_rate, pitch_rate, _, _, _, _, _, _, _, vx, vy, step_index, _, _ = self._signals()
-        return {"vx": vx, "vy": vy, "pitch": pitch, "roll": roll, "pitch_rate": pitch_rate, "roll_rate": roll_rate,
-                "step_index": int(step_index)}
+        inputs = dict(zip(REGULATOR_INPUT_NAMES, self.signals()))
+        inputs["step_index"] = int(inputs["step_index"])
+        return inputs
 
     def _signals_python(self) -> tuple:
         """What the C controller's ``sense`` gives (``plant.native.native_ctrl.SENSE_NAMES``), from
@@ -292,16 +325,8 @@ class CassieWalker:
         """Nothing to free (the model and data are Python objects); part of :class:`plant.interface.Plant`."""
 
     def telemetry(self) -> dict:
-        """Named floats for logging (SI units; stance 0 = left, 1 = right)."""
-        yaw, pitch, roll, vx, vy, _, _, yaw_rate, fl, fr, x, y, z, t, vx_avg, vy_filt, step, stance, tau = self._signals()
-        return {
-            "t": t, "pelvis_x": x, "pelvis_y": y, "pelvis_z": z, "vx": vx, "vy": vy,
-            "vx_step_avg": vx_avg, "vy_signal": vy_filt, "pitch": pitch, "roll": roll,
-            "stance": stance, "tau": tau, "step_index": step,
-            "left_foot_force": fl, "right_foot_force": fr,
-            "vx_des": self.vx_des, "vy_des": self.vy_des,
-            "yaw": yaw, "yaw_rate": yaw_rate, "yaw_rate_des": self.yaw_rate_des,
-        }
+        """Named floats for logging (SI units; stance 0 = left, 1 = right): ``TELEMETRY_NAMES``."""
+        return dict(zip(TELEMETRY_NAMES, self.signals()[len(REGULATOR_INPUT_NAMES):]))
 
 
 __all__ = ["CassieWalker"]

@@ -367,23 +367,21 @@ class NativeController:
                                         ctypes.byref(self._libs[key][1]))
 
     def set_offsets(self, offsets) -> None:
-        if len(offsets) == len(OFFSET_NAMES):  # every offset given (the master's case): no merging
-            try:
-                values = [float(offsets[k]) for k in OFFSET_NAMES]
-            except KeyError:
-                values = None
-            if values is not None and all(map(math.isfinite, values)):
-                self._offsets[:] = values
-                self._native.lib.cc_set_offsets(self._buf, self._offsets)
-                return
         for k in offsets:
             if k not in OFFSET_NAMES:
                 raise KeyError(f"unknown offset key {k!r}; allowed: {', '.join(OFFSET_NAMES)}")
-        values = [float(offsets.get(k, self._mem.offsets[i])) for i, k in enumerate(OFFSET_NAMES)]
-        for k, v in zip(OFFSET_NAMES, values):
-            if not math.isfinite(v):
-                raise ValueError(f"offset {k} must be finite, got {v}")
-        self._native.lib.cc_set_offsets(self._buf, (ctypes.c_double * 6)(*values))
+        self.set_offset_values([offsets[k] if k in offsets else self._mem.offsets[i]
+                                for i, k in enumerate(OFFSET_NAMES)])
+
+    def set_offset_values(self, values) -> None:
+        """All six offsets in ``OFFSET_NAMES``' order (the master's per-step call); ValueError
+        naming any that is not finite (the offsets are then as they were)."""
+        buf = self._offsets
+        buf[:] = values
+        if not all(map(math.isfinite, buf)):
+            bad = [f"offset {k} must be finite, got {v}" for k, v in zip(OFFSET_NAMES, buf) if not math.isfinite(v)]
+            raise ValueError("; ".join(bad))
+        self._native.lib.cc_set_offsets(self._buf, buf)
 
     def update(self) -> None:
         self._native.lib.cc_update(self._buf)

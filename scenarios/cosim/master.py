@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import logging
 import math
+import operator
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,16 +31,16 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from plant.constants import OFFSET_NAMES
-from plant.interface import Plant
+from plant.interface import REGULATOR_INPUT_NAMES, Plant
 from scenarios.errors import CosimError, ScenarioError
-from scenarios.cosim.regulators import RegulatorPath, arm_regulator
+from scenarios.cosim.regulators import MASTER_INPUTS, RegulatorPath, arm_regulator
 from scenarios.lang.scenario import Arm, Scenario
 
 log = logging.getLogger(__name__)
 
 #: Regulator inputs sensed on the plant (vx_des/vy_des come from the command schedule; its
 #: yaw_rate_des goes to the plant only: the regulator has no such input).
-SENSED_INPUTS = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
+SENSED_INPUTS = REGULATOR_INPUT_NAMES
 #: Progress is reported every this many communication steps.
 PROGRESS_EVERY = 200
 #: The data flow within a communication step: ``gauss-seidel`` (the default: sense the plant,
@@ -86,6 +87,7 @@ TIMINGS = {
     "walker_s": "building the walker on it",
     "regulator_start_s": "starting the regulator (FMU: extract, instantiate, initialize)",
     "loop_s": "every communication step, the three below included",
+    "loop_cpu_s": "CPU time of the process over every communication step",
     "regulator_s": "the regulator's steps",
     "plant_s": "the plant's steps (physics and nominal controller)",
     "record_s": "storing each step's row",
@@ -188,7 +190,9 @@ def run_arm(scenario: Scenario, arm: Arm | str, regulator: RegulatorPath, *,
     try:
         regulator.start(arm.overrides_dict(), 0.0, scenario.n_comm_steps * scenario.comm_step_s)
         lap = _lap(timings, "regulator_start_s", lap)
+        loop_cpu0 = time.process_time()
         _run_steps(scenario, arm, walker, regulator, n_plant, steps, progress, stop, recorder, exchange)
+        timings["loop_cpu_s"] = time.process_time() - loop_cpu0
         lap = _lap(timings, "loop_s", lap)
     finally:
         regulator.close()
@@ -218,6 +222,15 @@ def _run_steps(scenario: Scenario, arm: Arm, walker: Plant, regulator: Regulator
     """The communication steps of :func:`run_arm` (see the module docstring), into ``steps``."""
     h, t0, n_steps = scenario.comm_step_s, 0.0, scenario.n_comm_steps
     outputs = regulator.output_names()
+    # per step, numbers in fixed orders (no names): the plant's signals (regulator inputs, then
+    # telemetry), the regulator's inputs (MASTER_INPUTS) and outputs, the offsets (OFFSET_NAMES)
+    n_sensed = len(SENSED_INPUTS)
+    if MASTER_INPUTS != (*SENSED_INPUTS, "vx_des", "vy_des"):
+        raise AssertionError("MASTER_INPUTS must be the sensed inputs, then vx_des and vy_des")
+    offsets_of = operator.itemgetter(*(outputs.index(n) for n in OFFSET_NAMES))
+    signals, step_values, set_offsets = walker.signals, regulator.step_values, walker.set_offset_values
+    command_at, push_at, advance, fell = scenario.command_at_step, scenario.push_force_at_step, walker.advance, walker.fell
+    pushed_bodies, events = scenario.pushed_bodies, scenario.events
     clock = time.perf_counter
     command: tuple[float, float, float] | None = None
     force = (0.0, 0.0, 0.0)
@@ -225,7 +238,7 @@ def _run_steps(scenario: Scenario, arm: Arm, walker: Plant, regulator: Regulator
     reg_s = plant_s = record_s = 0.0
     # Jacobi: the offsets in force over step k are the regulator's outputs at t_k, computed
     # in step k-1; at t0 its outputs' start values, 0 for every regulator output.
-    held = {n: 0.0 for n in outputs} if exchange == "jacobi" else None
+    held = [0.0] * len(outputs) if exchange == "jacobi" else None
     body_forces: dict[str, tuple[float, float, float]] = {}
     running = {"torso_com_offset_m": scenario.torso_com_offset_m, "joint_damping_scale": scenario.joint_damping_scale}
     try:
@@ -233,38 +246,35 @@ def _run_steps(scenario: Scenario, arm: Arm, walker: Plant, regulator: Regulator
             if stop is not None and stop():
                 raise KeyboardInterrupt(f"{scenario.name}/{arm.name} stopped at t = {t0 + k * h:g} s")
             t = t0 + k * h
-            cmd = scenario.command_at_step(k)
+            cmd = command_at(k)
             if cmd != command:
                 walker.set_command(*cmd)
                 command = cmd
-            f = scenario.push_force_at_step(k)
+            f = push_at(k)
             if f != force:
                 walker.set_pelvis_force(np.array(f, dtype=float))
                 force = f
-            if scenario.pushed_bodies:
+            if pushed_bodies:
                 body_forces = _apply_body_forces(scenario, walker, k, body_forces)
-            if scenario.events:
+            if events:
                 running = _apply_events(scenario, walker, k, running)
-            sensed = walker.regulator_inputs()
-            tel = walker.telemetry()
-            inputs = {n: sensed[n] for n in SENSED_INPUTS}
-            inputs["vx_des"], inputs["vy_des"], _ = cmd
+            sensed = signals()
+            inputs = (*sensed[:n_sensed - 1], int(sensed[n_sensed - 1]), cmd[0], cmd[1])  # step_index last: an int
             c0 = clock()
-            out = regulator.step(t, h, inputs)
+            out = step_values(t, h, inputs)
             if held is not None:
                 out, held = held, out
             c1 = clock()
-            walker.set_offsets({n: out[n] for n in OFFSET_NAMES})
+            set_offsets(offsets_of(out))
             if table is None:
-                steps.recorder = _Recorder(n_steps, _row_dtype(outputs, sensed, tel))
+                steps.recorder = _Recorder(n_steps, _row_dtype(outputs, walker.regulator_inputs(), walker.telemetry()))
                 table = steps.recorder.table
             c2 = clock()
-            table[k] = (t, *cmd, *f, *map(inputs.__getitem__, SENSED_INPUTS), *map(out.__getitem__, outputs),
-                        *tel.values())
+            table[k] = (t, *cmd, *f, *inputs[:n_sensed], *out, *sensed[n_sensed:])
             if recorder is not None:
                 recorder(k, t, walker)
             c3 = clock()
-            walker.advance(n_plant)
+            advance(n_plant)
             c4 = clock()
             reg_s += c1 - c0
             record_s += c3 - c2
@@ -272,7 +282,7 @@ def _run_steps(scenario: Scenario, arm: Arm, walker: Plant, regulator: Regulator
             steps.done += 1
             if progress is not None and (steps.done % PROGRESS_EVERY == 0):
                 progress(PROGRESS_EVERY)
-            if walker.fell():
+            if fell():
                 steps.fell, steps.t_fall = True, t0 + (k + 1) * h
                 steps.reason = walker.fall_reason or None
                 log.info("%s/%s: fell at t = %.3f s (%s)", scenario.name, arm.name, steps.t_fall, steps.reason)

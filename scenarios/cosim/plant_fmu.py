@@ -18,11 +18,13 @@ in its ``terrain_field_file`` parameter (:meth:`FmuPlant._with_terrain_field`).
 """
 from __future__ import annotations
 
+import operator
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Sequence
 
 from scenarios.errors import CosimError
 from plant.constants import OFFSET_NAMES as OFFSET_NAMES
+from plant.interface import REGULATOR_INPUT_NAMES, TELEMETRY_NAMES, TELEMETRY_TAIL
 from fmu_src.plant_fmu.fmu_core import INPUT_NAMES, MODEL_FILES, PLANT_STEP_S, values_from_perturbation
 from scenarios.cosim.fmi_host import FmuInstance
 
@@ -30,7 +32,12 @@ from scenarios.cosim.fmi_host import FmuInstance
 #: (docs/native.md), and the name the master gives the file it writes.
 FIELD_PARAMETER = "terrain_field_file"
 FIELD_FILE_NAME = "terrain_field.cptf"
-REGULATOR_NAMES = ("vx", "vy", "pitch", "roll", "pitch_rate", "roll_rate", "step_index")
+REGULATOR_NAMES = REGULATOR_INPUT_NAMES  # the FMU's outputs of the same names
+#: The FMU output behind each telemetry value (by name in ``TELEMETRY_NAMES``) that is an output
+#: of another name; ``vx_des``, ``vy_des`` and ``yaw_rate_des`` are the command the master set.
+TELEMETRY_OUTPUTS = {"t": "plant_time", "vx": "pelvis_vx", "vy": "pelvis_vy", "vx_step_avg": "vx",
+                     "vy_signal": "vy", "tau": "gait_phase"}
+COMMAND_NAMES = ("vx_des", "vy_des", "yaw_rate_des")
 
 
 def fmu_parameters(scenario, torso_mass_kg: float | None = None) -> dict:
@@ -67,8 +74,13 @@ class FmuPlant(FmuInstance):
     def __init__(self, fmu_path: str | Path, parameters: Mapping[str, Any], instance_name: str = "plant", *,
                  unpack_dir: str | Path | None = None):
         """``unpack_dir``: where the FMU is extracted (a fresh subfolder, removed by ``close``)."""
+        from ctypes import c_double
+
         super().__init__(fmu_path, instance_name, unpack_dir=unpack_dir)
-        self._inputs = {n: 0.0 for n in INPUT_NAMES}
+        #: The inputs held over the next doStep (INPUT_NAMES' order), set in place by the setters.
+        self._in_vals = (c_double * len(INPUT_NAMES))()
+        self._in_at = {n: i for i, n in enumerate(INPUT_NAMES)}
+        self._offsets_at = [self._in_at[n] for n in OFFSET_NAMES]
         self.vx_des = self.vy_des = self.yaw_rate_des = 0.0
         self.time_s = 0.0
         self.start(parameters, 0.0, 0.0)
@@ -111,71 +123,104 @@ class FmuPlant(FmuInstance):
         return {**parameters, FIELD_PARAMETER: path}
 
     def _prepare_buffers(self) -> None:
-        """ctypes arrays for the per-step calls (value references from the model description)."""
-        from ctypes import c_double, c_int
+        """The per-step calls bound straight to the library (as the regulator's:
+        ``FmuRegulator._bind_step_calls``) on preallocated arrays (value references from the
+        model description), and which outputs :meth:`signals` picks."""
+        fmu, fmi, comp = self._fmu, self.fmi, self._fmu.component
+        vrs = lambda names: self._vr_array([self.vars[n].valueReference for n in names])  # noqa: E731
+        self._set_inputs = ("fmi2SetReal (inputs)", fmi.array_function(fmu.dll, "Set", "Real"),
+                            fmi.array_args(comp, vrs(INPUT_NAMES), self._in_vals))
+        self._do_step, self._do_step_tail, _ = fmi.bind_do_step(fmu.dll)
+        self._gets, names = [], []
+        for kind in ("Real", "Integer", "Boolean"):
+            kind_names = [v.name for v in self.md.modelVariables if v.causality == "output" and v.type == kind]
+            values = (fmi.ctypes[kind] * len(kind_names))()
+            self._gets.append((f"fmi2Get{kind} (outputs)", fmi.array_function(fmu.dll, "Get", kind),
+                               fmi.array_args(comp, vrs(kind_names), values), values))
+            names += kind_names
+        self._out_names = tuple(names)
+        at = {n: i for i, n in enumerate(names)}
+        tel = [at[TELEMETRY_OUTPUTS.get(n, n)] for n in TELEMETRY_NAMES[:-len(TELEMETRY_TAIL)]]
+        self._head = operator.itemgetter(*(at[n] for n in REGULATOR_NAMES), *tel)
+        self._tail = operator.itemgetter(at["yaw"], at["yaw_rate"])
+        self._fell_at = at["fell"]
 
-        self._in_vrs = self._vr_array([self.vars[n].valueReference for n in INPUT_NAMES])
-        self._in_vals = (c_double * len(INPUT_NAMES))()
-        fmu = self._fmu
-        self._out = []
-        for kind, ctype, getter in (("Real", c_double, fmu.fmi2GetReal), ("Integer", c_int, fmu.fmi2GetInteger),
-                                    ("Boolean", c_int, fmu.fmi2GetBoolean)):
-            names = [v.name for v in self.md.modelVariables if v.causality == "output" and v.type == kind]
-            vrs = self._vr_array([self.vars[n].valueReference for n in names])
-            self._out.append((f"fmi2Get{kind} (outputs)", getter, names, vrs, (ctype * len(names))()))
+    def _bound(self, what: str, fn, args: tuple) -> None:
+        """A bound call, its status checked (a ctypes argument error is an error too)."""
+        try:
+            status = fn(*args)
+        except Exception as exc:
+            raise self._fail(what, f"{type(exc).__name__}: {exc}") from None
+        if status:
+            raise self._status_error(what, status)
 
     def _read_outputs(self) -> None:
-        comp, values = self._fmu.component, {}
-        for what, getter, names, vrs, buffer in self._out:
-            self._call(what, getter, comp, vrs, len(names), buffer)
-            values.update(zip(names, buffer))
-        values["fell"] = bool(values["fell"])
-        self.out = values
+        values: list = []
+        for what, fn, args, buffer in self._gets:
+            self._bound(what, fn, args)
+            values += buffer
+        self._values = values
+
+    def _drop_bound_calls(self) -> None:
+        self._set_inputs = self._do_step = None
+        self._gets = []
+
+    @property
+    def out(self) -> dict[str, Any]:
+        """Every output by name after the last step (``fell`` a bool)."""
+        out = dict(zip(self._out_names, self._values))
+        out["fell"] = bool(out["fell"])
+        return out
 
     # ---- the walker's interface
     def set_command(self, vx_des: float, vy_des: float, yaw_rate_des: float = 0.0) -> None:
         self.vx_des, self.vy_des = float(vx_des), float(vy_des)
         self.yaw_rate_des = float(yaw_rate_des)
-        self._inputs.update(vx_des=self.vx_des, vy_des=self.vy_des, yaw_rate_des=self.yaw_rate_des)
+        for name in COMMAND_NAMES:
+            self._in_vals[self._in_at[name]] = getattr(self, name)
 
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
         unknown = [k for k in offsets if k not in OFFSET_NAMES]
         if unknown:
             raise KeyError(f"unknown offset key(s) {unknown}; allowed: {', '.join(OFFSET_NAMES)}")
-        self._inputs.update({k: float(v) for k, v in offsets.items()})
+        values = {k: float(v) for k, v in offsets.items()}
+        for k, v in values.items():
+            self._in_vals[self._in_at[k]] = v
+
+    def set_offset_values(self, values: Sequence[float]) -> None:
+        at, held = self._offsets_at, self._in_vals
+        if len(values) != len(at):
+            raise ValueError(f"{len(values)} offsets given, {len(at)} due ({', '.join(OFFSET_NAMES)})")
+        for i, v in zip(at, values):
+            held[i] = v
 
     def set_pelvis_force(self, force_n) -> None:
         fx, fy, fz = (float(f) for f in force_n)
-        self._inputs.update(push_fx=fx, push_fy=fy, push_fz=fz)
+        for name, f in (("push_fx", fx), ("push_fy", fy), ("push_fz", fz)):
+            self._in_vals[self._in_at[name]] = f
 
     def advance(self, n_steps: int) -> None:
         h = int(n_steps) * self.SIM_DT_S
-        fmu = self._fmu
         self._t = self.time_s
-        for i, name in enumerate(INPUT_NAMES):
-            self._in_vals[i] = self._inputs[name]
-        self._call("fmi2SetReal (inputs)", fmu.fmi2SetReal, fmu.component, self._in_vrs, len(INPUT_NAMES),
-                   self._in_vals)
-        self._call("fmi2DoStep", fmu.fmi2DoStep, fmu.component, self.time_s, h, 1)
+        self._bound(*self._set_inputs)
+        self._bound("fmi2DoStep", self._do_step, (self._fmu.component, self.time_s, h, *self._do_step_tail))
         self.time_s += h
         self._read_outputs()
 
+    def signals(self) -> tuple:
+        values = self._values
+        return (*self._head(values), self.vx_des, self.vy_des, *self._tail(values), self.yaw_rate_des)
+
     def regulator_inputs(self) -> dict:
-        out = {n: self.out[n] for n in REGULATOR_NAMES}
+        out = dict(zip(REGULATOR_NAMES, self.signals()))
         out["step_index"] = int(out["step_index"])
         return out
 
     def telemetry(self) -> dict:
-        o = self.out
-        return {"t": o["plant_time"], "pelvis_x": o["pelvis_x"], "pelvis_y": o["pelvis_y"], "pelvis_z": o["pelvis_z"],
-                "vx": o["pelvis_vx"], "vy": o["pelvis_vy"], "vx_step_avg": o["vx"], "vy_signal": o["vy"],
-                "pitch": o["pitch"], "roll": o["roll"], "stance": float(o["stance"]), "tau": o["gait_phase"],
-                "step_index": float(o["step_index"]), "left_foot_force": o["left_foot_force"],
-                "right_foot_force": o["right_foot_force"], "vx_des": self.vx_des, "vy_des": self.vy_des,
-                "yaw": o["yaw"], "yaw_rate": o["yaw_rate"], "yaw_rate_des": self.yaw_rate_des}
+        return dict(zip(TELEMETRY_NAMES, map(float, self.signals()[len(REGULATOR_NAMES):])))
 
     def fell(self) -> bool:
-        return bool(self.out["fell"])
+        return bool(self._values[self._fell_at])
 
     @property
     def fall_reason(self) -> str | None:

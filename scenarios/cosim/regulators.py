@@ -14,15 +14,20 @@ tests/support/native/test_native_master.py).
 from __future__ import annotations
 
 import abc
+import operator
 from pathlib import Path
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Sequence
 
+from plant.interface import REGULATOR_INPUT_NAMES
 from scenarios.errors import CosimError
 from scenarios.cosim.fmi_api import FMI_CASTS
 from scenarios.cosim.fmi_host import FmuInstance
 from scenarios.cosim.fmus import REGULATOR_FMUS
 
 REGULATORS = (*REGULATOR_FMUS, "inprocess")
+#: The regulator inputs the master gives, in the order of :meth:`RegulatorPath.step_values`:
+#: the plant's sensed inputs (``step_index`` an int), then the command.
+MASTER_INPUTS = (*REGULATOR_INPUT_NAMES, "vx_des", "vy_des")
 
 
 class RegulatorPath(abc.ABC):
@@ -43,6 +48,12 @@ class RegulatorPath(abc.ABC):
 
     @abc.abstractmethod
     def output_names(self) -> tuple[str, ...]: ...
+
+    def step_values(self, t: float, h: float, values: Sequence[Any]) -> list[float]:
+        """:meth:`step` with the inputs as numbers in :data:`MASTER_INPUTS`' order and the
+        outputs in :meth:`output_names`' order (the master's per-step call: no names)."""
+        out = self.step(t, h, dict(zip(MASTER_INPUTS, values, strict=True)))
+        return [out[n] for n in self.output_names()]
 
     @abc.abstractmethod
     def close(self) -> None: ...
@@ -165,6 +176,12 @@ class FmuRegulator(FmuInstance, RegulatorPath):
         self._args_in_real = self.fmi.array_args(comp, vrs(self._in_real), self._val_in_real)
         self._args_in_int = self.fmi.array_args(comp, vrs(self._in_int), self._val_in_int)
         self._args_out = self.fmi.array_args(comp, vrs(self._outputs), self._val_out)
+        given = {n: i for i, n in enumerate(MASTER_INPUTS)}
+        if all(n in given for n in (*self._in_real, *self._in_int)):
+            self._real_from = _picker([given[n] for n in self._in_real])
+            self._int_from = [given[n] for n in self._in_int]
+        else:
+            self._real_from, self._int_from = None, []
 
     def _bind_step_calls(self) -> None:
         """The four per-step FMI functions as ctypes prototypes on the loaded library,
@@ -181,11 +198,21 @@ class FmuRegulator(FmuInstance, RegulatorPath):
                                               ("Get", "Real", "outputs"))}
 
     def step(self, t: float, h: float, inputs: Mapping[str, Any]) -> dict[str, float]:
+        return dict(zip(self._outputs, self._exchange(t, h, [float(inputs[n]) for n in self._in_real],
+                                                      [int(inputs[n]) for n in self._in_int])))
+
+    def step_values(self, t: float, h: float, values: Sequence[Any]) -> list[float]:
+        if self._real_from is None:  # an FMU with inputs the master does not give: by name (KeyError)
+            return super().step_values(t, h, values)
+        return self._exchange(t, h, self._real_from(values), [int(values[i]) for i in self._int_from])
+
+    def _exchange(self, t: float, h: float, reals: Sequence[float], ints: Sequence[int]) -> list[float]:
+        """Set the Real and Integer inputs (in ``_in_real``/``_in_int``'s order; the Integers only
+        when one changed), step, return the Real outputs (in ``_outputs``' order)."""
         self._t = t
-        self._val_in_real[:] = [float(inputs[n]) for n in self._in_real]
+        self._val_in_real[:] = reals
         int_changed = self._first_step
-        for i, n in enumerate(self._in_int):
-            v = int(inputs[n])
+        for i, v in enumerate(ints):
             if v != self._val_in_int[i]:
                 self._val_in_int[i] = v
                 int_changed = True
@@ -207,7 +234,7 @@ class FmuRegulator(FmuInstance, RegulatorPath):
             raise
         except Exception as exc:  # a ctypes argument error: never a traceback without the FMU log
             raise self._fail("FMI call", f"{type(exc).__name__}: {exc}") from None
-        return dict(zip(self._outputs, self._val_out[:]))
+        return self._val_out[:]
 
     def _checked(self, fn, args: tuple, which: str) -> None:
         status = fn(*args)
@@ -216,6 +243,13 @@ class FmuRegulator(FmuInstance, RegulatorPath):
 
     def _drop_bound_calls(self) -> None:
         self._set_real = self._get_real = self._set_int = self._do_step = self._check_step = None
+
+
+def _picker(at: list[int]) -> Callable[[Sequence[Any]], Sequence[Any]]:
+    """The values at the positions ``at`` of a sequence, as a sequence (however many)."""
+    if len(at) >= 2:
+        return operator.itemgetter(*at)
+    return lambda values: [values[i] for i in at]
 
 
 class RlHzdRegulator(RegulatorPath):

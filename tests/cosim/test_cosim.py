@@ -128,6 +128,33 @@ def test_nan_input_raises_cosim_error_with_the_fmu_log(fmu_path):
     assert any("vx" in m or "nan" in m.lower() for m in reg.messages), reg.messages
 
 
+@pytest.mark.parametrize("kind", ["fmu", "native-fmi2", "native-fmi3", "inprocess"])
+def test_step_values_is_step_in_the_masters_order(fmu_path, native_fmus, kind):
+    """The master's per-step call (numbers in MASTER_INPUTS' order, outputs in output_names'
+    order) gives what ``step`` gives by name, step after step (the FMU keeps its state)."""
+    from scenarios.cosim.regulators import MASTER_INPUTS, InProcessRegulator
+
+    def make():
+        if kind == "inprocess":
+            return InProcessRegulator()
+        return FmuRegulator(fmu_path if kind == "fmu" else native_fmus[int(kind[-1])])
+
+    by_name, in_order = make(), make()
+    inputs = [{"vx": 0.1 * k, "vy": -0.01, "vx_des": 0.5, "vy_des": 0.1, "pitch": 0.02, "roll": -0.01,
+               "pitch_rate": 0.1, "roll_rate": 0.0, "step_index": k // 2} for k in range(6)]
+    try:
+        for reg in (by_name, in_order):
+            reg.start({"learning_rate": 0.0005}, 0.0, 1.0)
+        for k, u in enumerate(inputs):
+            want = by_name.step(0.005 * k, 0.005, u)
+            got = in_order.step_values(0.005 * k, 0.005, [u[n] for n in MASTER_INPUTS])
+            assert got == [want[n] for n in by_name.output_names()]
+        assert any(v != 0.0 for v in got)
+    finally:
+        by_name.close()
+        in_order.close()
+
+
 def test_out_of_range_parameter_raises_cosim_error(fmu_path):
     reg = FmuRegulator(fmu_path)
     try:

@@ -7,10 +7,12 @@ names."""
 from __future__ import annotations
 
 import inspect
+import math
 
 import numpy as np
+import pytest
 
-from plant.interface import Plant
+from plant.interface import REGULATOR_INPUT_NAMES, TELEMETRY_NAMES, Plant
 from support.plant_fmu_support import built_plant_fmu
 
 #: The members of the protocol (its own, not object's).
@@ -75,17 +77,57 @@ def _drive(plant) -> list[str]:
     before = list(plant.telemetry())
     plant.advance(10)
     assert list(plant.telemetry()) == before
+    _signals_are_inputs_then_telemetry(plant)
+    plant.set_offset_values([0.01, -0.02, 0.0, 0.0, 0.0, 0.0])
+    with pytest.raises(ValueError):
+        plant.set_offset_values([0.0] * 5)  # all six or none
+    plant.advance(10)
+    _signals_are_inputs_then_telemetry(plant)
     assert plant.fell() is False and plant.fall_reason is None
     plant.close()
     plant.close()
     return before
 
 
-def test_the_in_process_walker_is_a_plant():
+def _signals_are_inputs_then_telemetry(plant) -> None:
+    """``signals()`` is the regulator inputs' values then the telemetry's, the same numbers."""
+    signals = plant.signals()
+    assert signals == (*plant.regulator_inputs().values(), *plant.telemetry().values())
+    assert len(signals) == len(REGULATOR_INPUT_NAMES) + len(TELEMETRY_NAMES)
+    assert list(plant.regulator_inputs()) == list(REGULATOR_INPUT_NAMES)
+    assert list(plant.telemetry()) == list(TELEMETRY_NAMES)
+
+
+@pytest.mark.parametrize("controller", ["python", "native"])
+def test_the_walker_takes_six_finite_offsets_in_order(controller):
+    from plant.constants import OFFSET_NAMES
     from plant.model import load_model
     from plant.sim import CassieWalker
 
-    walker = CassieWalker(load_model("menagerie"))
+    walker = CassieWalker(load_model("menagerie"), controller=controller)
+
+    def held():
+        if controller == "python":
+            return [walker.controller.offsets[n] for n in OFFSET_NAMES]
+        return list(walker.controller._mem.offsets)  # the C controller's memory
+
+    values = [0.01 * (i + 1) for i in range(len(OFFSET_NAMES))]
+    walker.set_offset_values(values)
+    assert held() == values
+    with pytest.raises(ValueError, match="delta_swing_knee must be finite"):
+        walker.set_offset_values([0.0, math.nan, 0.0, 0.0, 0.0, 0.0])
+    assert held() == values  # none set
+    with pytest.raises(ValueError):
+        walker.set_offset_values(values[:5])
+    assert held() == values
+
+
+@pytest.mark.parametrize("controller", ["python", "native"])
+def test_the_in_process_walker_is_a_plant(controller):
+    from plant.model import load_model
+    from plant.sim import CassieWalker
+
+    walker = CassieWalker(load_model("menagerie"), controller=controller)
     assert protocol_problems(walker) == []
     _drive(walker)
 
