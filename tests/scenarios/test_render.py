@@ -93,3 +93,28 @@ def test_results_folder_accepts_the_arms_videos_only():
     assert output.is_result_file("velocity.png")
     for name in ("adaptive.avi", "Adaptive.mp4", ".mp4", "../x.gif", "a/b.mp4", "notes.txt"):
         assert not output.is_result_file(name), name
+
+
+#: Runs ``python -m scenarios`` with the given arguments (``--help``: it stops after parsing), then
+#: imports MuJoCo as the command would, and prints MUJOCO_GL and whether MuJoCo's GLFW renderer
+#: was imported.
+_GL_PROBE = ("import os, runpy, sys\n"
+             "try:\n    runpy.run_module('scenarios', run_name='__main__', alter_sys=True)\n"
+             "except SystemExit:\n    pass\n"
+             "import mujoco\n"
+             "print(os.environ.get('MUJOCO_GL'), 'glfw' in sys.modules)")
+
+
+def _gl_probe(*args: str) -> list[str]:
+    env = {k: v for k, v in os.environ.items() if k != "MUJOCO_GL"}
+    done = subprocess.run([sys.executable, "-c", _GL_PROBE, *args], env=env, capture_output=True, text=True,
+                          cwd=REPO_ROOT, timeout=120)
+    assert done.returncode == 0, done.stderr
+    return done.stdout.split()[-2:]
+
+
+def test_the_cli_skips_mujocos_opengl_search_unless_it_renders():
+    """``python -m scenarios`` sets MUJOCO_GL=disable (MuJoCo then skips its OpenGL search, about
+    0.3 s of every start) unless it renders: ``run --render`` chooses its own backend."""
+    assert _gl_probe("run", "--help") == ["disable", "False"]
+    assert _gl_probe("run", "--render", "--help") == ["None", "True"]
