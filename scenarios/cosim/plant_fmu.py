@@ -191,6 +191,7 @@ class FmuPlant(FmuInstance):
         at, held = self._offsets_at, self._in_vals
         if len(values) != len(at):
             raise ValueError(f"{len(values)} offsets given, {len(at)} due ({', '.join(OFFSET_NAMES)})")
+        values = [float(v) for v in values]  # all converted before any is held
         for i, v in zip(at, values):
             held[i] = v
 

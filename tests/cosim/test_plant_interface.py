@@ -81,6 +81,8 @@ def _drive(plant) -> list[str]:
     plant.set_offset_values([0.01, -0.02, 0.0, 0.0, 0.0, 0.0])
     with pytest.raises(ValueError):
         plant.set_offset_values([0.0] * 5)  # all six or none
+    with pytest.raises((TypeError, ValueError)):
+        plant.set_offset_values([0.0, "x", 0.0, 0.0, 0.0, 0.0])
     plant.advance(10)
     _signals_are_inputs_then_telemetry(plant)
     assert plant.fell() is False and plant.fall_reason is None
