@@ -80,6 +80,10 @@ def random_campaign_file(folder: Path, samples: int) -> Path:
     kept = [a for a in arms if re.search(r'^name = "([^"]+)"', a, re.M).group(1) in RANDOM_ARMS]
     head = re.sub(r"^compare = \[[^\]]*\]", "compare = " + json.dumps(list(RANDOM_ARMS)), head, flags=re.M)
     head = re.sub(r"^\[replicas\]\n(?:[^\[\n].*\n)*", "", head, flags=re.M)
+    # the replicas (each draw on several grounds: replicate_over's grid) left out: one run per sample
+    head = re.sub(r"^(replicate_over|redraw|confirm_runs) = .*\n", "", head, flags=re.M)
+    head = re.sub(r"^(\[factors\.floor_terrain_seed\].*\n(?:[^\[\n].*\n)*?)values = \[[^\]]*\]",
+                  r"\1values = [1]", head, flags=re.M)
     head = re.sub(r"^samples = \d+$", f"samples = {samples}", head, flags=re.M)
     head = head.replace('name = "robustness_random"', 'name = "bench_random"')
     path = folder / "bench_random.toml"
