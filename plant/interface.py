@@ -10,6 +10,7 @@ Units: SI; speeds in the heading frame (x forward, y left), angles in rad.
 """
 from __future__ import annotations
 
+import operator
 from typing import Any, Mapping, Protocol, Sequence
 
 #: The regulator inputs a plant senses, in the order of :meth:`Plant.regulator_inputs` and of
@@ -21,6 +22,31 @@ TELEMETRY_TAIL = ("vx_des", "vy_des", "yaw", "yaw_rate", "yaw_rate_des")
 #: The telemetry's keys, in the order of :meth:`Plant.telemetry` and of the tail of :meth:`Plant.signals`.
 TELEMETRY_NAMES = ("t", "pelvis_x", "pelvis_y", "pelvis_z", "vx", "vy", "vx_step_avg", "vy_signal", "pitch", "roll",
                    "stance", "tau", "step_index", "left_foot_force", "right_foot_force", *TELEMETRY_TAIL)
+
+
+def signal_pickers(sources: Sequence[str], regulator_from: Mapping[str, str] | None = None,
+                   telemetry_from: Mapping[str, str] | None = None) -> tuple[Any, Any]:
+    """How a plant picks :meth:`Plant.signals` out of its own values, named ``sources``: the
+    regulator inputs and the telemetry up to :data:`TELEMETRY_TAIL` (one getter), then the tail's
+    ``yaw`` and ``yaw_rate`` (the other); the plant puts its command around them. ``regulator_from``
+    and ``telemetry_from``: the source of each name whose source has another name."""
+    at = {n: i for i, n in enumerate(sources)}
+    regulator_from, telemetry_from = regulator_from or {}, telemetry_from or {}
+    reg = [at[regulator_from.get(n, n)] for n in REGULATOR_INPUT_NAMES]
+    tel = [at[telemetry_from.get(n, n)] for n in TELEMETRY_NAMES[:-len(TELEMETRY_TAIL)]]
+    return operator.itemgetter(*reg, *tel), operator.itemgetter(at["yaw"], at["yaw_rate"])
+
+
+def inputs_of(signals: Sequence[Any]) -> dict:
+    """:meth:`Plant.regulator_inputs` from :meth:`Plant.signals` (``step_index`` an int)."""
+    inputs = dict(zip(REGULATOR_INPUT_NAMES, signals))
+    inputs["step_index"] = int(inputs["step_index"])
+    return inputs
+
+
+def telemetry_of(signals: Sequence[Any]) -> dict:
+    """:meth:`Plant.telemetry` from :meth:`Plant.signals` (every value a float)."""
+    return dict(zip(TELEMETRY_NAMES, map(float, signals[len(REGULATOR_INPUT_NAMES):])))
 
 
 class Plant(Protocol):
@@ -69,4 +95,5 @@ class Plant(Protocol):
         """Free what the plant holds (an FMU instance); calling it again does nothing."""
 
 
-__all__ = ["Plant", "REGULATOR_INPUT_NAMES", "TELEMETRY_NAMES", "TELEMETRY_TAIL"]
+__all__ = ["Plant", "REGULATOR_INPUT_NAMES", "TELEMETRY_NAMES", "TELEMETRY_TAIL", "inputs_of", "signal_pickers",
+           "telemetry_of"]

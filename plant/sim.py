@@ -26,7 +26,6 @@ from __future__ import annotations
 import ctypes
 import logging
 import math
-import operator
 from pathlib import Path
 from typing import Mapping, Sequence
 
@@ -37,7 +36,7 @@ from plant.constants import CONTROLLERS, OFFSET_NAMES
 from plant.controller_params import ControllerParams
 from plant.controller import NominalController
 from plant.gaits import GaitLibrary
-from plant.interface import REGULATOR_INPUT_NAMES, TELEMETRY_NAMES, TELEMETRY_TAIL
+from plant.interface import inputs_of, signal_pickers, telemetry_of
 from plant.native.native_ctrl import SENSE_NAMES
 
 log = logging.getLogger(__name__)
@@ -47,21 +46,9 @@ log = logging.getLogger(__name__)
 NATIVE_CACHE = Path(__file__).resolve().parents[1] / "build" / "native_ctrl"
 
 
-#: The sensed signal (``SENSE_NAMES``) behind each name of :data:`REGULATOR_INPUT_NAMES` and
-#: :data:`TELEMETRY_NAMES` whose signal has another name (any other: the same name).
-SENSED_AS = {"regulator": {"vx": "vx_step_avg", "vy": "vy_filt"}, "telemetry": {"vy_signal": "vy_filt"}}
-
-
-def _pick_sensed() -> tuple[operator.itemgetter, operator.itemgetter]:
-    """What :meth:`CassieWalker.signals` takes from the sensed signals: the regulator inputs and
-    the telemetry before ``TELEMETRY_TAIL``, then its ``yaw`` and ``yaw_rate``."""
-    at = {n: i for i, n in enumerate(SENSE_NAMES)}
-    reg = [at[SENSED_AS["regulator"].get(n, n)] for n in REGULATOR_INPUT_NAMES]
-    tel = [at[SENSED_AS["telemetry"].get(n, n)] for n in TELEMETRY_NAMES[:-len(TELEMETRY_TAIL)]]
-    return operator.itemgetter(*reg, *tel), operator.itemgetter(at["yaw"], at["yaw_rate"])
-
-
-_HEAD, _TAIL = _pick_sensed()
+#: :meth:`CassieWalker.signals` out of the sensed signals (``SENSE_NAMES``): the regulator's ``vx`` and
+#: ``vy`` are the step average and the filtered lateral speed, the telemetry's ``vy_signal`` the latter.
+_HEAD, _TAIL = signal_pickers(SENSE_NAMES, {"vx": "vx_step_avg", "vy": "vy_filt"}, {"vy_signal": "vy_filt"})
 
 
 class CassieWalker:
@@ -163,9 +150,7 @@ class CassieWalker:
 
     def regulator_inputs(self) -> dict:
         """Signals for the regulator (see ``plant/controller.py`` for definitions)."""
-        inputs = dict(zip(REGULATOR_INPUT_NAMES, self.signals()))
-        inputs["step_index"] = int(inputs["step_index"])
-        return inputs
+        return inputs_of(self.signals())
 
     def _signals_python(self) -> tuple:
         """What the C controller's ``sense`` gives (``plant.native.native_ctrl.SENSE_NAMES``), from
@@ -326,7 +311,7 @@ class CassieWalker:
 
     def telemetry(self) -> dict:
         """Named floats for logging (SI units; stance 0 = left, 1 = right): ``TELEMETRY_NAMES``."""
-        return dict(zip(TELEMETRY_NAMES, self.signals()[len(REGULATOR_INPUT_NAMES):]))
+        return telemetry_of(self.signals())
 
 
 __all__ = ["CassieWalker"]

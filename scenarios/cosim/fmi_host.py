@@ -87,6 +87,16 @@ class FmuInstance:
             raise self._status_error(what, status)
         return status
 
+    def _bound(self, what: str, fn, args: tuple) -> None:
+        """A per-step FMI function bound straight to the library (no fmpy wrapper), its status
+        checked; a ctypes argument error is a CosimError with the FMU log too."""
+        try:
+            status = fn(*args)
+        except Exception as exc:
+            raise self._fail(what, f"{type(exc).__name__}: {exc}") from None
+        if status:
+            raise self._status_error(what, status)
+
     def _status_error(self, what: str, status: int) -> CosimError:
         return self._fail(what, f"status {status_label(status)}")
 

@@ -18,13 +18,12 @@ in its ``terrain_field_file`` parameter (:meth:`FmuPlant._with_terrain_field`).
 """
 from __future__ import annotations
 
-import operator
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 from scenarios.errors import CosimError
 from plant.constants import OFFSET_NAMES as OFFSET_NAMES
-from plant.interface import REGULATOR_INPUT_NAMES, TELEMETRY_NAMES, TELEMETRY_TAIL
+from plant.interface import inputs_of, signal_pickers, telemetry_of
 from fmu_src.plant_fmu.fmu_core import INPUT_NAMES, MODEL_FILES, PLANT_STEP_S, values_from_perturbation
 from scenarios.cosim.fmi_host import FmuInstance
 
@@ -32,12 +31,10 @@ from scenarios.cosim.fmi_host import FmuInstance
 #: (docs/native.md), and the name the master gives the file it writes.
 FIELD_PARAMETER = "terrain_field_file"
 FIELD_FILE_NAME = "terrain_field.cptf"
-REGULATOR_NAMES = REGULATOR_INPUT_NAMES  # the FMU's outputs of the same names
 #: The FMU output behind each telemetry value (by name in ``TELEMETRY_NAMES``) that is an output
 #: of another name; ``vx_des``, ``vy_des`` and ``yaw_rate_des`` are the command the master set.
 TELEMETRY_OUTPUTS = {"t": "plant_time", "vx": "pelvis_vx", "vy": "pelvis_vy", "vx_step_avg": "vx",
                      "vy_signal": "vy", "tau": "gait_phase"}
-COMMAND_NAMES = ("vx_des", "vy_des", "yaw_rate_des")
 
 
 def fmu_parameters(scenario, torso_mass_kg: float | None = None) -> dict:
@@ -139,20 +136,8 @@ class FmuPlant(FmuInstance):
                                fmi.array_args(comp, vrs(kind_names), values), values))
             names += kind_names
         self._out_names = tuple(names)
-        at = {n: i for i, n in enumerate(names)}
-        tel = [at[TELEMETRY_OUTPUTS.get(n, n)] for n in TELEMETRY_NAMES[:-len(TELEMETRY_TAIL)]]
-        self._head = operator.itemgetter(*(at[n] for n in REGULATOR_NAMES), *tel)
-        self._tail = operator.itemgetter(at["yaw"], at["yaw_rate"])
-        self._fell_at = at["fell"]
-
-    def _bound(self, what: str, fn, args: tuple) -> None:
-        """A bound call, its status checked (a ctypes argument error is an error too)."""
-        try:
-            status = fn(*args)
-        except Exception as exc:
-            raise self._fail(what, f"{type(exc).__name__}: {exc}") from None
-        if status:
-            raise self._status_error(what, status)
+        self._head, self._tail = signal_pickers(names, telemetry_from=TELEMETRY_OUTPUTS)
+        self._fell_at = names.index("fell")
 
     def _read_outputs(self) -> None:
         values: list = []
@@ -176,16 +161,13 @@ class FmuPlant(FmuInstance):
     def set_command(self, vx_des: float, vy_des: float, yaw_rate_des: float = 0.0) -> None:
         self.vx_des, self.vy_des = float(vx_des), float(vy_des)
         self.yaw_rate_des = float(yaw_rate_des)
-        for name in COMMAND_NAMES:
-            self._in_vals[self._in_at[name]] = getattr(self, name)
+        self._hold({"vx_des": self.vx_des, "vy_des": self.vy_des, "yaw_rate_des": self.yaw_rate_des})
 
     def set_offsets(self, offsets: Mapping[str, float]) -> None:
         unknown = [k for k in offsets if k not in OFFSET_NAMES]
         if unknown:
             raise KeyError(f"unknown offset key(s) {unknown}; allowed: {', '.join(OFFSET_NAMES)}")
-        values = {k: float(v) for k, v in offsets.items()}
-        for k, v in values.items():
-            self._in_vals[self._in_at[k]] = v
+        self._hold({k: float(v) for k, v in offsets.items()})
 
     def set_offset_values(self, values: Sequence[float]) -> None:
         at, held = self._offsets_at, self._in_vals
@@ -197,8 +179,12 @@ class FmuPlant(FmuInstance):
 
     def set_pelvis_force(self, force_n) -> None:
         fx, fy, fz = (float(f) for f in force_n)
-        for name, f in (("push_fx", fx), ("push_fy", fy), ("push_fz", fz)):
-            self._in_vals[self._in_at[name]] = f
+        self._hold({"push_fx": fx, "push_fy": fy, "push_fz": fz})
+
+    def _hold(self, values: Mapping[str, float]) -> None:
+        """Inputs by name, held over the next doStep."""
+        for name, value in values.items():
+            self._in_vals[self._in_at[name]] = value
 
     def advance(self, n_steps: int) -> None:
         h = int(n_steps) * self.SIM_DT_S
@@ -213,12 +199,10 @@ class FmuPlant(FmuInstance):
         return (*self._head(values), self.vx_des, self.vy_des, *self._tail(values), self.yaw_rate_des)
 
     def regulator_inputs(self) -> dict:
-        out = dict(zip(REGULATOR_NAMES, self.signals()))
-        out["step_index"] = int(out["step_index"])
-        return out
+        return inputs_of(self.signals())
 
     def telemetry(self) -> dict:
-        return dict(zip(TELEMETRY_NAMES, map(float, self.signals()[len(REGULATOR_NAMES):])))
+        return telemetry_of(self.signals())
 
     def fell(self) -> bool:
         return bool(self._values[self._fell_at])

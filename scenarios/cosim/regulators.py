@@ -185,8 +185,8 @@ class FmuRegulator(FmuInstance, RegulatorPath):
 
     def _bind_step_calls(self) -> None:
         """The four per-step FMI functions as ctypes prototypes on the loaded library,
-        called directly by :meth:`step` on the preallocated arguments, which checks their
-        statuses (fmpy's Python wrapper around each call cost about 1.5 us, 5 us a step).
+        called directly by :meth:`step` on the preallocated arguments through ``FmuInstance._bound``,
+        which checks their statuses (fmpy's Python wrapper around each call cost about 1.5 us, 5 us a step).
         :meth:`close` drops them before the library is unloaded."""
         dll, fmi = self._fmu.dll, self.fmi
         self._set_real = fmi.array_function(dll, "Set", "Real")
@@ -216,30 +216,18 @@ class FmuRegulator(FmuInstance, RegulatorPath):
             if v != self._val_in_int[i]:
                 self._val_in_int[i] = v
                 int_changed = True
-        try:
-            if self._in_real:
-                self._checked(self._set_real, self._args_in_real, "SetReal")
-            if self._in_int and int_changed:  # step_index changes once a walking step: FMU inputs keep their value
-                self._checked(self._set_int, self._args_in_int, "SetInteger")
-            self._first_step = False
-            status = self._do_step(self._fmu.component, t, h, *self._do_step_tail)
-            if status:
-                raise self._status_error(f"{self.fmi.prefix}DoStep", status)
-            if self._check_step is not None:
-                problem = self._check_step(t, h)
-                if problem:
-                    raise self._fail(f"{self.fmi.prefix}DoStep", problem)
-            self._checked(self._get_real, self._args_out, "GetReal")
-        except CosimError:
-            raise
-        except Exception as exc:  # a ctypes argument error: never a traceback without the FMU log
-            raise self._fail("FMI call", f"{type(exc).__name__}: {exc}") from None
+        if self._in_real:
+            self._bound(self._names["SetReal"], self._set_real, self._args_in_real)
+        if self._in_int and int_changed:  # step_index changes once a walking step: FMU inputs keep their value
+            self._bound(self._names["SetInteger"], self._set_int, self._args_in_int)
+        self._first_step = False
+        self._bound(f"{self.fmi.prefix}DoStep", self._do_step, (self._fmu.component, t, h, *self._do_step_tail))
+        if self._check_step is not None:
+            problem = self._check_step(t, h)
+            if problem:
+                raise self._fail(f"{self.fmi.prefix}DoStep", problem)
+        self._bound(self._names["GetReal"], self._get_real, self._args_out)
         return self._val_out[:]
-
-    def _checked(self, fn, args: tuple, which: str) -> None:
-        status = fn(*args)
-        if status:
-            raise self._status_error(self._names[which], status)
 
     def _drop_bound_calls(self) -> None:
         self._set_real = self._get_real = self._set_int = self._do_step = self._check_step = None
