@@ -13,6 +13,7 @@ Exit status: 0 every row complete (the stage's too); 1 some failed (they are in 
 """
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import functools
 import logging
@@ -58,9 +59,10 @@ def add_parser(sub) -> None:
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--task-timeout", type=float, default=None, help="seconds per sample (overrides the file)")
     sp.add_argument("--retries", type=int, default=None, help="retries of a task whose worker/run process died")
-    sp.add_argument("--fork-runs", action="store_true",
-                    help="fork each sample's run from a warm process per worker (imports and the base model's "
-                         "check done once per worker, not once per sample); default: a new interpreter per run")
+    sp.add_argument("--fork-runs", action=argparse.BooleanOptionalAction, default=True,
+                    help="fork each sample's run, a fresh process all the same, from a warm process per worker "
+                         "(imports and the base model's check once per worker, not once per sample; the "
+                         "default on Linux); --no-fork-runs: a new interpreter per run")
     sp.add_argument("--seed", type=int, default=None,
                     help="draw the samples from this seed instead of the file's: the same design on other robots "
                          "(recorded in campaign.json and campaign.md)")

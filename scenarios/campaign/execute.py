@@ -79,7 +79,7 @@ class RunOptions:
     timeout_s: float | None = None  # per task; default from the campaign
     retries: int | None = None  # default from the campaign
     progress: bool | None = None  # tqdm's disable=None: on a terminal only
-    fork_runs: bool = False  # each run forked from the worker's warm server (scenarios.campaign.forkrun)
+    fork_runs: bool = True  # each run forked from the worker's warm server (scenarios.campaign.forkrun), where it can fork
 
 
 @dataclass

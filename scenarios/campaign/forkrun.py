@@ -37,6 +37,10 @@ try:  # Linux: the child gets SIGKILL when the thread that started it (the task)
 except (OSError, AttributeError):  # pragma: no cover - not Linux
     _PRCTL = None
 _PR_SET_PDEATHSIG = 1
+#: Whether runs can be forked here: Linux (a forked child must die with its server, and fork
+#: without exec is safe with these libraries only where the tests run it). Elsewhere a run that
+#: asks for a fork is started as a new interpreter (:func:`scenarios.campaign.task.run_sample`).
+AVAILABLE = sys.platform.startswith("linux") and hasattr(os, "fork") and _PRCTL is not None
 
 #: What the server imports before its first fork (what a run imports, matplotlib aside).
 PRELOAD = ("numpy", "mujoco", "fmpy", "fmpy.fmi2", "fmpy.fmi3", "tqdm", "plant.model", "plant.sim",

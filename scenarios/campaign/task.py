@@ -3,9 +3,10 @@
 The sample's scenario file is run by a fresh ``python -m scenarios run --no-plots``
 process (a crash, a leak or a pythonfmu FMU that cannot share a process touches
 nothing else; the campaign's report draws the plots); the task reads the metrics back
-from that run's ``summary.json``. With ``fork`` (``campaign --fork-runs``) that process
-is forked from the worker's warm server (:mod:`scenarios.campaign.forkrun`: no
-interpreter start-up, imports and base-model check per run) instead of started anew.
+from that run's ``summary.json``. With ``fork`` (the campaign's default on Linux,
+``--no-fork-runs`` turns it off) that process is forked from the worker's warm server
+(:mod:`scenarios.campaign.forkrun`: no interpreter start-up, imports and base-model check
+per run) instead of started anew; on a worker that cannot fork it is started anew.
 One task per sample, not per arm: the arms share the process start, the model
 compilation checks and the run's CSV writing, and the sample's folder holds one normal
 run output.
@@ -61,7 +62,7 @@ class Task:
     timeout_s: float
     tmp_root: str  # the campaign's scratch folder (TMPDIR of the run process)
     env: tuple[tuple[str, str], ...] = ()  # the client's settings the run must share (MENAGERIE_ROOT)
-    fork: bool = False  # run forked from the worker's warm server (--fork-runs), not as a new interpreter
+    fork: bool = False  # run forked from the worker's warm server (where it can fork), not as a new interpreter
     warm_models: tuple[str, ...] = ()  # the models that server checks (compiles) once, ahead of the runs
     controller: str = "native"  # the walking controller (run --controller)
 
@@ -107,7 +108,7 @@ def run_sample(task: Task) -> dict[str, Any]:
     tmp = tempfile.mkdtemp(prefix=f"{task.sample}-", dir=task.tmp_root)
     t0 = time.perf_counter()
     try:
-        code, err = (_run_forked if task.fork else _run_process)(task, out, tmp)
+        code, err = (_run_forked if task.fork and forkrun.AVAILABLE else _run_process)(task, out, tmp)
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     wall = time.perf_counter() - t0
@@ -149,7 +150,10 @@ def _server_env(task: Task) -> dict[str, str]:
 
 def warm_fork_server(task: Task) -> None:
     """Start this worker's fork server for runs like ``task``'s ahead of them (the campaign
-    calls it on every worker: ``client.run``); a failure leaves it to the first run."""
+    calls it on every worker: ``client.run``); a failure leaves it to the first run. A worker
+    that cannot fork starts none (its runs are new interpreters)."""
+    if not forkrun.AVAILABLE:
+        return
     try:
         forkrun.warm(_server_env(task), task.warm_models)
     except Exception as exc:

@@ -206,8 +206,10 @@ def test_killed_worker_mid_campaign(retries, tmp_path, built_fmu):
     out = tmp_path / "out"
     # 4 draws x 2 speeds: each worker starts three samples after its first, so a loaded machine
     # (the first row lands late) still leaves a run younger than 1 s to catch
+    # runs as new interpreters, children of the workers (a forked run's parent is its server:
+    # test_campaign_fork.py kills servers and forked runs)
     args = [campaign_file(tmp_path, DRAWS), "--out", out, "--workers", 2, "--retries", retries, "--fmu", built_fmu,
-            "--no-plots"]
+            "--no-plots", "--no-fork-runs"]
     cli = subprocess.Popen(CLI + [str(a) for a in args], env=campaign_env(tmp_path), cwd=tmp_path,
                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
@@ -233,10 +235,12 @@ def test_killed_worker_mid_campaign(retries, tmp_path, built_fmu):
 
 
 def test_interrupt_then_resume_runs_every_sample_once(tmp_path, built_fmu):
-    """Ctrl-C as a terminal sends it: SIGINT to the whole process group (CLI and workers)."""
+    """Ctrl-C as a terminal sends it: SIGINT to the whole process group (CLI and workers); the
+    runs as new interpreters (test_campaign_fork.py interrupts forked ones), the resume forked."""
     out = tmp_path / "out"
     cfile = campaign_file(tmp_path, 3)
-    cli = subprocess.Popen(CLI + [str(cfile), "--out", str(out), "--workers", "1", "--fmu", str(built_fmu), "--no-plots"],
+    cli = subprocess.Popen(CLI + [str(cfile), "--out", str(out), "--workers", "1", "--fmu", str(built_fmu), "--no-plots",
+                                  "--no-fork-runs"],
                            env=campaign_env(tmp_path), cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                            start_new_session=True)
     try:

@@ -1,12 +1,14 @@
-"""``campaign --fork-runs``: each sample's run forked from a warm server per worker
-(:mod:`scenarios.campaign.forkrun`), real processes and a real Dask cluster throughout.
+"""Forked campaign runs (the default; ``--no-fork-runs`` turns them off): each sample's run
+forked from a warm server per worker (:mod:`scenarios.campaign.forkrun`), real processes and a
+real Dask cluster throughout.
 
 - a task forked from a server: the same run folder as a task run as a new interpreter,
   the server reused by the next task, its stderr kept in a failure's reason;
 - a forked run killed by a signal: ``RunProcessDied`` (Dask retries the task); the
   server killed during a run: the same; a timeout kills the run, the server goes on;
-- the smoke campaign with ``--fork-runs`` on 2 workers: the same CSV apart from the
-  timings as without.
+- the smoke campaign with ``--no-fork-runs`` (new interpreters) on 2 workers: the same CSV
+  apart from the timings as the session's, forked by default; where a worker cannot fork, a
+  task's run is a new interpreter.
 """
 from __future__ import annotations
 
@@ -120,20 +122,38 @@ def test_a_forked_run_past_its_timeout_is_killed_and_the_server_goes_on(tmp_path
     assert [r["status"] for r in again["rows"]] == ["complete", "complete"]
 
 
-def test_smoke_campaign_with_fork_runs_gives_the_same_rows(tmp_path, tmp_path_factory, built_fmu):
-    """The session's plain smoke campaign (support.smoke_campaign) again with ``--fork-runs``."""
-    _, plain_out, plain = smoke_run(tmp_path_factory, built_fmu)
-    assert plain.returncode == 0, plain.stderr
+def test_smoke_campaign_with_new_interpreters_gives_the_same_rows(tmp_path, tmp_path_factory, built_fmu):
+    """The session's smoke campaign (support.smoke_campaign: forked runs, the default) again with
+    ``--no-fork-runs``: each run a new interpreter."""
+    _, forked_out, forked = smoke_run(tmp_path_factory, built_fmu)
+    assert forked.returncode == 0, forked.stderr
     got = {}
-    out = tmp_path / "fork"
-    r = run_campaign([SMOKE, "--out", out, "--workers", 2, "--no-plots", "--fork-runs"], tmp_path, built_fmu)
+    out = tmp_path / "new"
+    r = run_campaign([SMOKE, "--out", out, "--workers", 2, "--no-plots", "--no-fork-runs"], tmp_path, built_fmu)
     assert r.returncode == 0, r.stderr
     assert not (out / ".tmp").exists() and not (out / ".dask").exists() and not list((tmp_path / "systemp").iterdir())
-    for mode, folder in (("fork", out), ("plain", plain_out)):
+    for mode, folder in (("new", out), ("fork", forked_out)):
         with open(folder / "campaign.csv", newline="") as fh:
             got[mode] = [{k: v for k, v in row.items() if k not in TIMING_COLUMNS} for row in csv.DictReader(fh)]
-    assert len(got["fork"]) == 8 and all(row["status"] == "complete" for row in got["fork"])
-    assert got["fork"] == got["plain"]
+    assert len(got["new"]) == 8 and all(row["status"] == "complete" for row in got["new"])
+    assert got["new"] == got["fork"]
+
+
+def test_the_cli_forks_runs_by_default_and_no_fork_runs_turns_it_off():
+    from scenarios.cli import build_parser
+
+    parse = build_parser().parse_args
+    assert parse(["campaign", "smoke", "--out", "x"]).fork_runs is forkrun.AVAILABLE is True  # Linux
+    assert parse(["campaign", "smoke", "--out", "x", "--no-fork-runs"]).fork_runs is False
+
+
+def test_a_task_that_asks_for_a_fork_where_none_is_possible_runs_a_new_interpreter(tmp_path, monkeypatch, servers):
+    """A worker that cannot fork (not Linux) runs the task's run as a new interpreter: the same run."""
+    monkeypatch.setattr(forkrun, "AVAILABLE", False)
+    task_mod.warm_fork_server(sample_task(tmp_path, "s0000"))
+    result = task_mod.run_sample(sample_task(tmp_path, "s0000"))
+    assert [r["status"] for r in result["rows"]] == ["complete", "complete"], result
+    assert servers == []  # no server was started, ahead of the run or for it
 
 
 def test_interrupt_with_fork_runs_kills_the_runs_then_resume_finishes(tmp_path, built_fmu):

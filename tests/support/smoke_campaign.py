@@ -1,7 +1,7 @@
 """The smoke campaign (``scenarios/campaigns/smoke.toml``) on a local Dask cluster of 2 workers,
-run once per test session through the real CLI (``made_once``): the plain run that
-tests/campaign/test_campaign_dask.py checks in full and that the other campaign modes
-(``--fork-runs``, one worker, an external scheduler) must reproduce row for row. Read only;
+run once per test session through the real CLI (``made_once``) with its defaults (forked
+runs): the run that tests/campaign/test_campaign_dask.py checks in full and that the other
+campaign modes (``--no-fork-runs``, one worker, an external scheduler) must reproduce row for row. Read only;
 a test that writes beside it works in its own folder.
 """
 from __future__ import annotations
@@ -52,7 +52,7 @@ def campaign_in_process(capsys, *args) -> tuple[int, str, str]:
 
 def smoke_run(tmp_path_factory, fmu: Path) -> tuple[Path, Path, subprocess.CompletedProcess]:
     """(the folder it ran from, its output folder, the finished CLI process) of the session's
-    plain smoke campaign (with its plots)."""
+    smoke campaign (its defaults, with its plots)."""
     def make(folder: Path):
         out = folder / "out"
         return folder, out, run_campaign([SMOKE, "--out", out, "--workers", 2], folder, fmu)
