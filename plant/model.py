@@ -186,6 +186,24 @@ def load_perturbed(source: str | os.PathLike = "menagerie",
     return _perturbed(model, perturbation, src)
 
 
+def perturbed_with_terrain(model: mujoco.MjModel, perturbation: Perturbation,
+                           source: str | os.PathLike = "menagerie") -> tuple[mujoco.MjModel, Applied | None]:
+    """``load_perturbed(source, perturbation)`` for a perturbation with terrain, given ``model``,
+    what ``load_perturbed(source)`` compiled (its names and keyframe checked): ``source`` parsed
+    again and compiled once, with the terrain (``load_perturbed`` compiles it a first time to
+    check it), the same bytes. ValueError for a perturbation without terrain (call
+    :func:`perturbed_copy`)."""
+    _validated(perturbation)
+    if perturbation is None or perturbation.terrain is None:
+        raise ValueError("a perturbation without terrain needs no compile: use perturbed_copy")
+    src = os.fspath(source)
+    spec = _source_spec(src)
+    if not any(key.name == HOME_KEY for key in spec.keys):
+        _add_home_key(spec, model)  # the keyframe depends on qpos0 and the joints: alike in both
+    add_terrain(spec, perturbation.terrain)
+    return _perturbed(_compile(spec, src, " after edits"), perturbation, src)
+
+
 def perturbed_copy(model: mujoco.MjModel, perturbation: Perturbation | None,
                    source: str | os.PathLike = "") -> tuple[mujoco.MjModel, Applied | None]:
     """``load_perturbed(source, perturbation)`` from ``model``, what ``load_perturbed(source)``

@@ -165,15 +165,17 @@ def load_plant_model(scenario: "Scenario", *, shared: bool = False) -> tuple["mu
 
 
 def _compiled(model: str, stamp: tuple | None, pert: "Perturbation | None"):
-    """``plant.model.load_perturbed(model, pert)``: without terrain, a perturbed copy of the
-    process's base model (:func:`_base_model`; the same bytes, one compile less)."""
-    from plant.model import load_perturbed, perturbed_copy
+    """``plant.model.load_perturbed(model, pert)`` from the process's base model
+    (:func:`_base_model`, checked): without terrain a perturbed copy of it, with terrain the
+    source compiled once with the terrain; the same bytes, one compile less either way."""
+    from plant.model import load_perturbed, perturbed_copy, perturbed_with_terrain
 
+    base = _base_model(model, stamp)
+    if isinstance(base, ModelError):
+        return load_perturbed(model, pert)  # raises the model's error
     if pert is None or pert.terrain is None:
-        base = _base_model(model, stamp)
-        if not isinstance(base, ModelError):
-            return perturbed_copy(base, pert, model)
-    return load_perturbed(model, pert)  # raises the model's error
+        return perturbed_copy(base, pert, model)
+    return perturbed_with_terrain(base, pert, model)
 
 
 @functools.lru_cache(maxsize=8)

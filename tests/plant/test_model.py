@@ -190,6 +190,28 @@ def test_a_perturbed_copy_is_the_compiled_perturbed_model_byte_for_byte(nominal,
         plant_model.perturbed_copy(base, Perturbation(joint_damping_scale=-1.0), src)
 
 
+@pytest.mark.parametrize("src", SOURCES)
+def test_a_terrain_model_from_the_checked_base_is_the_compiled_one_byte_for_byte(nominal, src):
+    """plant.model.perturbed_with_terrain (one compile, from the checked base model) gives
+    load_perturbed's model (two compiles), every byte, for both terrains the random campaign
+    draws and one with the other perturbations; the base model is left alone."""
+    base = nominal[src]
+    before = _model_bytes(base)
+    cases = [Perturbation(terrain=TerrainSpec(max_height_m=0.2, max_slope_deg=15.0, seed=3)),
+             Perturbation(terrain=TerrainSpec(max_height_m=0.34, max_slope_deg=20.0, seed=41)),
+             Perturbation(torso_mass_kg=21.0, torso_com_offset_m=(0.03, -0.05, 0.0), joint_damping_scale=3.0,
+                          floor_friction=0.7, link_mass_scale=(("left-shin", 1.2),),
+                          terrain=TerrainSpec(max_height_m=0.1, max_slope_deg=10.0, seed=7))]
+    for pert in cases:
+        once, applied = plant_model.perturbed_with_terrain(base, pert, src)
+        twice, applied_twice = plant_model.load_perturbed(src, pert)
+        assert _model_bytes(once) == _model_bytes(twice), pert
+        assert applied == applied_twice
+    assert _model_bytes(base) == before
+    with pytest.raises(ValueError, match="use perturbed_copy"):
+        plant_model.perturbed_with_terrain(base, Perturbation(torso_mass_kg=15.0), src)
+
+
 def test_validation_lists_every_problem():
     with pytest.raises(PerturbationError) as e:
         Perturbation(torso_mass_kg=-1, joint_damping_scale=20).validate()
