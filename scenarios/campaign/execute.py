@@ -122,9 +122,35 @@ def _verbose() -> bool:
     return log.isEnabledFor(logging.INFO)
 
 
+class SyncCancelBugFilter(logging.Filter):
+    """Drops one known Dask error, tornado's log of it: a Ctrl-C that lands while the client waits
+    in ``distributed.utils.sync`` before sync's coroutine has started makes sync's ``cancel``
+    callback raise NameError (its ``future`` is not assigned yet: there was nothing to cancel).
+    The campaign reports the interrupt in one line itself; every other record passes."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        exc = record.exc_info[1] if record.exc_info else None
+        if not isinstance(exc, NameError) or exc.__traceback__ is None:
+            return True
+        tb = exc.__traceback__
+        while tb.tb_next is not None:
+            tb = tb.tb_next
+        code = tb.tb_frame.f_code
+        return not (code.co_name == "cancel" and Path(code.co_filename).parts[-2:] == ("distributed", "utils.py"))
+
+
+def _filter_sync_cancel_bug() -> None:
+    """Install :class:`SyncCancelBugFilter` on tornado's callback logger, once per process."""
+    tlog = logging.getLogger("tornado.application")
+    if not any(isinstance(f, SyncCancelBugFilter) for f in tlog.filters):
+        tlog.addFilter(SyncCancelBugFilter())
+
+
 @contextlib.contextmanager
 def _quiet_dask() -> Iterator[None]:
-    """Dask logs every connection at INFO: keep its errors only, unless we are verbose (-v)."""
+    """Dask logs every connection at INFO: keep its errors only, unless we are verbose (-v); and
+    never the traceback of a known Dask error on Ctrl-C (:class:`SyncCancelBugFilter`)."""
+    _filter_sync_cancel_bug()
     dlog = logging.getLogger("distributed")
     old = dlog.level
     if not _verbose():
