@@ -60,11 +60,18 @@ def _interrupted_sync(monkeypatch, then=None) -> None:
 
     runner = dask_utils.LoopRunner(asynchronous=False)
     runner.start()
+    # the loop thread waits at this gate until sync has been interrupted: sync's coroutine cannot
+    # finish first (then sync would never wait, and nothing would interrupt it)
+    gate = threading.Event()
+    runner.loop.add_callback(gate.wait, 30)
     try:
-        with monkeypatch.context() as m:
-            m.setattr(dask_utils, "threading", _Threading())
-            with pytest.raises(KeyboardInterrupt):
-                dask_utils.sync(runner.loop, work)
+        try:
+            with monkeypatch.context() as m:
+                m.setattr(dask_utils, "threading", _Threading())
+                with pytest.raises(KeyboardInterrupt):
+                    dask_utils.sync(runner.loop, work)
+        finally:
+            gate.set()
         if then is not None:
             runner.loop.add_callback(then)
         done = threading.Event()
