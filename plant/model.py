@@ -170,20 +170,29 @@ def load_perturbed(source: str | os.PathLike = "menagerie",
     spec = _source_spec(src)
     model = _compile(spec, src)
     _check_names(model, repr(src))
+    edited = _edited(spec, model, perturbation, src)
+    return _perturbed(model if edited is None else edited, perturbation, src)
 
-    edit_spec = False
-    if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_KEY, HOME_KEY) < 0:
-        _add_home_key(spec, model)
-        edit_spec = True
+
+def _edited(spec: mujoco.MjSpec, model: mujoco.MjModel, perturbation: Perturbation | None,
+            src: str) -> mujoco.MjModel | None:
+    """``spec`` (the source as parsed) compiled with what :func:`load_perturbed` adds to it: the
+    ``home`` keyframe when the source has none (filled from ``model``, the source compiled) and
+    the perturbation's terrain; None when there is nothing to add."""
+    edits = False
+    if not any(key.name == HOME_KEY for key in spec.keys):
+        _add_home_key(spec, model)  # the keyframe depends on qpos0 and the joints only
+        edits = True
     if perturbation is not None and perturbation.terrain is not None:
         add_terrain(spec, perturbation.terrain)
-        edit_spec = True
-    if edit_spec:
-        model = _compile(spec, src, " after edits")
-        key = model.key(HOME_KEY)
-        if key.qpos.shape != (model.nq,):
-            raise ModelError(f"{HOME_KEY!r} keyframe has {key.qpos.size} qpos, model nq={model.nq}")
-    return _perturbed(model, perturbation, src)
+        edits = True
+    if not edits:
+        return None
+    edited = _compile(spec, src, " after edits")
+    key = edited.key(HOME_KEY)
+    if key.qpos.shape != (edited.nq,):
+        raise ModelError(f"{HOME_KEY!r} keyframe has {key.qpos.size} qpos, model nq={edited.nq}")
+    return edited
 
 
 def perturbed_with_terrain(model: mujoco.MjModel, perturbation: Perturbation,
@@ -197,11 +206,7 @@ def perturbed_with_terrain(model: mujoco.MjModel, perturbation: Perturbation,
     if perturbation is None or perturbation.terrain is None:
         raise ValueError("a perturbation without terrain needs no compile: use perturbed_copy")
     src = os.fspath(source)
-    spec = _source_spec(src)
-    if not any(key.name == HOME_KEY for key in spec.keys):
-        _add_home_key(spec, model)  # the keyframe depends on qpos0 and the joints: alike in both
-    add_terrain(spec, perturbation.terrain)
-    return _perturbed(_compile(spec, src, " after edits"), perturbation, src)
+    return _perturbed(_edited(_source_spec(src), model, perturbation, src), perturbation, src)
 
 
 def perturbed_copy(model: mujoco.MjModel, perturbation: Perturbation | None,
