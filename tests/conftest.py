@@ -29,13 +29,13 @@ sys.path[:0] = [str(p) for p in sorted(Path(__file__).parent.iterdir())
 
 from support.native_support import REGULATOR_FMUS  # noqa: E402
 from support.paths import SUPPORT_DIR  # noqa: E402
-from support import builds, native_support  # noqa: E402
+from support import builds, native_support, schedule  # noqa: E402
 
 
 @pytest.hookimpl(trylast=True)  # after -m has deselected
 def pytest_collection_modifyitems(session, config, items):
-    """The test modules that read no build first (``support.builds.builds_last``)."""
-    items[:] = builds.builds_last(items)
+    """The test modules that read no build first, the longest first (``support.schedule``)."""
+    items[:] = schedule.order(items)
 
 
 def pytest_sessionstart(session):

@@ -35,20 +35,6 @@ def use_whole_build(items) -> bool:
     return _WHOLE_BUILD["used"]
 
 
-def builds_last(items) -> list:
-    """``items`` with the test modules that read no build first, so a session's first tests run
-    while its build is made; within each part the modules with more tests first (pytest-xdist's
-    own order for ``--dist loadscope``, which pyproject.toml's ``--no-loadscope-reorder`` leaves
-    to this), each module's tests together and in their order."""
-    modules: dict[str, list] = {}
-    for item in items:
-        modules.setdefault(item.nodeid.split("::")[0], []).append(item)
-    reads = {name: any(BUILD_FIXTURE in getattr(i, "fixturenames", ()) for i in group)
-             for name, group in modules.items()}
-    order = sorted(modules, key=lambda name: (reads[name], -len(modules[name])))
-    return [i for name in order for i in modules[name]]
-
-
 def whole_build(tmp_path_factory) -> tuple[Path, list[Path]]:
     """``python build.py --out FOLDER`` once per session: the folder and the paths build_all
     returned (the lines build.py prints).  In a process of its own: pythonfmu's builder changes
