@@ -87,12 +87,14 @@ def test_c_and_numpy_build_the_same_networks(c_core, n, seed):
 
 @pytest.fixture(scope="session")
 def closed_loop_inputs():
-    """The regulator inputs of 60 s of MuJoCo walking with the numpy core in the loop."""
+    """The regulator inputs of 60 s of MuJoCo walking with the numpy core in the loop (the C
+    walking controller, the run's default: a third less time than the Python one, which gives
+    the same bits, tests/plant/test_native_controller.py)."""
     from plant.model import load_model
     from plant.sim import CassieWalker
     from scenarios.cosim.inprocess import apply_regulator
 
-    walker = CassieWalker(load_model("menagerie"))
+    walker = CassieWalker(load_model("menagerie"), controller="native")
     walker.set_command(0.5, 0.0)
     regulator = avr_core.Regulator(RegulatorParams(**LOOP_PARAMS))
     recorded = []
