@@ -90,8 +90,9 @@ def _specs():
     return (*PARAM_SPECS, *INPUT_SPECS, *OUTPUT_SPECS)
 
 
-def _pythonfmu_entries(packed: pack.Packed, dest: Path) -> dict[str, bytes]:
-    """Every file of the FMU pythonfmu builds for the staged code ``packed`` (with FMU state support)."""
+def _pythonfmu_entries(packed: pack.Packed, dest: Path, identifier: str) -> dict[str, bytes]:
+    """Every file of the FMU ``identifier`` that pythonfmu builds for the staged code ``packed`` (with FMU
+    state support); RuntimeError when the pythonfmu imported here has no binaries to put in it."""
     from pythonfmu.builder import FmuBuilder
 
     path_before = list(sys.path)
@@ -103,7 +104,13 @@ def _pythonfmu_entries(packed: pack.Packed, dest: Path) -> dict[str, bytes]:
         for name in [n for n in sys.modules if n == packed.module or n == packed.package
                      or n.startswith(packed.package + ".")]:
             del sys.modules[name]
-    return read_entries(raw)
+    entries = read_entries(raw)
+    if PYTHONFMU_LINUX.format(identifier) not in entries:
+        import pythonfmu
+
+        raise RuntimeError(f"pythonfmu came from {Path(pythonfmu.__file__).parent}, which has no binaries (an FMU's "
+                           "resources copy, imported after a pythonfmu FMU was loaded): build in a fresh process")
+    return entries
 
 
 def _move_pythonfmu_library(entries: dict[str, bytes], identifier: str) -> None:
@@ -145,7 +152,7 @@ def build_fmu(out_dir: Path = DEFAULT_OUT, sanitize: bool = False) -> Path:
     specs = _specs()
     with tempfile.TemporaryDirectory(prefix="avr_fmu_") as tmp:
         packed = pack.pack(Path(tmp) / "stage", SLAVE_SCRIPT, MODEL_IDENTIFIER, REGULATOR_LIB)
-        entries = _pythonfmu_entries(packed, Path(tmp) / "raw")
+        entries = _pythonfmu_entries(packed, Path(tmp) / "raw", MODEL_IDENTIFIER)
     tree = model_description(entries.pop("modelDescription.xml"), specs)
     entries["documentation/index.html"] = pages.regulator_page(MODEL_IDENTIFIER, specs).encode("utf-8")
     entries["resources/requirements.txt"] = REQUIREMENTS.encode("utf-8")
@@ -182,12 +189,7 @@ def _plant_entries(tmp: Path) -> tuple[pack.Packed, dict[str, bytes]]:
         vendor.copy_models(lib / "models")
 
     packed = pack.pack(tmp / "stage", PLANT_SLAVE_SCRIPT, PLANT_IDENTIFIER, PLANT_LIB, fill=data)
-    entries = _pythonfmu_entries(packed, tmp / "raw")
-    if PYTHONFMU_LINUX.format(PLANT_IDENTIFIER) not in entries:
-        import pythonfmu
-
-        raise RuntimeError(f"pythonfmu came from {Path(pythonfmu.__file__).parent}, which has no binaries (an FMU's "
-                           "resources copy, imported after a pythonfmu FMU was loaded): build in a fresh process")
+    entries = _pythonfmu_entries(packed, tmp / "raw", PLANT_IDENTIFIER)
     for name in [n for n in entries if n.startswith("binaries/") and not n.startswith("binaries/linux64/")]:
         del entries[name]  # the guard is built for linux64 only: without it a refusal could only be fmi2Fatal
     return packed, entries

@@ -1,13 +1,17 @@
 """The FMUs a run uses: the given file, or the default one in ``dist/`` built by
 ``build.py`` when it is missing, older than its sources (a stale FMU would silently
-run old code) or on ``--rebuild-fmu``."""
+run old code) or on ``--rebuild-fmu``.  The build runs in a process of its own: pythonfmu's
+builder changes ``sys.path`` and ``sys.modules``, and a process that has loaded a pythonfmu FMU
+holds that FMU's copy of pythonfmu, which cannot build one."""
 from __future__ import annotations
 
 import importlib.util
 import logging
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Iterable
+from typing import Iterable
 
 from fmu_src.core.avr_errors import AvrError
 from scenarios.errors import CosimError
@@ -32,26 +36,44 @@ def load_build_module():
     return module
 
 
-def _built(default: Path, sources: Iterable[Path], build: Callable[[object, Path], str], rebuild: bool) -> Path:
-    """``default``, (re)built by ``build(build_module, folder)`` when missing, older than
-    any of ``sources`` or on ``rebuild``."""
+#: Runs ``build.py``'s function ``argv[1]`` with the integer arguments ``argv[3:]`` into the folder
+#: ``argv[2]`` and prints the path it returns.
+_BUILD_SCRIPT = ("import sys\nfrom pathlib import Path\nfrom scenarios.cosim.fmus import load_build_module\n"
+                 "print(getattr(load_build_module(), sys.argv[1])(*map(int, sys.argv[3:]), out_dir=Path(sys.argv[2])))\n")
+
+
+def build_in_own_process(build: tuple, folder: Path) -> Path:
+    """``build.py``'s function ``build[0]`` with the arguments ``build[1:]``, building into ``folder``
+    in a process of its own; the path it returned.  AvrError with the build's last words if it fails."""
+    name, *args = build
+    proc = subprocess.run([sys.executable, "-c", _BUILD_SCRIPT, name, str(folder), *map(str, args)],
+                          cwd=REPO_ROOT, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise AvrError(f"build.py's {name}{tuple(args) if args else '()'} failed (exit {proc.returncode}):\n"
+                       f"{proc.stderr[-3000:]}")
+    return Path(proc.stdout.strip().splitlines()[-1])
+
+
+def _built(default: Path, sources: Iterable[Path], build: tuple, rebuild: bool) -> Path:
+    """``default``, (re)built by :func:`build_in_own_process` (``build``: build.py's function and
+    its arguments) when missing, older than any of ``sources`` or on ``rebuild``."""
     stale = default.is_file() and max(p.stat().st_mtime for p in sources) > default.stat().st_mtime
     if rebuild or stale or not default.is_file():
         log.info("building %s%s", default, " (older than its sources)" if stale else "")
         default.parent.mkdir(parents=True, exist_ok=True)
-        return Path(build(load_build_module(), default.parent))
+        return build_in_own_process(build, default.parent)
     return default
 
 
 @dataclass(frozen=True)
 class RegulatorFmu:
     """A ``--regulator`` that runs an FMU: its default file (the module constant named
-    ``default_name``), the FMI version it runs and how ``build.py`` builds that file
-    (``build(build_module, folder)``)."""
+    ``default_name``), the FMI version it runs and how ``build.py`` builds that file (``build``:
+    the function's name and its arguments before the output folder)."""
 
     default_name: str
     fmi_version: str
-    build: Callable[[Any, Path], str]
+    build: tuple
     help: str
 
     @property
@@ -61,11 +83,11 @@ class RegulatorFmu:
 
 #: The ``--regulator`` choices that run an FMU through fmpy (``inprocess`` runs the core).
 REGULATOR_FMUS: dict[str, RegulatorFmu] = {
-    "fmu": RegulatorFmu("DEFAULT_FMU", "2.0", lambda b, d: b.build_fmu(d),
+    "fmu": RegulatorFmu("DEFAULT_FMU", "2.0", ("build_fmu",),
                         "the pythonfmu FMU (FMI 2.0) through fmpy's FMU2Slave"),
-    "native": RegulatorFmu("DEFAULT_NATIVE_FMU", "2.0", lambda b, d: b.build_native_fmu(2, d),
+    "native": RegulatorFmu("DEFAULT_NATIVE_FMU", "2.0", ("build_native_fmu", 2),
                            "the native (C) FMI 2.0 FMU through fmpy's FMU2Slave"),
-    "native-fmi3": RegulatorFmu("DEFAULT_NATIVE3_FMU", "3.0", lambda b, d: b.build_native_fmu(3, d),
+    "native-fmi3": RegulatorFmu("DEFAULT_NATIVE3_FMU", "3.0", ("build_native_fmu", 3),
                                 "the native (C) FMI 3.0 FMU through fmpy's FMU3Slave"),
 }
 
@@ -179,4 +201,4 @@ def ensure_plant_fmu(fmu: str | Path | None, *, rebuild: bool = False) -> Path:
         return Path(fmu)
     sources = [REPO_ROOT / "build.py", *(REPO_ROOT / "plant").rglob("*.py"), *(REPO_ROOT / "plant" / "data").glob("*"),
                *(REPO_ROOT / "fmu_src").rglob("*.py"), *(REPO_ROOT / "fmu_src").rglob("*.c")]
-    return _built(DEFAULT_PLANT_FMU, sources, lambda b, d: b.build_plant_fmu(d), rebuild)
+    return _built(DEFAULT_PLANT_FMU, sources, ("build_plant_fmu",), rebuild)

@@ -119,8 +119,7 @@ def ensure_command_fmu(fmu: str | Path | None) -> Path:
         return Path(fmu)
     folder = REPO_ROOT / "fmu_src" / "command_source"
     sources = [REPO_ROOT / "build.py", *folder.glob("*.py"), *folder.glob("*.[ch]")]
-    return _built(REPO_ROOT / "dist" / "CommandSource_fmi2.fmu", sources,
-                  lambda b, d: b.build_command_source(2, d), False)
+    return _built(REPO_ROOT / "dist" / "CommandSource_fmi2.fmu", sources, ("build_command_source", 2), False)
 
 
 def cmd_export_ssp(args) -> int:

@@ -237,17 +237,43 @@ def test_full_paper_suite(tmp_path):
         assert {n: a["status"] for n, a in summary["arms"].items()} == {a.name: "complete" for a in s.arms}
 
 
-def test_cli_rebuilds_a_default_fmu_older_than_its_sources(tmp_path, monkeypatch):
-    import os
-    import zipfile
+#: A user's session: the pythonfmu regulator FMU run in process, then the default FMU rebuilt
+#: because it is older than its sources, then asked for again.
+REBUILD_AFTER_LOAD = """
+import json, os, sys, zipfile
+from pathlib import Path
+import fmpy
+from scenarios.cosim import fmus
+args = json.load(sys.stdin)
+fmpy.simulate_fmu(fmpy.extract(args["fmu"], unzipdir=args["unzipped"]), stop_time=0.01)
+fmus.DEFAULT_FMU = stale = Path(args["stale"])
+path = fmus.ensure_fmu(None)
+rebuilt = path == stale and zipfile.is_zipfile(path)
+mtime = path.stat().st_mtime
+kept = fmus.ensure_fmu(None) == stale and stale.stat().st_mtime == mtime
+print(json.dumps({"rebuilt": rebuilt, "kept": kept}))
+"""
 
-    from scenarios.cosim import fmus
+
+def test_cli_rebuilds_a_default_fmu_older_than_its_sources_also_after_running_a_pythonfmu_fmu(built_fmu, tmp_path):
+    """The rebuild runs in a process of its own: in this one, which has run the pythonfmu FMU (and
+    so holds that FMU's copy of pythonfmu, without binaries), pythonfmu could not build."""
+    import os
+
+    from support.pythonfmu_support import run_host
 
     stale = tmp_path / "AdaptiveVelocityRegulator.fmu"
     stale.write_bytes(b"an FMU built from older sources")
     os.utime(stale, (0, 0))  # 1970: older than every source file
-    monkeypatch.setattr(fmus, "DEFAULT_FMU", stale)
-    path = fmus.ensure_fmu(None)
-    assert path == stale and zipfile.is_zipfile(path)  # rebuilt in place
-    mtime = path.stat().st_mtime
-    assert fmus.ensure_fmu(None) == stale and stale.stat().st_mtime == mtime  # fresh: kept
+    args = {"fmu": str(built_fmu), "unzipped": str(tmp_path / "unzipped"), "stale": str(stale)}
+    result, err = run_host(REBUILD_AFTER_LOAD, args, tmp_path)
+    assert result == {"rebuilt": True, "kept": True}, err[-2000:]
+
+
+def test_a_failed_build_names_the_function_and_says_why(tmp_path):
+    from fmu_src.core.avr_errors import AvrError
+    from scenarios.cosim.fmus import build_in_own_process
+
+    with pytest.raises(AvrError, match=r"build.py's build_native_fmu\(4,\) failed \(exit 1\)") as err:
+        build_in_own_process(("build_native_fmu", 4), tmp_path)
+    assert "4" in str(err.value).splitlines()[-1]  # the build's own last words

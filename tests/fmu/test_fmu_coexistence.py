@@ -14,6 +14,7 @@ import re
 import numpy as np
 import pytest
 
+from support.paths import REPO_ROOT
 from support.plant_fmu_support import built_plant_fmu
 from support.pythonfmu_support import build_edited, run_host
 
@@ -107,3 +108,31 @@ def test_builds_differing_in_a_default_each_compute_with_their_own(builds, tmp_p
     np.testing.assert_allclose(by_build["regulator"][0]["delta_swing_hip_pitch"][-1], KP_X * VX, rtol=1e-12)
     np.testing.assert_allclose(by_build["regulator_b"][0]["delta_swing_hip_pitch"][-1], KP_X_B * VX, rtol=1e-12)
     assert results[2]["joint_damping_scale"][-1] == DAMPING
+
+
+BUILD_AFTER_LOAD = """
+import json, sys
+from pathlib import Path
+import fmpy
+args = json.load(sys.stdin)
+fmpy.simulate_fmu(fmpy.extract(args["fmu"], unzipdir=args["unzipped"]), stop_time=0.01)
+sys.path.insert(0, args["repo"])
+import build
+try:
+    build.build_fmu(Path(args["out"]))
+except RuntimeError as exc:
+    print(json.dumps({"error": str(exc)}))
+else:
+    print(json.dumps({"error": None}))
+"""
+
+
+def test_a_build_after_loading_a_pythonfmu_fmu_in_process_says_to_build_in_a_fresh_process(built_fmu, tmp_path):
+    """An FMU loaded in process imports its own copy of pythonfmu, which has no binaries: a build in
+    that process must say so (it once failed with a bare KeyError for the library's name)."""
+    (tmp_path / "out").mkdir()
+    args = {"fmu": str(built_fmu), "unzipped": str(tmp_path / "unzipped"), "repo": str(REPO_ROOT),
+            "out": str(tmp_path / "out")}
+    result, _ = run_host(BUILD_AFTER_LOAD, args, tmp_path)
+    assert "which has no binaries" in (result["error"] or "") and "build in a fresh process" in result["error"]
+    assert not list((tmp_path / "out").iterdir())
