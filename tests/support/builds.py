@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Callable
 
 from support.paths import REPO_ROOT
+from support.pythonfmu_support import build_in_fresh_process
 from support.shared import made_once
 
 #: Whether this session's tests read the whole build (set by tests/conftest.py).
@@ -86,15 +87,21 @@ def built(tmp_path_factory, build_module, key: str, names, make: Callable[[Path]
     return made_once(tmp_path_factory, key, make)
 
 
+def _fresh(function: str) -> Callable[[Path], Path]:
+    """``make(folder)``: build.py's ``function`` into ``folder`` in a process of its own (a test
+    worker may have loaded a pythonfmu FMU in process, and then cannot build one)."""
+    return lambda out: build_in_fresh_process(REPO_ROOT, function, out)
+
+
 def regulator_fmu(tmp_path_factory, build_module) -> Path:
     """``AdaptiveVelocityRegulator.fmu`` (pythonfmu)."""
-    return built(tmp_path_factory, build_module, "fmu", f"{build_module.MODEL_IDENTIFIER}.fmu", build_module.build_fmu)
+    return built(tmp_path_factory, build_module, "fmu", f"{build_module.MODEL_IDENTIFIER}.fmu", _fresh("build_fmu"))
 
 
 def plant_fmu(tmp_path_factory, build_module) -> Path:
     """``CassiePlant.fmu`` (pythonfmu)."""
     return Path(built(tmp_path_factory, build_module, "plant_fmu", f"{build_module.PLANT_IDENTIFIER}.fmu",
-                      build_module.build_plant_fmu))
+                      _fresh("build_plant_fmu")))
 
 
 def by_version(tmp_path_factory, build_module, key: str, name: Callable[[int], str],
