@@ -16,7 +16,6 @@ from pathlib import Path
 from typing import Callable
 
 from support.paths import REPO_ROOT
-from support.pythonfmu_support import build_in_fresh_process
 from support.shared import made_once
 
 #: Whether this session's tests read the whole build (set by tests/conftest.py).
@@ -88,9 +87,12 @@ def built(tmp_path_factory, build_module, key: str, names, make: Callable[[Path]
 
 
 def _fresh(function: str) -> Callable[[Path], Path]:
-    """``make(folder)``: build.py's ``function`` into ``folder`` in a process of its own (a test
-    worker may have loaded a pythonfmu FMU in process, and then cannot build one)."""
-    return lambda out: build_in_fresh_process(REPO_ROOT, function, out)
+    """``make(folder)``: build.py's ``function`` into ``folder`` in a process of its own, as the CLI
+    builds a default FMU (a test worker may have loaded a pythonfmu FMU in process, and then
+    cannot build one)."""
+    from scenarios.cosim.fmus import build_in_own_process
+
+    return lambda out: build_in_own_process((function,), out)
 
 
 def regulator_fmu(tmp_path_factory, build_module) -> Path:

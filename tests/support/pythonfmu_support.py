@@ -1,7 +1,6 @@
-"""Builds of the two pythonfmu FMUs in processes of their own (the session's focused builds,
-``support.builds``, and edited copies of the sources for tests/fmu/test_fmu_coexistence.py and
-tests/fmu/test_fmu_memory.py: build.py's own functions, run on the copy), and a host process that
-calls fmpy on given .fmu files with its own empty TMPDIR."""
+"""Shared by tests/fmu/test_fmu_coexistence.py and tests/fmu/test_fmu_memory.py: builds of the two pythonfmu
+FMUs from edited copies of the sources (build.py's own functions, run on the copy), and a host
+process that calls fmpy on given .fmu files with its own empty TMPDIR."""
 from __future__ import annotations
 
 import json
@@ -41,13 +40,6 @@ def build_edited(tmp: Path, function: str, edits: dict[str, tuple[str, str]]) ->
         (tree / name).write_text(text.replace(old, new))
     out = tmp / "out"
     out.mkdir()
-    return build_in_fresh_process(tree, function, out)
-
-
-def build_in_fresh_process(tree: Path, function: str, out: Path) -> Path:
-    """``build.<function>(out)`` of the checkout ``tree`` in a process of its own; returns the FMU's
-    path.  A pythonfmu build needs a process that has loaded no pythonfmu FMU: one loaded in
-    process imports the FMU's own copy of pythonfmu, which has no binaries to build with."""
     proc = subprocess.run([sys.executable, "-c", _BUILD, function, str(out)], cwd=tree, env=_model_env(),
                           capture_output=True, text=True, timeout=600)
     assert proc.returncode == 0, proc.stderr[-3000:]
