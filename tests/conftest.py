@@ -15,7 +15,6 @@ guard built with AddressSanitizer); the tests parametrized over every regulator 
 """
 import json
 import os
-import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
@@ -29,7 +28,7 @@ sys.path[:0] = [str(p) for p in sorted(Path(__file__).parent.iterdir())
 
 from support.native_support import REGULATOR_FMUS  # noqa: E402
 from support.paths import SUPPORT_DIR  # noqa: E402
-from support import builds, native_support, schedule  # noqa: E402
+from support import builds, native_support, schedule, warm  # noqa: E402
 
 
 @pytest.hookimpl(trylast=True)  # after -m has deselected
@@ -176,8 +175,7 @@ def raw_host():
     """``raw_host(fmu_dir, case, args)``: run a case of tests/support/fmi/raw_host.py (direct ctypes calls
     with hostile arguments) in a process of its own; the process must not die."""
     def run(fmu_dir, case, args=None, timeout=600):
-        proc = subprocess.run([sys.executable, str(RAW_HOST), str(fmu_dir), case], input=json.dumps(args),
-                              capture_output=True, text=True, timeout=timeout)
+        proc = warm.run(RAW_HOST, [fmu_dir, case], input=json.dumps(args), timeout=timeout)
         assert proc.returncode == 0, f"the host process died (exit {proc.returncode}) in {case}:\n{proc.stderr[-3000:]}"
         return json.loads(proc.stdout.strip().splitlines()[-1])
     return run

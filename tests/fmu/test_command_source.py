@@ -12,14 +12,13 @@ built as build.py builds them, driven by fmpy in a subprocess (tests/support/com
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 from fmpy import extract, read_model_description
 
 from fmu_src.command_source import build_command_source as cs
+from support import warm
 from support.paths import SUPPORT_DIR
 
 DRIVER = SUPPORT_DIR / "command_source_driver.py"
@@ -53,8 +52,7 @@ def fmu_dir(built, fmi, tmp_path):
 
 
 def drive(fmu_dir: Path, fmi: int, calls: list) -> dict:
-    proc = subprocess.run([sys.executable, str(DRIVER), str(fmu_dir), str(fmi), json.dumps(calls)],
-                          capture_output=True, text=True, timeout=120)
+    proc = warm.run(DRIVER, [fmu_dir, fmi, json.dumps(calls)], timeout=120)
     assert proc.returncode == 0, f"the host process failed (exit {proc.returncode}):\n{proc.stderr[-3000:]}"
     return json.loads(proc.stdout.strip().splitlines()[-1])
 

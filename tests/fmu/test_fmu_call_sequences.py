@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_REQUIRES, PARAM_SPECS, requires_problems
 from fmu_src.fmi import phase_rules
 
+from support import warm
 from support.native_support import DRIVERS, H, REGULATOR_FMUS
 from support.paths import SUPPORT_DIR
 
@@ -250,8 +251,7 @@ def test_every_function_in_every_state_follows_the_phase_rules(any_fmu):
     table says it is not allowed, never answering OK there, and a function the FMU does not
     provide refused (Error) in every state."""
     fmi, fmu_dir = any_fmu
-    proc = subprocess.run([sys.executable, str(PHASE_MATRIX), str(fmu_dir), str(fmi)], capture_output=True,
-                          text=True, timeout=600)
+    proc = warm.run(PHASE_MATRIX, [fmu_dir, fmi], timeout=600)
     assert proc.returncode == 0, f"the host process died (exit {proc.returncode}):\n{proc.stderr[-3000:]}"
     matrix = json.loads(proc.stdout.strip().splitlines()[-1])
     table = phase_rules.FMI2_ALLOWED if fmi == 2 else phase_rules.FMI3_ALLOWED

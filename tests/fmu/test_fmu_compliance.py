@@ -29,6 +29,7 @@ from pythonfmu.builder import FmuBuilder
 
 from fmu_src.core.avr_specs import INPUT_SPECS, OUTPUT_SPECS, PARAM_SPECS
 from fmu_src.packing.archive import ZIP_EPOCH
+from support import warm
 from support.native_support import DRIVERS, H, AnySlave, fmi2_only, input_sequence
 
 OK, ERROR = 0, 3
@@ -41,8 +42,7 @@ NATIVE_PLATFORMS = {2: ("linux64", "win64"), 3: ("x86_64-linux", "x86_64-windows
 def run_calls(fmu, calls):
     """Answers (dicts) to `calls` made in a fresh process on the extracted FMU, and the process's
     stdout (fmpy prints the FMU's log messages there); the process must not die."""
-    proc = subprocess.run([sys.executable, str(DRIVERS[fmu.fmi]), fmu.dir, json.dumps(calls)], capture_output=True,
-                          text=True, timeout=120)
+    proc = warm.run(DRIVERS[fmu.fmi], [fmu.dir, json.dumps(calls)], timeout=120)
     assert proc.returncode == 0, f"driver died (exit {proc.returncode}):\n{proc.stderr[-2000:]}"
     return json.loads(proc.stdout.strip().splitlines()[-1]), proc.stdout
 

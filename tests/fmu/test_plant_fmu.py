@@ -21,6 +21,7 @@ from fmpy.validation import validate_fmu
 
 from plant.perturbation import Perturbation
 from plant.terrain import TerrainSpec
+from support import warm
 from support.paths import REPO_ROOT, SUPPORT_DIR
 from support.plant_fmu_support import Plant, built_plant_fmu, status_of
 
@@ -43,8 +44,7 @@ def plant_dir(plant_fmu, unzip, tmp_path_factory):
 
 def run_calls(fmu_dir, calls, env=None):
     """(statuses, the FMU's log) of `calls` in a fresh process; the process must not die."""
-    proc = subprocess.run([sys.executable, str(DRIVER), str(fmu_dir), json.dumps(calls)], capture_output=True,
-                          text=True, timeout=300, env=env)
+    proc = warm.run(DRIVER, [fmu_dir, json.dumps(calls)], timeout=300, env=env)
     assert proc.returncode == 0, f"driver died (exit {proc.returncode}):\n{proc.stderr[-3000:]}"
     lines = proc.stdout.strip().splitlines()
     return [r["status"] for r in json.loads(lines[-1])], "\n".join(lines[:-1]) + proc.stderr

@@ -2,12 +2,11 @@
 floor_cross_slope_deg, link_mass_scale_<link>): refused out of range naming the field and
 its range, all at once, and carried into the model when accepted."""
 import json
-import subprocess
-import sys
 
 import pytest
 
 from plant.perturbation import Perturbation
+from support import warm
 from support.paths import SUPPORT_DIR
 from support.plant_fmu_support import built_plant_fmu
 
@@ -22,8 +21,7 @@ def plant_dir(tmp_path_factory, build_module, unzip):
 
 
 def run_calls(fmu_dir, calls):
-    proc = subprocess.run([sys.executable, str(DRIVER), str(fmu_dir), json.dumps(calls)], capture_output=True,
-                          text=True, timeout=300)
+    proc = warm.run(DRIVER, [fmu_dir, json.dumps(calls)], timeout=300)
     assert proc.returncode == 0, f"driver died (exit {proc.returncode}):\n{proc.stderr[-3000:]}"
     lines = proc.stdout.strip().splitlines()
     return [r["status"] for r in json.loads(lines[-1])], "\n".join(lines[:-1]) + proc.stderr
