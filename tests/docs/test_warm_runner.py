@@ -7,6 +7,9 @@ import os
 import signal
 import subprocess
 import sys
+import threading
+import time
+from pathlib import Path
 
 import pytest
 
@@ -88,3 +91,32 @@ def test_a_changed_start_up_environment_gets_a_new_interpreter(tmp_path):
     env = dict(os.environ, PYTHONHASHSEED="123")
     assert int(warm.run(probe, env=env).stdout) == os.getpid()  # read at start-up: a new interpreter
 
+
+
+def test_a_dead_server_is_replaced_and_a_run_it_took_down_fails_loudly(tmp_path):
+    probe = tmp_path / "ppid.py"
+    probe.write_text("import os, sys, time\nprint(os.getppid(), flush=True)\nif sys.argv[1:] == ['wait']: time.sleep(60)\n")
+    server = int(warm.run(probe).stdout)
+    os.kill(server, signal.SIGKILL)
+    _wait_dead(server)
+    again = int(warm.run(probe).stdout)
+    assert again not in (server, os.getpid())  # a new server forked it
+    # the server dies while a child runs: that run fails naming the server, the next one works
+    threading.Timer(1.0, os.kill, (again, signal.SIGKILL)).start()
+    with pytest.raises(RuntimeError, match="warm server .* died"):
+        warm.run(probe, ["wait"], timeout=30)
+    assert int(warm.run(probe).stdout) not in (again, os.getpid())
+
+
+def _wait_dead(pid: int) -> None:
+    """Until ``pid`` (a child of this process, which warm reaps) is a zombie or gone."""
+    stat = Path(f"/proc/{pid}/stat")
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline:
+        try:
+            if stat.read_text().rsplit(")", 1)[1].split()[0] in ("Z", "X"):
+                return
+        except (FileNotFoundError, ProcessLookupError):
+            return
+        time.sleep(0.01)
+    raise AssertionError(f"process {pid} did not die")

@@ -61,6 +61,16 @@ class _Server:
         self.proc.stdin.flush()
         return self._answer()
 
+    def kill(self) -> None:
+        """End the server now (its child, if any, dies with it)."""
+        self.proc.kill()
+        self.proc.wait()
+        for pipe in (self.proc.stdin, self.proc.stdout):
+            try:
+                pipe.close()
+            except OSError:
+                pass
+
     def close(self) -> None:
         if self.proc.poll() is None:
             self.proc.stdin.close()
@@ -98,8 +108,9 @@ def run(script: Path | str, args: Sequence[Any] = (), *, input: str | None = Non
                 try:
                     answer = _server.ask({"script": os.path.abspath(script), "args": cmd[2:], "cwd": cwd, "env": env,
                                           "input": input, "timeout": timeout})
-                except (OSError, RuntimeError):
-                    _close()  # a dead server: the next run starts another
+                except BaseException:  # dead, or its answer left unread (e.g. Ctrl-C): the next run starts another
+                    _server.kill()
+                    _server = None
                     raise
                 if answer["timed_out"]:
                     raise subprocess.TimeoutExpired(cmd, timeout, output=answer["stdout"], stderr=answer["stderr"])
