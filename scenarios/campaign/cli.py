@@ -19,10 +19,14 @@ import functools
 import logging
 import sys
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from scenarios.errors import ScenarioError
 from scenarios.cosim.fmus import REGULATOR_FMUS, fmu_file_problem
 from scenarios.run.options import CONTROLLERS, DEFAULT_CONTROLLER, DEFAULT_REGULATOR, resolve_regulator
+
+if TYPE_CHECKING:  # pragma: no cover
+    from scenarios.campaign.execute import RunOptions
 
 log = logging.getLogger("scenarios.campaign")
 
@@ -59,7 +63,7 @@ def add_parser(sub) -> None:
     sp.add_argument("--rebuild-fmu", action="store_true", help="rebuild the default FMU first")
     sp.add_argument("--task-timeout", type=float, default=None, help="seconds per sample (overrides the file)")
     sp.add_argument("--retries", type=int, default=None, help="retries of a task whose worker/run process died")
-    sp.add_argument("--fork-runs", action=argparse.BooleanOptionalAction, default=True,
+    sp.add_argument("--fork-runs", action=argparse.BooleanOptionalAction, default=None,
                     help="fork each sample's run, a fresh process all the same, from a warm process per worker "
                          "(imports and the base model's check once per worker, not once per sample; the "
                          "default on Linux); --no-fork-runs: a new interpreter per run")
@@ -114,6 +118,18 @@ def _dashboard_problem(args) -> str | None:
     return None
 
 
+def run_options(args) -> RunOptions:
+    """The campaign's :class:`scenarios.campaign.execute.RunOptions` from the parsed arguments; an
+    option left unset (None) takes RunOptions' default, written there only."""
+    from scenarios.campaign import execute
+
+    where = {"scheduler": args.scheduler, "scheduler_file": args.scheduler_file}
+    given = {"dashboard_address": args.dashboard_address, "fork_runs": args.fork_runs}
+    where.update({k: v for k, v in given.items() if v is not None})
+    return execute.RunOptions(workers=args.workers, **where, regulator=args.regulator, controller=args.controller,
+                              fmu=None, timeout_s=args.task_timeout, retries=args.retries)
+
+
 def _print_samples(samples, factor_names) -> None:
     from scenarios.campaign.sampling import format_value
 
@@ -150,11 +166,7 @@ def cmd_campaign(args) -> int:
     if args.dry_run:
         _print_samples(samples, names)
         return 0
-    where = {"scheduler": args.scheduler, "scheduler_file": args.scheduler_file}
-    if args.dashboard_address is not None:
-        where["dashboard_address"] = args.dashboard_address
-    opts = execute.RunOptions(workers=args.workers, **where, regulator=args.regulator, controller=args.controller,
-                              fmu=None, timeout_s=args.task_timeout, retries=args.retries, fork_runs=args.fork_runs)
+    opts = run_options(args)
     if args.scheduler or args.scheduler_file:
         try:  # before the folder is claimed: a wrong address leaves nothing behind
             execute.check_scheduler(opts)

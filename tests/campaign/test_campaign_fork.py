@@ -140,11 +140,14 @@ def test_smoke_campaign_with_new_interpreters_gives_the_same_rows(tmp_path, tmp_
 
 
 def test_the_cli_forks_runs_by_default_and_no_fork_runs_turns_it_off():
+    from scenarios.campaign.cli import run_options
     from scenarios.cli import build_parser
 
-    parse = build_parser().parse_args
-    assert parse(["campaign", "smoke", "--out", "x"]).fork_runs is forkrun.AVAILABLE is True  # Linux
-    assert parse(["campaign", "smoke", "--out", "x", "--no-fork-runs"]).fork_runs is False
+    def options(*args):
+        return run_options(build_parser().parse_args(["campaign", "smoke", "--out", "x", *args]))
+    assert options().fork_runs is forkrun.AVAILABLE is True  # Linux
+    assert options("--no-fork-runs").fork_runs is False
+    assert options("--fork-runs").fork_runs is True
 
 
 def test_a_task_that_asks_for_a_fork_where_none_is_possible_runs_a_new_interpreter(tmp_path, monkeypatch, servers):
