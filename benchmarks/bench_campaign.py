@@ -148,11 +148,28 @@ def run_campaign(cfile: Path, out: Path, workers: int, fmu: str, repo: Path = RE
         t["sim_s"] += float(row["sim_s"])
     overhead = [t["task_wall_s"] - t["arms_wall_s"] for t in tasks.values()]
     sim = sum(t["sim_s"] for t in tasks.values())
+    arm_cpu = arm_cpu_by_sample(out)
     return {"workers": workers, "wall_s": wall, "cpu_s": cpu, "sim_s": sim, "sim_by_sample": {k: t["sim_s"] for k, t in tasks.items()},
             "rate_cpu": sim / cpu, "rate_wall_per_worker": sim / wall / workers, "tasks": len(tasks), "arms": len(rows),
             "sum_task_wall_s": sum(t["task_wall_s"] for t in tasks.values()),
             "sum_cosim_s": sum(t["arms_wall_s"] for t in tasks.values()),
-            "overhead_per_task_s": sum(overhead) / len(overhead), "overhead_max_s": max(overhead)}
+            "overhead_per_task_s": sum(overhead) / len(overhead), "overhead_max_s": max(overhead),
+            "arm_cpu_by_sample": arm_cpu}
+
+
+#: The CPU parts of an arm's run that its summary.json records (``timings``), as the report names them.
+ARM_CPU_PARTS = {"plant_s": "the plant (mj_step and the walking controller)", "loop_cpu_s": "the arms' loops",
+                 "task_cpu_s": "the runs' own processes"}
+
+
+def arm_cpu_by_sample(out: Path) -> dict[str, dict[str, float]]:
+    """Per sample, the CPU seconds its arms' runs spent in each of :data:`ARM_CPU_PARTS` (from each
+    sample's last try's ``summary.json``)."""
+    found: dict[str, dict[str, float]] = {}
+    for path in sorted((out / "runs").glob("s*/try*/*/summary.json"), key=lambda p: (p.parts[-4], int(p.parts[-3][3:]))):
+        arms = json.loads(path.read_text())["arms"].values()
+        found[path.parts[-2]] = {k: sum(a["timings"][k] for a in arms if "timings" in a) for k in ARM_CPU_PARTS}
+    return found
 
 
 def overhead_breakdown(sample: Path, folder: Path, fmu: str) -> dict:
@@ -188,8 +205,9 @@ def physics_limit(samples: Path, sim_by_sample: dict[str, float]) -> dict[str, A
 
     scenarios = {name: spec.resolve_targets([str(samples / f"{name}.toml")])[0] for name in sim_by_sample}
     rates = bench_suite.physics_rates(list(scenarios.values()), 3)
-    cpu = sum(sim / rates[scenarios[name].name]["rtf_cpu"] for name, sim in sim_by_sample.items())
-    return {"cpu_s": cpu, "rate_cpu": sum(sim_by_sample.values()) / cpu}
+    cpu_by_sample = {name: sim / rates[scenarios[name].name]["rtf_cpu"] for name, sim in sim_by_sample.items()}
+    cpu = sum(cpu_by_sample.values())
+    return {"cpu_s": cpu, "rate_cpu": sum(sim_by_sample.values()) / cpu, "cpu_by_sample": cpu_by_sample}
 
 
 def report(label: str, runs: list[dict], samples: int, physics: dict[str, Any]) -> dict:
@@ -214,6 +232,13 @@ def report(label: str, runs: list[dict], samples: int, physics: dict[str, Any]) 
     print(f"the same co-simulation work took {two['sum_cosim_s'] / one['sum_cosim_s']:.2f} x as long with 2 workers "
           f"(1.00 on two free cores); scaling per unit of that work: {normalised:.2f} x (what two free cores "
           "would give, if every part of a task slowed alike)")
+    for r in runs:  # where the CPU goes, each part against the physics of the same simulated seconds
+        r["cpu_over_physics"] = {k: sum(c[k] for c in r["arm_cpu_by_sample"].values()) / physics["cpu_s"]
+                                 for k in ARM_CPU_PARTS}
+        r["cpu_over_physics"]["campaign"] = r["cpu_s"] / physics["cpu_s"]
+        print(f"{r['workers']} worker(s), CPU s per CPU s of bare mj_step on the same simulated seconds: "
+              + "; ".join(f"{ARM_CPU_PARTS.get(k, 'the whole campaign (every process)')} {v:.2f}"
+                          for k, v in r["cpu_over_physics"].items()))
     rate = min(r["rate_over_physics"] for r in runs)
     print(f"per worker / bare mj_step (CPU) = {rate:.3f} (the lower of the two; target >= "
           f"{BENCH_TARGETS['campaign_rate']}: {'met' if rate >= BENCH_TARGETS['campaign_rate'] else 'MISSED'}); scaling wall(1)/wall(2) = {scaling:.2f} "
