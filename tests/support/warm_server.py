@@ -10,11 +10,10 @@ killed by that signal; text decoded with ``surrogateescape``, so no byte is lost
 that outlives ``timeout`` is killed (SIGKILL) and reported as timed out. The server ends when
 its stdin closes; each child dies with it (Linux ``PR_SET_PDEATHSIG``).
 
-The server imports what the scripts share (fmpy and its dependencies) and nothing else: it
+The server imports what the scripts share (fmpy and its dependencies) and nothing of the tests: it
 never loads an FMU, so every child starts from the same state a new interpreter reaches
 after those imports.
 """
-import ctypes
 import importlib
 import json
 import os
@@ -25,16 +24,17 @@ import sys
 import time
 import traceback
 
+from scenarios.campaign.forkrun import die_with_parent  # the campaigns' fork server's: Linux PR_SET_PDEATHSIG
+
 #: What the server imports before its first fork: what every support script imports.
 PRELOAD = ("numpy", "fmpy", "fmpy.fmi1", "fmpy.fmi2", "fmpy.fmi3", "fmpy.logging", "fmpy.model_description")
-_PR_SET_PDEATHSIG = 1
 
 
 def _child(request, fds, server_pid):
     """In the forked child: become ``python SCRIPT ARGS`` and exit (never returns)."""
     code = 1
     try:
-        ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+        die_with_parent()
         if os.getppid() != server_pid:  # the server died before the line above
             os._exit(1)
         for fd, target in zip((0, 1, 2), fds):
@@ -77,9 +77,10 @@ def serve(request):
     """Fork a child for ``request``, feed its stdin, collect its output, wait for it."""
     pipes = [os.pipe() for _ in range(3)]  # (read, write) for stdin, stdout, stderr
     child_fds = (pipes[0][0], pipes[1][1], pipes[2][1])
+    server_pid = os.getpid()
     pid = os.fork()
     if pid == 0:
-        _child(request, child_fds, os.getppid())
+        _child(request, child_fds, server_pid)
     for fd in child_fds:
         os.close(fd)
     stdin, stdout, stderr = pipes[0][1], pipes[1][0], pipes[2][0]
