@@ -16,7 +16,7 @@ def test_modules_without_a_build_first_then_the_longest_first_each_module_togeth
              + [_item("tests/ssp/test_ssp.py::t1", True), _item("tests/a/test_short.py::t2"),
                 _item("tests/plant/test_blas_independence.py::t1")])
     got = [i.nodeid for i in schedule.order(items)]
-    assert got == (["tests/plant/test_blas_independence.py::t1"]  # listed: 17 s
+    assert got == (["tests/plant/test_blas_independence.py::t1"]  # listed in MODULE_SECONDS
                    + [f"tests/a/test_many.py::t{k}" for k in range(30)]  # unlisted: 30 x 0.1 s
                    + ["tests/a/test_short.py::t1", "tests/a/test_short.py::t2",  # 2 x 0.1 s
                       "tests/ssp/test_ssp.py::t1", "tests/ssp/test_ssp_repeat.py::t1"])  # reads the build: last

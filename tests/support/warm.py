@@ -102,7 +102,10 @@ def run(script: Path | str, args: Sequence[Any] = (), *, input: str | None = Non
     cwd = os.path.abspath(cwd if cwd is not None else os.getcwd())
     if AVAILABLE and _lock.acquire(blocking=False):
         try:
-            if _server is None or _server.proc.poll() is not None:
+            if _server is not None and _server.proc.poll() is not None:  # died between runs: close its pipes
+                _server.kill()
+                _server = None
+            if _server is None:
                 _server = _Server()
             if _startup_env(env) == _startup_env(_server.env):
                 try:
