@@ -35,6 +35,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -155,7 +156,8 @@ class LeanNativeFmu:
 
         md = read_model_description(str(fmu_path))
         vr = {v.name: v.valueReference for v in md.modelVariables}
-        self._fmu = FMU2Slave(guid=md.guid, unzipDirectory=extract(str(fmu_path)),
+        self._dir = extract(str(fmu_path))  # a new temporary folder: removed by close()
+        self._fmu = FMU2Slave(guid=md.guid, unzipDirectory=self._dir,
                               modelIdentifier=md.coSimulation.modelIdentifier, instanceName="lean")
         self._fmu.instantiate()
         self._fmu.setupExperiment(startTime=0.0)
@@ -188,7 +190,8 @@ class LeanNativeFmu:
 
     def close(self) -> None:
         self._fmu.terminate()
-        self._fmu.freeInstance()
+        self._fmu.freeInstance()  # also unloads the library
+        shutil.rmtree(self._dir)
 
 
 class LeanZero:
