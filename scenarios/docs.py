@@ -338,7 +338,7 @@ def table_bench_campaign(suite, study, confirm, bench) -> list[str]:
                          f"{r['rate_over_physics']:.2f}", f"{r['rate_wall_per_worker']:.2f}",
                          f"{res['scaling']:.2f}" if r["workers"] == 2 else "",
                          f"{res['fixed_s'][r['workers'] - 1]:.1f}",
-                         "; ".join(f"{v:.2f}" for v in r.get("cpu_over_physics", {}).values())])
+                         "; ".join(f"{v:.2f}" for v in r["cpu_over_physics"].values())])
     lines = _md(["set-up", "workers", "wall s", "CPU s", "simulated s per CPU s", "/ bare `mj_step`",
                  "simulated s per wall s per worker", "scaling wall(1)/wall(2)", "fixed wall s per campaign",
                  "CPU s per CPU s of bare `mj_step`: plant; arms' loops; runs; campaign"], rows)

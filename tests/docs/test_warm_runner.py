@@ -92,7 +92,6 @@ def test_a_changed_start_up_environment_gets_a_new_interpreter(tmp_path):
     assert int(warm.run(probe, env=env).stdout) == os.getpid()  # read at start-up: a new interpreter
 
 
-
 def test_a_dead_server_is_replaced_and_a_run_it_took_down_fails_loudly(tmp_path):
     probe = tmp_path / "ppid.py"
     probe.write_text("import os, sys, time\nprint(os.getppid(), flush=True)\nif sys.argv[1:] == ['wait']: time.sleep(60)\n")
