@@ -22,35 +22,65 @@ YAW_RATE_MEAN_S = 1.0
 #: Titles at the top of their axes: placed, not moved clear of tick labels at each draw
 #: (there are none above the axes here; the search was a tenth of the plotting time).
 TITLE_Y = 1.0
+#: zlib's level for the PNGs (Pillow's default is 6).
+PNG_COMPRESS_LEVEL = 1
 
 
 def write_plots(out_dir: Path, scenario: Scenario, results: Sequence[Any]) -> list[str]:
     """velocity.png (velocity vs command per arm), psi.png (Psi and joint offsets), torso.png."""
     import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     results = [r for r in results if len(r.rows)]
     if not results:
         return []
-    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    colors = matplotlib.rcParams["axes.prop_cycle"].by_key()["color"]
     written = []
     for name, draw in zip(PLOTS, (_velocity, _psi, _torso)):
-        fig, margins = draw(plt, scenario, results, colors)
-        # fixed margins (figure fractions): tight_layout measured every text twice, a third of the time
-        fig.subplots_adjust(**margins)
-        fig.savefig(out_dir / name, dpi=90)
-        plt.close(fig)
+        fig = draw(scenario, results, colors)
+        # zlib level 1: a fifth of the plotting time at level 6, for files a fifth larger
+        fig.savefig(out_dir / name, dpi=90, pil_kwargs={"compress_level": PNG_COMPRESS_LEVEL})
         written.append(name)
     return written
 
 
-def _velocity(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
+#: This process's figures by layout, reused from scenario to scenario (see :func:`_figure`).
+_FIGURES: dict[tuple, tuple[Any, np.ndarray]] = {}
+
+
+def _figure(key: tuple, nrows: int, ncols: int, figsize: tuple[float, float], margins: dict[str, float]):
+    """The figure of layout ``key`` (``nrows`` x ``ncols`` axes sharing x), emptied of what
+    the last scenario drew in it; made once per layout and process, since creating the
+    axes and their ticks was a third of the plotting time.  Every draw sets the titles
+    and labels again; a reused figure draws the same pixels as a new one
+    (tests/scenarios/test_plots.py).  One scenario at a time: matplotlib is not thread-safe."""
+    if key not in _FIGURES:
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=figsize)
+        FigureCanvasAgg(fig)
+        axes = fig.subplots(nrows, ncols, sharex=True, squeeze=False)
+        # fixed margins (figure fractions): tight_layout measured every text twice, a third of the time
+        fig.subplots_adjust(**margins)
+        _FIGURES[key] = (fig, axes)
+        return fig, axes
+    fig, axes = _FIGURES[key]
+    for ax in axes.flat:
+        for artist in [*ax.lines, *ax.collections, *ax.texts]:
+            artist.remove()
+        if ax.get_legend() is not None:
+            ax.get_legend().remove()
+        ax.relim()
+    return fig, axes
+
+
+def _velocity(scenario: Scenario, results: Sequence[Any], colors: list[str]):
     """Step-averaged (and, for vy, stride-averaged) velocity against the command; the
     yaw rate against its command when the scenario turns."""
     turns = any(c.yaw_rate_des for c in scenario.commands)
-    fig, axes = plt.subplots(3 if turns else 2, 1, figsize=(10, 8.5 if turns else 6), sharex=True)
+    fig, axes = _figure(("velocity", turns), 3 if turns else 2, 1, (10, 8.5 if turns else 6),
+                        dict(left=0.08, right=0.98, bottom=0.09, top=0.94, hspace=0.08))
+    axes = axes[:, 0]
     if turns:
         _yaw_rate(axes[2], results, colors)
     for ax, axis in zip(axes, ("vx", "vy")):
@@ -76,7 +106,7 @@ def _velocity(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]
         ax.legend(loc="best", fontsize=8)
     axes[0].set_title(f"{scenario.name}: velocity vs command (faint: instantaneous)", y=TITLE_Y)
     axes[-1].set_xlabel("t (s)")
-    return fig, dict(left=0.08, right=0.98, bottom=0.09, top=0.94, hspace=0.08)
+    return fig
 
 
 def _yaw_rate(ax, results: Sequence[Any], colors: list[str]) -> None:
@@ -97,7 +127,7 @@ def _yaw_rate(ax, results: Sequence[Any], colors: list[str]) -> None:
     ax.grid(alpha=0.3)
 
 
-def _psi(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
+def _psi(scenario: Scenario, results: Sequence[Any], colors: list[str]):
     """The networks' outputs (Psi) and the joint offsets they produce, one panel each."""
     columns = {n for r in results for n in r.rows.dtype.names}  # the rl_hzd arm has no psi_*
     deltas = [n[4:] for n in results[0].rows.dtype.names if n.startswith("out_delta_")]
@@ -105,7 +135,9 @@ def _psi(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
     panels = psis + deltas
     ncols = 2
     nrows = max(1, (len(panels) + ncols - 1) // ncols)
-    fig, axes = plt.subplots(nrows, ncols, figsize=(11, 2.0 * nrows + 0.8), sharex=True, squeeze=False)
+    height = 2.0 * nrows + 0.8
+    fig, axes = _figure(("psi", nrows, len(panels)), nrows, ncols, (11, height),
+                        dict(left=0.075, right=0.985, bottom=0.8 / height, top=1 - 0.65 / height, hspace=0.32, wspace=0.2))
     for idx, name in enumerate(panels):
         ax = axes[idx // ncols][idx % ncols]
         for i, r in enumerate(results):
@@ -120,13 +152,13 @@ def _psi(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
     if panels:
         axes[0][0].legend(fontsize=8)
     fig.suptitle(f"{scenario.name}: Psi outputs and joint offsets per arm")
-    return fig, dict(left=0.075, right=0.985, bottom=0.8 / fig.get_figheight(), top=1 - 0.65 / fig.get_figheight(),
-                     hspace=0.32, wspace=0.2)
+    return fig
 
 
-def _torso(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
+def _torso(scenario: Scenario, results: Sequence[Any], colors: list[str]):
     """Torso pitch and roll, degrees."""
-    fig, axes = plt.subplots(2, 1, figsize=(10, 5), sharex=True)
+    fig, axes = _figure(("torso",), 2, 1, (10, 5), dict(left=0.08, right=0.98, bottom=0.1, top=0.93, hspace=0.08))
+    axes = axes[:, 0]
     for ax, name in zip(axes, ("pitch", "roll")):
         for i, r in enumerate(results):
             ax.plot(r.rows["t"], np.degrees(r.rows[f"in_{name}"]), color=colors[i % len(colors)], lw=0.9, label=r.arm)
@@ -135,4 +167,4 @@ def _torso(plt, scenario: Scenario, results: Sequence[Any], colors: list[str]):
     axes[0].legend(fontsize=8)
     axes[0].set_title(f"{scenario.name}: torso angles", y=TITLE_Y)
     axes[-1].set_xlabel("t (s)")
-    return fig, dict(left=0.08, right=0.98, bottom=0.1, top=0.93, hspace=0.08)
+    return fig
