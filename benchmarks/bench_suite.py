@@ -3,7 +3,7 @@
     python benchmarks/bench_suite.py [TARGET ...] [--jobs 2] [--duration S] [--fmu PATH]
                                      [--regulator fmu|native] [--controller python|native]
                                      [--repeat 3] [--compare DIR] [--keep DIR] [--json FILE]
-                                     [--code CHECKOUT]
+                                     [--code CHECKOUT] [--no-plots]
 
 ``TARGET``: what ``python -m scenarios run`` takes (default ``all``, the whole suite;
 ``--duration 8`` makes a quick representative run of every scenario). Measured in this
@@ -28,9 +28,10 @@ Rates are given per wall second and per CPU second: on a shared machine wall tim
 mostly measures the neighbours, and each arm's ``rtf`` is compared with the loop
 benchmark on its own kind of floor. ``--compare DIR`` checks every ``timeseries.csv``
 byte for byte and the metrics of every ``summary.json`` against an earlier run.
-``--code CHECKOUT`` runs the suite of another checkout (e.g. ``git archive`` of the
-commit before) against the same yardsticks: a before/after on one machine state
-(a version without ``timings`` gets totals and per-arm ``rtf`` only).
+``--no-plots`` runs the suite with ``run --no-plots`` (the plots cost the difference from
+a run with them). ``--code CHECKOUT`` runs the suite of another checkout (e.g. ``git
+archive`` of the commit before) against the same yardsticks: a before/after on one
+machine state (a version without ``timings`` gets totals and per-arm ``rtf`` only).
 """
 from __future__ import annotations
 
@@ -133,9 +134,9 @@ def startup_s(t: dict[str, float]) -> float:
 
 
 # --------------------------------------------------------------------------- comparing with an earlier run
-def compare_runs(new: Path, old: Path, scenarios: list[Scenario]) -> list[str]:
+def compare_runs(new: Path, old: Path, scenarios: list[Scenario], skip: tuple[str, ...] = ()) -> list[str]:
     """Differences: timeseries.csv bytes, and every summary.json key of ``old`` except the
-    volatile ones (wall time, statuses added later, the source path, timings)."""
+    volatile ones (wall time, statuses added later, the source path, timings) and ``skip``."""
     problems = []
     for s in scenarios:
         a, b = new / s.name, old / s.name
@@ -148,7 +149,7 @@ def compare_runs(new: Path, old: Path, scenarios: list[Scenario]) -> list[str]:
                     ma = sa["arms"].get(arm, {})
                     diff = [k for k in mb if k not in VOLATILE_ARM_KEYS and ma.get(k) != mb[k]]
                     problems += [f"{s.name}/{arm}: {k} {ma.get(k)!r} != {mb[k]!r}" for k in diff]
-            elif key not in VOLATILE_TOP_KEYS and sa.get(key) != value:
+            elif key not in VOLATILE_TOP_KEYS + skip and sa.get(key) != value:
                 problems.append(f"{s.name}: {key} differs")
     return problems
 
@@ -222,7 +223,8 @@ def print_summary(res: dict[str, Any], jobs: int) -> None:
     rates = sorted(res["physics"].items(), key=lambda kv: kv[1]["rtf_cpu"])
     print(f"  bare mj_step: {rates[0][1]['rtf_cpu']:.2f} ({rates[0][0]}) .. {rates[-1][1]['rtf_cpu']:.2f} "
           f"({rates[-1][0]}) sim s / CPU s")
-    print(f"\nsuite, --jobs {jobs}, --regulator {res['regulator']} --controller {res['controller']}: {f['sim_s']:.0f} simulated s in {f['wall_s']:.1f} s wall (the tasks: "
+    no_plots = "" if res["plots"] else " --no-plots"
+    print(f"\nsuite, --jobs {jobs}, --regulator {res['regulator']} --controller {res['controller']}{no_plots}: {f['sim_s']:.0f} simulated s in {f['wall_s']:.1f} s wall (the tasks: "
           f"{res['suite']['tasks_wall_s']} s), {f['cpu_s']:.1f} CPU s in all its processes")
     if "arms_cpu_s" in f:
         print(f"  CPU: arms {f['arms_cpu_s']:.1f} s, worker start-up {f['worker_startup_cpu_s']:.1f} s, writing the "
@@ -253,6 +255,7 @@ def main(argv=None) -> int:
     ap.add_argument("--json", default=None, help="write the numbers to this file")
     ap.add_argument("--code", type=Path, default=REPO_ROOT,
                     help="run the suite of this checkout instead (e.g. the code before, for a before/after)")
+    ap.add_argument("--no-plots", action="store_true", help="run the suite with `run --no-plots`")
     args = ap.parse_args(argv)
 
     with tempfile.TemporaryDirectory(prefix="bench_suite_") as tmp:
@@ -272,12 +275,12 @@ def main(argv=None) -> int:
 def measure(args: argparse.Namespace, tmp: Path) -> dict[str, Any]:
     """The yardsticks and the suite (its results in ``--keep`` or under ``tmp``, the FMU built there)."""
     fmu = bench_cosim.ensure_fmu(args.fmu, tmp, native=args.regulator == "native")
-    path = ("--regulator", args.regulator, "--controller", args.controller)
+    path = ("--regulator", args.regulator, "--controller", args.controller) + (("--no-plots",) if args.no_plots else ())
     scenarios = spec.resolve_targets(args.targets)
     if args.duration is not None:
         scenarios = [spec.override(s, duration_s=args.duration) for s in scenarios]
     res: dict[str, Any] = {"targets": args.targets, "jobs": args.jobs, "duration": args.duration,
-                           "regulator": args.regulator, "controller": args.controller}
+                           "regulator": args.regulator, "controller": args.controller, "plots": not args.no_plots}
     res["physics"] = physics_rates(scenarios, args.repeat)
     res["loop"] = loop_rates(scenarios, fmu, args.repeat, args.controller)
     out = args.keep or tmp / "runs"
@@ -285,7 +288,7 @@ def measure(args: argparse.Namespace, tmp: Path) -> dict[str, Any]:
     res["arms"], res["writes"] = read_arms(out, scenarios)
     res["worker_pids"] = sorted({(a.get("timings") or {}).get("pid") for a in res["arms"]} - {None})
     if args.compare is not None:
-        res["compare"] = compare_runs(out, args.compare, scenarios)
+        res["compare"] = compare_runs(out, args.compare, scenarios, ("plots",) if args.no_plots else ())
     return res
 
 
