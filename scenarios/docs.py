@@ -33,9 +33,10 @@ DATA_DIR = REPO_ROOT / DATA_REL
 SUITE_DATA = DATA_DIR / "suite.json"
 STUDY_DATA = DATA_DIR / "robustness_study.csv"
 CONFIRM_DATA = DATA_DIR / "robustness_confirm.csv"
-#: The benchmarks' numbers: ``<name>.json`` written by ``benchmarks/bench_<name>.py --json``.
+#: The benchmarks' numbers: ``<name>.json``, by the command that writes it (with ``--json FILE``).
 BENCH_REL = DATA_REL / "benchmarks"
-BENCHMARKS = ("suite", "cosim", "campaign")
+BENCHMARKS = {"suite": "python benchmarks/bench_suite.py", "suite_no_plots": "python benchmarks/bench_suite.py --no-plots",
+              "cosim": "python benchmarks/bench_cosim.py", "campaign": "python benchmarks/bench_campaign.py --samples 100"}
 #: The benchmarks' targets (issue 45), which the scripts print and the tables show: the main job's
 #: fraction of the physics limit; our master's rate over the plain C host's on the same FMUs; a
 #: campaign worker's rate over bare ``mj_step``, and the campaign's scaling from 1 to 2 workers.
@@ -261,10 +262,10 @@ def table_confirm(suite, study, confirm: Sequence[Mapping[str, str]], bench) -> 
                 "only one arm fell, adaptive / PD-only", "one-sided p"], rows)
 
 
-def _bench_measured(data: Mapping[str, Any], name: str) -> str:
+def _bench_measured(data: Mapping[str, Any], name: str, what: str = "Measured") -> str:
     m = data["measured"]
     load = ", ".join(f"{x:.2f}" for x in m["load_average"])
-    return (f"Measured on {m['machine']} ({m['cpu_count']} cores), {m['date']}, load average {load} (1, 5, 15 min) "
+    return (f"{what} on {m['machine']} ({m['cpu_count']} cores), {m['date']}, load average {load} (1, 5, 15 min) "
             f"at the end, at commit {m['commit']} (`{(BENCH_REL / name).as_posix()}`).")
 
 
@@ -291,8 +292,14 @@ def table_bench_suite(suite, study, confirm, bench) -> list[str]:
              f"{f['physics_fraction_cpu'] * f['cpu_s']:.1f}", "", ""],
             ["every `timeseries.csv` and `summary.json` metric identical to the compared run", same, "yes",
              "" if compared is None else _met(0 if compared else 1, 1)]]
+    bare = bench["suite_no_plots"]
+    g = bare["figures"]
+    rows += [["without the plots (`--no-plots`): main job / physics limit, by CPU time; by wall time",
+              f"{g['physics_fraction_cpu']:.2f}; {g['physics_fraction']:.2f}", "", ""],
+             ["without the plots: wall s; CPU s of all its processes; the same outputs but the plots",
+              f"{g['wall_s']:.1f}; {g['cpu_s']:.1f}; {'yes' if bare.get('compare') == [] else 'not compared'}", "", ""]]
     return [*_md(["`bench_suite.py`, the whole suite, `--jobs 2`", "measured", "target", "met"], rows), "",
-            _bench_measured(data, "suite.json")]
+            _bench_measured(data, "suite.json") + " " + _bench_measured(bare, "suite_no_plots.json", "Without the plots: measured")]
 
 
 def table_bench_cosim(suite, study, confirm, bench) -> list[str]:
@@ -392,8 +399,8 @@ def all_tables(root: Path | None = None) -> dict[str, str]:
     data = (REPO_ROOT if root is None else root) / DATA_REL
     suite = load_suite(data / SUITE_DATA.name)
     study, confirm = load_csv(data / STUDY_DATA.name), load_csv(data / CONFIRM_DATA.name)
-    bench = {name: load_json(data / BENCH_REL.name / f"{name}.json", f"python benchmarks/bench_{name}.py --json FILE")
-             for name in BENCHMARKS}
+    bench = {name: load_json(data / BENCH_REL.name / f"{name}.json", f"{command} --json FILE")
+             for name, command in BENCHMARKS.items()}
     return {name: "\n".join(fn(suite, study, confirm, bench)) for name, fn in TABLES.items()}
 
 
