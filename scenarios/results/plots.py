@@ -138,19 +138,22 @@ def _psi(scenario: Scenario, results: Sequence[Any], colors: list[str]):
     height = 2.0 * nrows + 0.8
     fig, axes = _figure(("psi", nrows, len(panels)), nrows, ncols, (11, height),
                         dict(left=0.075, right=0.985, bottom=0.8 / height, top=1 - 0.65 / height, hspace=0.32, wspace=0.2))
+    handles = {}  # one line per arm for the legend, from the first panel the arm has
     for idx, name in enumerate(panels):
         ax = axes[idx // ncols][idx % ncols]
         for i, r in enumerate(results):
             if f"out_{name}" in r.rows.dtype.names:
-                ax.plot(r.rows["t"], r.rows[f"out_{name}"], color=colors[i % len(colors)], lw=0.9, label=r.arm)
+                (line,) = ax.plot(r.rows["t"], r.rows[f"out_{name}"], color=colors[i % len(colors)], lw=0.9)
+                handles.setdefault(r.arm, line)
         ax.set_title(name + (" (rad)" if name.startswith("delta_") else ""), fontsize=9, y=TITLE_Y)
         ax.grid(alpha=0.3)
     for idx in range(len(panels), nrows * ncols):
         axes[idx // ncols][idx % ncols].axis("off")
     for ax in axes[-1]:
         ax.set_xlabel("t (s)")
-    if panels:
-        axes[0][0].legend(fontsize=8)
+    if handles:  # every arm in the scenario's order, also one without Psi outputs (rl_hzd)
+        arms = [r.arm for r in results if r.arm in handles]
+        axes[0][0].legend([handles[a] for a in arms], arms, fontsize=8)
     fig.suptitle(f"{scenario.name}: Psi outputs and joint offsets per arm")
     return fig
 

@@ -51,3 +51,16 @@ def test_an_arm_without_rows_is_left_out_and_no_rows_draw_nothing(tmp_path):
     assert list(tmp_path.iterdir()) == []
     assert plots.write_plots(tmp_path, s, [results[0], empty[1]]) == list(plots.PLOTS)
     assert np.all([(tmp_path / n).stat().st_size > 0 for n in plots.PLOTS])
+
+
+def test_the_psi_legend_names_every_arm_also_one_without_psi_outputs(tmp_path):
+    s = scenario("compare_fixed_speed", 0.5)
+    results = master.run_scenario(s, "inprocess")
+    rows = results[1].rows  # an arm like rl_hzd: offsets, no psi_* outputs
+    kept = [n for n in rows.dtype.names if not n.startswith("out_psi_")]
+    policy = dataclasses.replace(results[1], arm="policy", rows=rows[kept])
+    arms = [results[0].arm, policy.arm, results[1].arm]
+    plots._FIGURES.clear()
+    plots.write_plots(tmp_path, s, [results[0], policy, results[1]])
+    (fig, axes), = [v for k, v in plots._FIGURES.items() if k[0] == "psi"]
+    assert [t.get_text() for t in axes[0][0].get_legend().get_texts()] == arms
