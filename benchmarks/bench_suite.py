@@ -224,7 +224,8 @@ def print_summary(res: dict[str, Any], jobs: int) -> None:
     print(f"  bare mj_step: {rates[0][1]['rtf_cpu']:.2f} ({rates[0][0]}) .. {rates[-1][1]['rtf_cpu']:.2f} "
           f"({rates[-1][0]}) sim s / CPU s")
     no_plots = "" if res["plots"] else " --no-plots"
-    print(f"\nsuite, --jobs {jobs}, --regulator {res['regulator']} --controller {res['controller']}{no_plots}: {f['sim_s']:.0f} simulated s in {f['wall_s']:.1f} s wall (the tasks: "
+    print(f"\nsuite, --jobs {jobs}, --regulator {res['regulator']} --controller {res['controller']}{no_plots}: "
+          f"{f['sim_s']:.0f} simulated s in {f['wall_s']:.1f} s wall (the tasks: "
           f"{res['suite']['tasks_wall_s']} s), {f['cpu_s']:.1f} CPU s in all its processes")
     if "arms_cpu_s" in f:
         print(f"  CPU: arms {f['arms_cpu_s']:.1f} s, worker start-up {f['worker_startup_cpu_s']:.1f} s, writing the "

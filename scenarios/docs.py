@@ -35,8 +35,10 @@ STUDY_DATA = DATA_DIR / "robustness_study.csv"
 CONFIRM_DATA = DATA_DIR / "robustness_confirm.csv"
 #: The benchmarks' numbers: ``<name>.json``, by the command that writes it (with ``--json FILE``).
 BENCH_REL = DATA_REL / "benchmarks"
-BENCHMARKS = {"suite": "python benchmarks/bench_suite.py", "suite_no_plots": "python benchmarks/bench_suite.py --no-plots",
-              "cosim": "python benchmarks/bench_cosim.py", "campaign": "python benchmarks/bench_campaign.py --samples 100"}
+BENCHMARKS = {"suite": "python benchmarks/bench_suite.py",
+              "suite_no_plots": "python benchmarks/bench_suite.py --no-plots",
+              "cosim": "python benchmarks/bench_cosim.py",
+              "campaign": "python benchmarks/bench_campaign.py --samples 100"}
 #: The benchmarks' targets (issue 45), which the scripts print and the tables show: the main job's
 #: fraction of the physics limit; our master's rate over the plain C host's on the same FMUs; a
 #: campaign worker's rate over bare ``mj_step``, and the campaign's scaling from 1 to 2 workers.
@@ -299,7 +301,8 @@ def table_bench_suite(suite, study, confirm, bench) -> list[str]:
              ["without the plots: wall s; CPU s of all its processes; the same outputs but the plots",
               f"{g['wall_s']:.1f}; {g['cpu_s']:.1f}; {'yes' if bare.get('compare') == [] else 'not compared'}", "", ""]]
     return [*_md(["`bench_suite.py`, the whole suite, `--jobs 2`", "measured", "target", "met"], rows), "",
-            _bench_measured(data, "suite.json") + " " + _bench_measured(bare, "suite_no_plots.json", "Without the plots: measured")]
+            _bench_measured(data, "suite.json") + " "
+            + _bench_measured(bare, "suite_no_plots.json", "Without the plots: measured")]
 
 
 def table_bench_cosim(suite, study, confirm, bench) -> list[str]:
