@@ -275,12 +275,17 @@ def _met(value: float, target: float) -> str:
     return "yes" if value >= target else "no"
 
 
+def _compared(data: Mapping[str, Any]) -> str:
+    """Whether a ``bench_suite.py --compare`` run's outputs equal the compared run's."""
+    compared = data.get("compare")
+    return "not compared" if compared is None else "yes" if not compared else f"no ({len(compared)} differences)"
+
+
 def table_bench_suite(suite, study, confirm, bench) -> list[str]:
     data = bench["suite"]
     f = data["figures"]
     target = BENCH_TARGETS["suite"]
     compared = data.get("compare")
-    same = "not compared" if compared is None else "yes" if not compared else f"no ({len(compared)} differences)"
     rows = [["main job / physics limit (2 x bare `mj_step` in the same run), by CPU time",
              f"{f['physics_fraction_cpu']:.2f}", f">= {target}", _met(f["physics_fraction_cpu"], target)],
             ["the same by wall time", f"{f['physics_fraction']:.2f}", f">= {target} (quiet machine)",
@@ -292,14 +297,14 @@ def table_bench_suite(suite, study, confirm, bench) -> list[str]:
              "", ""],
             ["the physics limit, CPU s (bare `mj_step` on each scenario's plant)",
              f"{f['physics_fraction_cpu'] * f['cpu_s']:.1f}", "", ""],
-            ["every `timeseries.csv` and `summary.json` metric identical to the compared run", same, "yes",
+            ["every `timeseries.csv` and `summary.json` metric identical to the compared run", _compared(data), "yes",
              "" if compared is None else _met(0 if compared else 1, 1)]]
     bare = bench["suite_no_plots"]
     g = bare["figures"]
     rows += [["without the plots (`--no-plots`): main job / physics limit, by CPU time; by wall time",
               f"{g['physics_fraction_cpu']:.2f}; {g['physics_fraction']:.2f}", "", ""],
              ["without the plots: wall s; CPU s of all its processes; the same outputs but the plots",
-              f"{g['wall_s']:.1f}; {g['cpu_s']:.1f}; {'yes' if bare.get('compare') == [] else 'not compared'}", "", ""]]
+              f"{g['wall_s']:.1f}; {g['cpu_s']:.1f}; {_compared(bare)}", "", ""]]
     return [*_md(["`bench_suite.py`, the whole suite, `--jobs 2`", "measured", "target", "met"], rows), "",
             _bench_measured(data, "suite.json") + " "
             + _bench_measured(bare, "suite_no_plots.json", "Without the plots: measured")]

@@ -217,7 +217,7 @@ def write_timeseries(path: Path, results: Sequence[Any]) -> None:
 
 
 def _memo_text(texts: dict[tuple[str, bytes], list[str]], column: np.ndarray) -> list[str]:
-    key = (column.dtype.str, np.ascontiguousarray(column).tobytes())
+    key = (column.dtype.str, column.tobytes())  # C order, also for a strided field of the rows
     if key not in texts:
         texts[key] = column_text(column)
     return texts[key]

@@ -62,5 +62,5 @@ def test_the_psi_legend_names_every_arm_also_one_without_psi_outputs(tmp_path):
     arms = [results[0].arm, policy.arm, results[1].arm]
     plots._FIGURES.clear()
     plots.write_plots(tmp_path, s, [results[0], policy, results[1]])
-    (fig, axes), = [v for k, v in plots._FIGURES.items() if k[0] == "psi"]
+    ((_, axes),) = [v for k, v in plots._FIGURES.items() if k[0] == "psi"]
     assert [t.get_text() for t in axes[0][0].get_legend().get_texts()] == arms
